@@ -1,0 +1,33 @@
+"""One error hierarchy; messages name the offending value and what was expected."""
+
+from __future__ import annotations
+
+
+class TwinError(Exception):
+    """Base of every error the twin reports to a user (the CLI prints it as one line)."""
+
+    exit_code = 2
+
+
+class ConfigError(TwinError):
+    """A profile, scene, key map or parameter is malformed or unknown."""
+
+
+class OutOfReach(TwinError):
+    """A target lies outside the reachable annulus or the joint limits."""
+
+    exit_code = 3
+
+
+class UnknownName(TwinError):
+    """A joint, object or signal name that the profile does not know."""
+
+
+class RecordingError(TwinError):
+    """A recording file is missing, unreadable, truncated or not MCAP."""
+
+
+class TaskError(TwinError):
+    """A task raised; the run was closed cleanly and the exception recorded as an Event."""
+
+    exit_code = 1

@@ -1,0 +1,169 @@
+"""Robot profiles: the MTB SCARA and the students' variants, selectable by name.
+
+A profile is data: geometry, limits, joint names and suction signals. It round-trips through a
+plain dict so a recording can carry it and replay can rebuild the robot from the file alone.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+from twin.errors import ConfigError, UnknownName
+
+ROLES = ("shoulder", "elbow", "z", "wrist")
+
+# Every joint name used by a known variant, by role: a script for any seed's scene finds its joint.
+JOINT_ALIASES: dict[str, tuple[str, ...]] = {
+    "shoulder": ("MTB_axis1", "joint1", "Revolute_joint", "AB", "axis1", "shoulder"),
+    "elbow": ("MTB_axis2", "joint2", "Revolute_joint1", "BC", "axis2", "elbow"),
+    "z": ("MTB_axis3", "joint3", "Prismatic_joint", "Z", "axis3", "z"),
+    "wrist": ("MTB_axis4", "joint4", "Revolute_joint0", "CD", "axis4", "wrist"),
+}
+PAD_ALIASES = ("suctionPad", "suctionPad_sensor", "pad", "MTB_suctionPad")
+ROBOT_ALIASES = ("MTB_Robot", "MTB_base", "robot", "base")
+DEFAULT_SUCTION_SIGNAL = "pad_switch"
+
+
+@dataclass(frozen=True)
+class RobotProfile:
+    """Geometry and limits of one SCARA variant (metres, radians, kilograms, newtons)."""
+
+    name: str
+    link1_m: float
+    link2_m: float
+    joint_names: tuple[str, str, str, str]  # shoulder, elbow, z, wrist as the variant names them
+    suction_signals: tuple[str, ...] = (DEFAULT_SUCTION_SIGNAL,)
+    shoulder_height_m: float = 0.152
+    elbow_height_m: float = 0.202
+    tip_z0_m: float = 0.255  # pad tip height with the Z joint at 0
+    z_stroke_m: float = 0.2
+    shoulder_limit_rad: float = math.radians(160.0)
+    elbow_limit_rad: float = math.radians(150.0)
+    wrist_limit_rad: float = math.pi
+    revolute_max_velocity_rad_s: float = 3.0
+    prismatic_max_velocity_m_s: float = 0.5
+    revolute_max_torque_nm: float = 60.0
+    prismatic_max_force_n: float = 60.0
+    pad_length_m: float = 0.012  # pad root to tip
+    urdf_path: str = ""  # a user's URDF (with meshes); empty: built from primitives
+    pad_link: str = ""  # the user URDF's link whose origin is the pad root
+    description: str = ""
+    extra: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def reach_m(self) -> tuple[float, float]:
+        """Inner and outer radius of the annulus the pad can reach within the elbow limit."""
+        l1, l2 = self.link1_m, self.link2_m
+        inner = math.sqrt(max(0.0, l1 * l1 + l2 * l2 + 2 * l1 * l2 * math.cos(self.elbow_limit_rad)))
+        return inner, l1 + l2
+
+    def joint_limits(self) -> tuple[tuple[float, float], ...]:
+        """(lower, upper) per joint in role order: rad, rad, m, rad."""
+        return (
+            (-self.shoulder_limit_rad, self.shoulder_limit_rad),
+            (-self.elbow_limit_rad, self.elbow_limit_rad),
+            (0.0, self.z_stroke_m),
+            (-self.wrist_limit_rad, self.wrist_limit_rad),
+        )
+
+    def joint_index(self, name: str) -> int:
+        """Resolve any variant's joint name (with or without a leading '/') to a role index."""
+        bare = name.lstrip("/")
+        for index, role in enumerate(ROLES):
+            if bare == self.joint_names[index] or bare in JOINT_ALIASES[role]:
+                return index
+        known = ", ".join(self.joint_names)
+        raise UnknownName(f"unknown joint {name!r} for robot {self.name!r}; expected one of {known}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @staticmethod
+    def from_dict(data: dict) -> RobotProfile:
+        try:
+            data = dict(data)
+            data["joint_names"] = tuple(data["joint_names"])
+            data["suction_signals"] = tuple(data.get("suction_signals", (DEFAULT_SUCTION_SIGNAL,)))
+            return RobotProfile(**data)
+        except (TypeError, KeyError) as err:
+            raise ConfigError(f"malformed robot profile: {err}") from err
+
+
+PROFILES: dict[str, RobotProfile] = {
+    "mtb": RobotProfile(
+        name="mtb", link1_m=0.467, link2_m=0.4005,
+        joint_names=("MTB_axis1", "MTB_axis2", "MTB_axis3", "MTB_axis4"),
+        suction_signals=(DEFAULT_SUCTION_SIGNAL, "suctionPad"),
+        description="CoppeliaSim's MTB (Machine Type B) SCARA",
+    ),
+    "seed000": RobotProfile(
+        name="seed000", link1_m=0.8, link2_m=0.8,
+        joint_names=("joint1", "joint2", "joint3", "joint4"),
+        description="report 000: 0.8 m / 0.8 m links",
+    ),
+    "seed001": RobotProfile(
+        name="seed001", link1_m=0.467, link2_m=0.401,
+        joint_names=("Revolute_joint", "Revolute_joint1", "Prismatic_joint", "Revolute_joint0"),
+        description="report 001: MTB-like links, arrow-key control",
+    ),
+    "seed002": RobotProfile(
+        name="seed002", link1_m=0.5, link2_m=0.5,
+        joint_names=("AB", "BC", "Z", "CD"),
+        description="report 002: 0.5 m / 0.5 m links",
+    ),
+    "seed003": RobotProfile(
+        name="seed003", link1_m=0.468, link2_m=0.4,
+        joint_names=("MTB_axis1", "MTB_axis2", "MTB_axis3", "MTB_axis4"),
+        suction_signals=("suctionPad", DEFAULT_SUCTION_SIGNAL),
+        description="report 003: MTB names, suction signal 'suctionPad'",
+    ),
+}
+
+
+def get_profile(name_or_path: str) -> RobotProfile:
+    """A built-in profile by name, or a user's profile file (.toml/.json) naming a URDF."""
+    if name_or_path in PROFILES:
+        return PROFILES[name_or_path]
+    path = Path(name_or_path)
+    if path.suffix in (".toml", ".json"):
+        return load_profile_file(path)
+    raise ConfigError(
+        f"unknown robot {name_or_path!r}; expected one of {', '.join(PROFILES)} or a profile file (.toml/.json)"
+    )
+
+
+def load_profile_file(path: Path) -> RobotProfile:
+    """Read a user's profile file: `urdf`, `joints` (role -> URDF joint name), `pad_link`, optional
+    `name`, `suction_signal`, `pad_length_m`. Geometry and limits come from the URDF itself."""
+    from twin.urdf import profile_from_urdf  # urdf.py owns URDF parsing
+
+    if not path.is_file():
+        raise ConfigError(f"robot profile file {str(path)!r} does not exist")
+    try:
+        text = path.read_text()
+        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except (ValueError, OSError) as err:
+        raise ConfigError(f"cannot read robot profile {str(path)!r}: {err}") from err
+    for key in ("urdf", "joints", "pad_link"):
+        if key not in data:
+            raise ConfigError(f"robot profile {str(path)!r} lacks {key!r}; expected urdf, joints, pad_link")
+    joints = data["joints"]
+    missing = [r for r in ROLES if r not in joints]
+    if missing:
+        raise ConfigError(f"robot profile {str(path)!r}: joints lacks {missing}; expected {list(ROLES)}")
+    urdf_path = (path.parent / data["urdf"]).resolve()
+    profile = profile_from_urdf(
+        urdf_path,
+        name=data.get("name", path.stem),
+        joint_names=tuple(joints[r] for r in ROLES),
+        pad_link=data["pad_link"],
+        pad_length_m=float(data.get("pad_length_m", 0.012)),
+    )
+    signal = data.get("suction_signal")
+    if signal:
+        profile = replace(profile, suction_signals=(signal, DEFAULT_SUCTION_SIGNAL))
+    return profile

@@ -1,0 +1,81 @@
+"""The suction pad: CoppeliaSim's stock model as a per-step rule over the World.
+
+While on and empty, the first object the downward ray sensor sees is fixed to the pad; switching
+off releases it; with finite strength the hold breaks on pull, shear or peel beyond the limits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from twin.config import SuctionParams
+from twin.types import NO_BODY
+from twin.world import World
+
+
+@dataclass(frozen=True)
+class SuctionEvent:
+    kind: str
+    body: int
+    message: str
+    data: dict
+
+
+class Suction:
+    def __init__(self, params: SuctionParams, pad_length_m: float, world: World) -> None:
+        self.params = params
+        self.world = world
+        self.pad_length_m = pad_length_m
+        self.on = False
+        self.sensed = NO_BODY
+        self.held = NO_BODY
+        self._held_this_period = False
+
+    def update(self, on: bool, tip_m: tuple[float, float, float], heading_rad: float) -> list[SuctionEvent]:
+        """Advance the pad's state for the coming step; returns what happened."""
+        events: list[SuctionEvent] = []
+        p = self.params
+        x, y, z_tip = tip_m
+        root_z = z_tip + self.pad_length_m
+        self.sensed, _ = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
+        if on and not self.on:
+            self._held_this_period = False
+        if not on and self.on and self.held == NO_BODY and not self._held_this_period:
+            events.append(SuctionEvent("suction_empty", NO_BODY, "suction on, nothing sensed", {}))
+        self.on = on
+        if self.held != NO_BODY and not on:
+            events.append(self._drop("release", "suction off"))
+        elif self.held != NO_BODY and not p.infinite_strength:
+            reason = self._overload()
+            if reason:
+                events.append(self._drop("break", reason))
+        if on and self.held == NO_BODY and self.sensed != NO_BODY:
+            self.world.attach(self.sensed, (x, y, root_z), heading_rad)
+            self.held = self.sensed
+            self._held_this_period = True
+            events.append(SuctionEvent("attach", self.held, "suction attached", {}))
+        return events
+
+    def _drop(self, kind: str, why: str) -> SuctionEvent:
+        body = self.held
+        self.world.detach()
+        self.held = NO_BODY
+        return SuctionEvent(kind, body, why, {})
+
+    def _overload(self) -> str:
+        """Why the hold must break now (pull, shear or peel over its limit), or ''."""
+        p = self.params
+        (fx, fy, fz), (tx, ty, _tz) = self.world.hold_wrench()
+        pull_n, shear_n, peel_nm = abs(fz), math.hypot(fx, fy), math.hypot(tx, ty)
+        if pull_n > p.max_pull_force_n:
+            return f"pull {pull_n:.3f} N > max_pull_force {p.max_pull_force_n} N"
+        if shear_n > p.max_shear_force_n:
+            return f"shear {shear_n:.3f} N > max_shear_force {p.max_shear_force_n} N"
+        if peel_nm > p.max_peel_torque_nm:
+            return f"peel torque {peel_nm:.4f} N·m > max_peel_torque {p.max_peel_torque_nm} N·m"
+        return ""
+
+    def release_all(self) -> list[SuctionEvent]:
+        """Stopping the simulation releases what is held."""
+        return [self._drop("release", "simulation stopped")] if self.held != NO_BODY else []

@@ -1,0 +1,344 @@
+"""Twin: the API that tasks, the keyboard and remote clients call.
+
+Every input becomes a Command stamped with the step it takes effect at; every physics step
+produces a Frame; every discrete happening an Event. All three go to the sinks, in order.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Protocol
+
+from twin import kinematics
+from twin.config import TwinConfig
+from twin.errors import ConfigError, OutOfReach, UnknownName
+from twin.suction import Suction
+from twin.types import NO_BODY, Command, Event, Frame
+from twin.world import World
+
+SHOULDER, ELBOW, Z, WRIST = range(4)
+SETTLE_TOL = (5e-4, 5e-4, 2e-4, 5e-4)  # rad, rad, m, rad
+SETTLE_SPEED_TOL = (5e-3, 5e-3, 2e-3, 5e-3)
+SETTLE_TIMEOUT_S = 10.0
+
+
+class Sink(Protocol):
+    def on_frame(self, frame: Frame) -> None: ...
+    def on_command(self, command: Command) -> None: ...
+    def on_event(self, event: Event) -> None: ...
+
+
+class Twin:
+    """A headless (or windowed) PyBullet twin of a SCARA robot, advanced in simulated time."""
+
+    def __init__(self, config: TwinConfig | None = None, *, gui: bool = False, sinks: list[Sink] = ()) -> None:
+        self.config = config or TwinConfig()
+        self.profile = self.config.profile
+        self.world = World(self.config, gui=gui)
+        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self.world)
+        self.sinks: list[Sink] = list(sinks)
+        self.step_index = 0
+        self.signals: dict[str, int] = {}
+        self.targets = [0.0, 0.0, 0.0, 0.0]
+        self.max_velocities = list(self.world._max_velocities())
+        self.limits = self.profile.joint_limits()
+        self.frame = self._read_frame()
+        self._emit_frame(self.frame)
+
+    # -- time -------------------------------------------------------------------------------
+    @property
+    def t_ns(self) -> int:
+        return self.step_index * self.config.dt_ns
+
+    @property
+    def t_s(self) -> float:
+        return self.t_ns * 1e-9
+
+    def step(self, n: int = 1) -> Frame:
+        """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
+        for _ in range(n):
+            f = self.frame
+            on = any(self.signals.get(s, 0) for s in self.profile.suction_signals)
+            pad = f.pad_pose
+            for ev in self.suction_pad.update(on, (pad[0], pad[1], pad[2]), self._heading(f)):
+                self.event(ev.kind, self._body_name(ev.body), ev.message, **ev.data)
+            self.world.step()
+            self.step_index += 1
+            self.frame = self._read_frame()
+            self._emit_frame(self.frame)
+        return self.frame
+
+    def wait(self, seconds: float) -> Frame:
+        """Let simulated time pass (the seeds' sim.wait)."""
+        if not math.isfinite(seconds) or seconds < 0:
+            raise ConfigError(f"wait of {seconds} s is invalid; expected a finite number >= 0")
+        return self.step(round(seconds * 1e9 / self.config.dt_ns))
+
+    # -- state ------------------------------------------------------------------------------
+    def _read_frame(self) -> Frame:
+        states = self.world.joint_states()
+        q = tuple(s.q for s in states)
+        pad = kinematics.fk(self.profile, q)
+        half = 0.5 * pad.heading_rad
+        wrench = self.world.hold_wrench()
+        sp = self.suction_pad
+        return Frame(
+            step=self.step_index,
+            t_ns=self.step_index * self.config.dt_ns,
+            joint_q=q,
+            joint_qd=tuple(s.qd for s in states),
+            joint_effort=tuple(s.effort for s in states),
+            joint_target=tuple(self.targets),
+            suction_on=sp.on,
+            sensed_body=sp.sensed,
+            held_body=sp.held,
+            hold_force_n=wrench[0],
+            hold_torque_nm=wrench[1],
+            pad_pose=(pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
+            object_poses=self.world.object_poses(),
+        )
+
+    def _heading(self, f: Frame) -> float:
+        q = f.joint_q
+        return q[SHOULDER] + q[ELBOW] + q[WRIST]
+
+    def _emit_frame(self, frame: Frame) -> None:
+        for s in self.sinks:
+            s.on_frame(frame)
+
+    def _body_name(self, index: int) -> str:
+        return "" if index == NO_BODY else self.config.objects[index].name
+
+    def object_index(self, name: str) -> int:
+        bare = name.lstrip("/")
+        for i, o in enumerate(self.config.objects):
+            if o.name == bare:
+                return i
+        raise UnknownName(f"unknown object {name!r}; expected one of {[o.name for o in self.config.objects]}")
+
+    def joint_position(self, joint: str | int) -> float:
+        return self.frame.joint_q[self._joint(joint)]
+
+    def pad_position(self) -> tuple[float, float, float]:
+        p = self.frame.pad_pose
+        return (p[0], p[1], p[2])
+
+    def object_pose(self, name: str) -> tuple[float, ...]:
+        return self.frame.object_poses[self.object_index(name)]
+
+    def get_signal(self, name: str) -> int | None:
+        return self.signals.get(name)
+
+    # -- events -----------------------------------------------------------------------------
+    def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
+        ev = Event(self.step_index, self.t_ns, kind, body, message, dict(sorted(data.items())))
+        for s in self.sinks:
+            s.on_event(ev)
+        return ev
+
+    def phase(self, name: str) -> None:
+        """Mark a task phase (shown in the log and the viewer)."""
+        self.event("phase", message=name)
+
+    # -- commands ---------------------------------------------------------------------------
+    def apply(self, command: Command) -> None:
+        """Validate and apply one Command now; replay feeds recorded Commands through here."""
+        if command.step != self.step_index:
+            raise ConfigError(f"command for step {command.step} applied at step {self.step_index}")
+        handler = _HANDLERS.get(command.kind)
+        if handler is None:
+            raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(_HANDLERS)}")
+        for s in self.sinks:
+            s.on_command(command)
+        handler(self, command.args)
+
+    def _command(self, kind: str, **args: Any) -> None:
+        self.apply(Command(self.step_index, kind, args))
+
+    def _joint(self, joint: str | int) -> int:
+        if isinstance(joint, bool) or not isinstance(joint, (str, int)):
+            raise UnknownName(f"joint {joint!r} is neither a name nor an index 0..3")
+        if isinstance(joint, int):
+            if not 0 <= joint < 4:
+                raise UnknownName(f"joint index {joint} is out of range; expected 0..3")
+            return joint
+        return self.profile.joint_index(joint)
+
+    def set_joint_target(self, joint: str | int, q: float) -> None:
+        """Drive a joint's motor toward q (rad | m) at its maximum velocity and force."""
+        self._command("joint_target", joint=self.profile.joint_names[self._joint(joint)], q=_number(q, "joint target"))
+
+    def set_joint_targets(self, targets: dict[str, float]) -> None:
+        for joint, q in targets.items():
+            self.set_joint_target(joint, q)
+
+    def set_joint_position(self, joint: str | int, q: float) -> None:
+        """Set a joint's position at once (kinematic), as simxSetJointPosition does."""
+        self._command("joint_position", joint=self.profile.joint_names[self._joint(joint)], q=_number(q, "joint position"))
+
+    def set_joint_max_velocity(self, joint: str | int, v: float) -> None:
+        v = _number(v, "maximum velocity")
+        if v <= 0:
+            raise ConfigError(f"maximum velocity {v} is invalid; expected > 0")
+        self._command("joint_max_velocity", joint=self.profile.joint_names[self._joint(joint)], v=v)
+
+    def set_signal(self, name: str, value: int | None) -> None:
+        """Set (or with None clear) an integer signal; the suction signals switch the pad."""
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"signal name {name!r} is invalid; expected a non-empty string")
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ConfigError(f"signal {name!r} value {value!r} is invalid; expected an integer")
+        self._command("signal", name=name, value=value)
+
+    def suction(self, on: bool) -> None:
+        self.set_signal(self.profile.suction_signals[0], 1 if on else 0)
+
+    def press_key(self, key: str) -> None:
+        """A key press, interpreted by the configured key map (teleop)."""
+        self._command("key", key=str(key))
+
+    # -- motion helpers (tasks) ---------------------------------------------------------------
+    def move_to(self, x_m: float, y_m: float, heading_rad: float | None = None, *, settle: bool = True) -> None:
+        """Move the pad over (x, y), keeping its heading unless one is given; raises OutOfReach."""
+        q = self.frame.joint_q
+        heading = self._heading(self.frame) if heading_rad is None else heading_rad
+        try:
+            sol = kinematics.choose(kinematics.ik(self.profile, x_m, y_m), (q[SHOULDER], q[ELBOW]))
+            wrist = kinematics.wrist_for_heading(self.profile, sol, heading)
+        except OutOfReach as err:
+            self.event("out_of_reach", message=str(err), x_m=x_m, y_m=y_m)
+            raise
+        self.set_joint_target(SHOULDER, sol.shoulder_rad)
+        self.set_joint_target(ELBOW, sol.elbow_rad)
+        self.set_joint_target(WRIST, wrist)
+        if settle:
+            self.settle()
+
+    def z_to(self, z_m: float, *, settle: bool = True) -> None:
+        """Move the pad tip to height z_m with the Z joint."""
+        try:
+            q3 = kinematics.z_joint_for_height(self.profile, z_m)
+        except OutOfReach as err:
+            self.event("out_of_reach", message=str(err), z_m=z_m)
+            raise
+        self.set_joint_target(Z, q3)
+        if settle:
+            self.settle()
+
+    def lower(self) -> None:
+        """Lower the pad to the end of the Z stroke."""
+        self.set_joint_target(Z, self.profile.z_stroke_m)
+        self.settle()
+
+    def raise_(self) -> None:
+        """Raise the pad to the top of the Z stroke."""
+        self.set_joint_target(Z, 0.0)
+        self.settle()
+
+    def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
+        """Step until every joint is at its target and still; an Event if it times out."""
+        max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
+        for _ in range(max_steps):
+            f = self.frame
+            if all(
+                abs(f.joint_q[j] - self.targets[j]) <= SETTLE_TOL[j] and abs(f.joint_qd[j]) <= SETTLE_SPEED_TOL[j]
+                for j in range(4)
+            ):
+                return True
+            self.step()
+        self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
+        return False
+
+    def stop(self) -> None:
+        """End of simulation: the pad lets go of what it holds."""
+        for ev in self.suction_pad.release_all():
+            self.event(ev.kind, self._body_name(ev.body), ev.message)
+
+    def close(self) -> None:
+        self.world.close()
+
+
+def _number(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{what} {value!r} is invalid; expected a finite number")
+    return float(value)
+
+
+def _clamped(twin: Twin, joint: int, q: float) -> float:
+    lo, hi = twin.limits[joint]
+    if lo <= q <= hi:
+        return q
+    clamped = min(hi, max(lo, q))
+    twin.event("joint_limit", message=f"{twin.profile.joint_names[joint]} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; "
+               f"stopped at {clamped:.6g}", joint=twin.profile.joint_names[joint], requested=q, limit=clamped)
+    return clamped
+
+
+def _do_joint_target(twin: Twin, args: dict) -> None:
+    j = twin._joint(args["joint"])
+    q = _clamped(twin, j, float(args["q"]))
+    twin.targets[j] = q
+    twin.world.set_motor(j, q, twin.max_velocities[j])
+
+
+def _do_joint_position(twin: Twin, args: dict) -> None:
+    j = twin._joint(args["joint"])
+    q = _clamped(twin, j, float(args["q"]))
+    twin.targets[j] = q
+    twin.world.reset_joint(j, q)
+    twin.world.set_motor(j, q, twin.max_velocities[j])
+    twin.frame = twin._read_frame()  # the pad moved: later suction sensing must see it
+
+
+def _do_joint_max_velocity(twin: Twin, args: dict) -> None:
+    j = twin._joint(args["joint"])
+    twin.max_velocities[j] = float(args["v"])
+    twin.world.set_motor(j, twin.targets[j], twin.max_velocities[j])
+
+
+def _do_signal(twin: Twin, args: dict) -> None:
+    if args["value"] is None:
+        twin.signals.pop(args["name"], None)
+    else:
+        twin.signals[args["name"]] = int(args["value"])
+
+
+def _do_key(twin: Twin, args: dict) -> None:
+    """Interpret a key through the key map: a list of actions per key.
+
+    Actions: ["jog", joint, delta] (target += delta), ["jog_keep_heading", joint, delta] (and the
+    wrist turns back by delta so the pad keeps its heading), ["target", joint, value|"min"|"max"],
+    ["signal", name, value], ["suction", 0|1].
+    """
+    key = args["key"]
+    actions = twin.config.keymap.get(key)
+    if actions is None:
+        twin.event("key_unknown", message=f"key {key!r} is not in the key map; ignored", key=key)
+        return
+    for action in actions:
+        op = action[0]
+        if op in ("jog", "jog_keep_heading"):
+            j = twin._joint(action[1])
+            _do_joint_target(twin, {"joint": j, "q": twin.targets[j] + float(action[2])})
+            if op == "jog_keep_heading":
+                _do_joint_target(twin, {"joint": WRIST, "q": twin.targets[WRIST] - float(action[2])})
+        elif op == "target":
+            j = twin._joint(action[1])
+            lo, hi = twin.limits[j]
+            value = {"min": lo, "max": hi}.get(action[2], action[2])
+            _do_joint_target(twin, {"joint": j, "q": float(value)})
+        elif op == "signal":
+            _do_signal(twin, {"name": action[1], "value": action[2]})
+        elif op == "suction":
+            _do_signal(twin, {"name": twin.profile.suction_signals[0], "value": int(action[1])})
+        else:
+            raise ConfigError(f"key {key!r}: unknown action {op!r}")
+
+
+_HANDLERS = {
+    "joint_target": _do_joint_target,
+    "joint_position": _do_joint_position,
+    "joint_max_velocity": _do_joint_max_velocity,
+    "signal": _do_signal,
+    "key": _do_key,
+}

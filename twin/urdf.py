@@ -1,0 +1,184 @@
+"""URDF text from a profile (primitives with real masses and inertias), and profiles from a
+user's URDF (links may use STL meshes)."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from twin.errors import ConfigError
+from twin.profiles import RobotProfile
+
+ALUMINIUM_KG_M3 = 2700.0
+LINK_WIDTH_M = 0.08
+QUILL_RADIUS_M = 0.012
+QUILL_LENGTH_M = 0.30
+PAD_RADIUS_M = 0.02
+PAD_MASS_KG = 0.05
+BASE_RADIUS_M = 0.09
+
+
+def _box_inertia(m: float, sx: float, sy: float, sz: float) -> tuple[float, float, float]:
+    return (m * (sy * sy + sz * sz) / 12.0, m * (sx * sx + sz * sz) / 12.0, m * (sx * sx + sy * sy) / 12.0)
+
+
+def _cyl_inertia(m: float, r: float, h: float) -> tuple[float, float, float]:
+    side = m * (3.0 * r * r + h * h) / 12.0
+    return (side, side, m * r * r / 2.0)
+
+
+def _f(v: float) -> str:
+    return repr(float(v))
+
+
+def _link(name: str, geom: str, origin_xyz: tuple[float, float, float], mass: float,
+          inertia: tuple[float, float, float], inertial_xyz: tuple[float, float, float], rgba: str) -> str:
+    ox, oy, oz = (_f(v) for v in origin_xyz)
+    ix, iy, iz = (_f(v) for v in inertial_xyz)
+    xx, yy, zz = (_f(v) for v in inertia)
+    return f"""  <link name="{name}">
+    <inertial><origin xyz="{ix} {iy} {iz}"/><mass value="{_f(mass)}"/>
+      <inertia ixx="{xx}" ixy="0" ixz="0" iyy="{yy}" iyz="0" izz="{zz}"/></inertial>
+    <visual><origin xyz="{ox} {oy} {oz}"/><geometry>{geom}</geometry><material name="{name}_m"><color rgba="{rgba}"/></material></visual>
+    <collision><origin xyz="{ox} {oy} {oz}"/><geometry>{geom}</geometry></collision>
+  </link>
+"""
+
+
+def _joint(name: str, kind: str, parent: str, child: str, xyz: tuple[float, float, float], axis: str,
+           lower: float, upper: float, effort: float, velocity: float) -> str:
+    x, y, z = (_f(v) for v in xyz)
+    return f"""  <joint name="{name}" type="{kind}">
+    <parent link="{parent}"/><child link="{child}"/><origin xyz="{x} {y} {z}"/><axis xyz="{axis}"/>
+    <limit lower="{_f(lower)}" upper="{_f(upper)}" effort="{_f(effort)}" velocity="{_f(velocity)}"/>
+  </joint>
+"""
+
+
+def pad_root_height_m(profile: RobotProfile) -> float:
+    return profile.tip_z0_m + profile.pad_length_m
+
+
+def urdf_from_profile(profile: RobotProfile) -> str:
+    """A URDF of the profile's SCARA built from boxes and cylinders (aluminium links)."""
+    p = profile
+    l1, l2 = p.link1_m, p.link2_m
+    h1 = p.elbow_height_m - p.shoulder_height_m
+    h2 = 0.04
+    limits = p.joint_limits()
+    n1, n2, n3, n4 = p.joint_names
+    m_base = 8.0
+    m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25  # hollow section: 25 % fill
+    m2 = ALUMINIUM_KG_M3 * (l2 + LINK_WIDTH_M) * LINK_WIDTH_M * h2 * 0.25
+    m3 = ALUMINIUM_KG_M3 * math.pi * QUILL_RADIUS_M**2 * QUILL_LENGTH_M
+    pad_offset = pad_root_height_m(p) - p.elbow_height_m  # axis4 above the Z joint's frame
+    pad_h = p.pad_length_m
+    pad_inertia = _cyl_inertia(PAD_MASS_KG, PAD_RADIUS_M, pad_h)
+    parts = [
+        f'<?xml version="1.0"?>\n<robot name="{p.name}">\n',
+        _link("MTB_base", f'<cylinder radius="{_f(BASE_RADIUS_M)}" length="{_f(p.shoulder_height_m)}"/>',
+              (0.0, 0.0, p.shoulder_height_m / 2), m_base, _cyl_inertia(m_base, BASE_RADIUS_M, p.shoulder_height_m),
+              (0.0, 0.0, p.shoulder_height_m / 2), "0.3 0.3 0.35 1"),
+        _joint(n1, "revolute", "MTB_base", "MTB_link1", (0.0, 0.0, p.shoulder_height_m), "0 0 1",
+               *limits[0], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
+        _link("MTB_link1", f'<box size="{_f(l1 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h1)}"/>',
+              (l1 / 2, 0.0, h1 / 2), m1, _box_inertia(m1, l1 + LINK_WIDTH_M, LINK_WIDTH_M, h1),
+              (l1 / 2, 0.0, h1 / 2), "0.9 0.5 0.1 1"),
+        _joint(n2, "revolute", "MTB_link1", "MTB_link2", (l1, 0.0, h1), "0 0 1",
+               *limits[1], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
+        _link("MTB_link2", f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
+              (l2 / 2, 0.0, h2 / 2), m2, _box_inertia(m2, l2 + LINK_WIDTH_M, LINK_WIDTH_M, h2),
+              (l2 / 2, 0.0, h2 / 2), "0.9 0.6 0.2 1"),
+        _joint(n3, "prismatic", "MTB_link2", "MTB_link3", (l2, 0.0, 0.0), "0 0 -1",
+               *limits[2], p.prismatic_max_force_n, p.prismatic_max_velocity_m_s),
+        _link("MTB_link3", f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',
+              (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2), m3, _cyl_inertia(m3, QUILL_RADIUS_M, QUILL_LENGTH_M),
+              (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2), "0.7 0.7 0.75 1"),
+        _joint(n4, "revolute", "MTB_link3", "suctionPad", (0.0, 0.0, pad_offset), "0 0 1",
+               *limits[3], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
+        # The pad's inertial frame sits at its root so a held object's constraint frame is simple.
+        _link("suctionPad", f'<cylinder radius="{_f(PAD_RADIUS_M)}" length="{_f(pad_h)}"/>',
+              (0.0, 0.0, -pad_h / 2), PAD_MASS_KG,
+              (pad_inertia[0] + PAD_MASS_KG * (pad_h / 2) ** 2, pad_inertia[1] + PAD_MASS_KG * (pad_h / 2) ** 2,
+               pad_inertia[2]),
+              (0.0, 0.0, 0.0), "0.1 0.1 0.1 1"),
+        "</robot>\n",
+    ]
+    return "".join(parts)
+
+
+def _xyz(elem: ET.Element | None, attr: str = "xyz") -> tuple[float, float, float]:
+    if elem is None or elem.get(attr) is None:
+        return (0.0, 0.0, 0.0)
+    vals = [float(v) for v in elem.get(attr, "").split()]
+    if len(vals) != 3:
+        raise ConfigError(f"URDF {attr}={elem.get(attr)!r}: expected three numbers")
+    return (vals[0], vals[1], vals[2])
+
+
+def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...], pad_link: str,
+                      pad_length_m: float) -> RobotProfile:
+    """Derive a SCARA profile from a user URDF: link lengths and heights from joint origins
+    (translations only, vertical joint axes), limits from the joints' <limit> tags."""
+    if not urdf_path.is_file():
+        raise ConfigError(f"URDF {str(urdf_path)!r} does not exist")
+    try:
+        root = ET.parse(urdf_path).getroot()
+    except ET.ParseError as err:
+        raise ConfigError(f"URDF {str(urdf_path)!r} is not valid XML: {err}") from err
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    by_child = {j.find("child").get("link"): j for j in root.findall("joint") if j.find("child") is not None}
+
+    def world_origin(link: str) -> tuple[float, float, float]:
+        x = y = z = 0.0
+        while link in by_child:
+            j = by_child[link]
+            origin = j.find("origin")
+            if origin is not None and any(abs(v) > 1e-12 for v in _xyz(origin, "rpy")):
+                raise ConfigError(f"URDF joint {j.get('name')!r} has a rotated origin; expected rpy 0 0 0")
+            dx, dy, dz = _xyz(origin)
+            x, y, z = x + dx, y + dy, z + dz
+            link = j.find("parent").get("link")
+        return (x, y, z)
+
+    missing = [n for n in joint_names if n not in joints]
+    if missing:
+        raise ConfigError(f"URDF {str(urdf_path)!r} has no joint named {missing[0]!r}; it has {sorted(joints)}")
+    if pad_link not in {lk.get("name") for lk in root.findall("link")}:
+        raise ConfigError(f"URDF {str(urdf_path)!r} has no link named {pad_link!r}")
+    shoulder, elbow, zj, _wrist = (joints[n] for n in joint_names)
+    if _xyz(zj.find("axis")) != (0.0, 0.0, -1.0):
+        raise ConfigError(f"URDF joint {zj.get('name')!r}: expected axis '0 0 -1' (positive lowers the pad)")
+    s_world = world_origin(shoulder.find("child").get("link"))
+    e_world = world_origin(elbow.find("child").get("link"))
+    pad_world = world_origin(pad_link)
+
+    def limit(j: ET.Element) -> tuple[float, float, float, float]:
+        lim = j.find("limit")
+        if lim is None:
+            raise ConfigError(f"URDF joint {j.get('name')!r} has no <limit>")
+        return tuple(float(lim.get(k, d)) for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1)))
+
+    s_lim, e_lim, z_lim, w_lim = (limit(j) for j in (shoulder, elbow, zj, _wrist))
+    return RobotProfile(
+        name=name,
+        link1_m=math.hypot(e_world[0] - s_world[0], e_world[1] - s_world[1]),
+        link2_m=math.hypot(pad_world[0] - e_world[0], pad_world[1] - e_world[1]),
+        joint_names=tuple(joint_names),  # type: ignore[arg-type]
+        shoulder_height_m=s_world[2],
+        elbow_height_m=e_world[2],
+        tip_z0_m=pad_world[2] - pad_length_m,
+        z_stroke_m=z_lim[1],
+        shoulder_limit_rad=min(abs(s_lim[0]), abs(s_lim[1])),
+        elbow_limit_rad=min(abs(e_lim[0]), abs(e_lim[1])),
+        wrist_limit_rad=min(abs(w_lim[0]), abs(w_lim[1])),
+        revolute_max_velocity_rad_s=s_lim[3],
+        prismatic_max_velocity_m_s=z_lim[3],
+        revolute_max_torque_nm=s_lim[2],
+        prismatic_max_force_n=z_lim[2],
+        pad_length_m=pad_length_m,
+        urdf_path=str(urdf_path),
+        pad_link=pad_link,
+        description=f"user URDF {urdf_path.name}",
+    )

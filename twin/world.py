@@ -1,0 +1,230 @@
+"""The PyBullet boundary: the only module that imports pybullet.
+
+Builds the scene in one fixed order (plane, robot, objects in scene order), sets every engine
+parameter explicitly, steps with a fixed time step and reads state. Never uses real-time mode,
+never calls getLinkState with computeForwardKinematics (that changes later physics).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+import tempfile
+from typing import NamedTuple
+
+from twin.config import TwinConfig
+from twin.errors import ConfigError
+from twin.types import NO_BODY
+from twin.urdf import urdf_from_profile
+
+NO_CONSTRAINT = -1
+
+
+def _import_pybullet_quietly():
+    """pybullet prints its build time from C at import; keep our stdout/stderr clean of it."""
+    import sys
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in saved:
+            os.dup2(devnull, fd)
+        import pybullet
+
+        ctypes.CDLL(None).fflush(None)  # C stdio may buffer the message when stdout is a pipe
+    finally:
+        for fd, keep in saved.items():
+            os.dup2(keep, fd)
+            os.close(keep)
+        os.close(devnull)
+    return pybullet
+
+
+pb = _import_pybullet_quietly()
+
+
+class JointState(NamedTuple):
+    q: float
+    qd: float
+    reaction: tuple[float, ...]
+    effort: float
+
+
+class World:
+    """A PyBullet client holding one robot and the scene's objects."""
+
+    def __init__(self, config: TwinConfig, *, gui: bool = False) -> None:
+        self.config = config
+        self.gui = gui
+        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        if self.client < 0:
+            raise ConfigError("cannot open a PyBullet window; run without --gui or under a display")
+        if gui:
+            pb.configureDebugVisualizer(pb.COV_ENABLE_KEYBOARD_SHORTCUTS, 0, physicsClientId=self.client)
+        self.urdf_text = ""
+        self.robot = -1
+        self.joints: tuple[int, ...] = ()
+        self.pad_link = -1
+        self.object_ids: tuple[int, ...] = ()
+        self._constraint = NO_CONSTRAINT
+        self.build()
+
+    # -- building ---------------------------------------------------------------------------
+    def build(self) -> None:
+        """(Re)build the scene from scratch: reset, engine parameters, plane, robot, objects."""
+        c = self.client
+        pb.resetSimulation(physicsClientId=c)
+        self._constraint = NO_CONSTRAINT
+        e = self.config.engine
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=self.config.dt_s,
+            numSolverIterations=e.num_solver_iterations,
+            numSubSteps=0,
+            deterministicOverlappingPairs=e.deterministic_overlapping_pairs,
+            physicsClientId=c,
+        )
+        pb.setGravity(*e.gravity_m_s2, physicsClientId=c)
+        pb.setRealTimeSimulation(0, physicsClientId=c)
+        plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=c)
+        pb.createMultiBody(0, plane, physicsClientId=c)
+        self._load_robot()
+        self.object_ids = tuple(self._create_object(o) for o in self.config.objects)
+
+    def _load_robot(self) -> None:
+        profile = self.config.profile
+        flags = pb.URDF_USE_INERTIA_FROM_FILE
+        if profile.urdf_path:
+            with open(profile.urdf_path) as f:
+                self.urdf_text = f.read()
+            self.robot = pb.loadURDF(profile.urdf_path, useFixedBase=True, flags=flags, physicsClientId=self.client)
+        else:
+            self.urdf_text = urdf_from_profile(profile)
+            fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"twin_{profile.name}_")
+            try:
+                with os.fdopen(fd, "w") as f:
+                    f.write(self.urdf_text)
+                self.robot = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=self.client)
+            finally:
+                os.unlink(path)
+        if self.robot < 0:
+            raise ConfigError(f"PyBullet could not load the URDF of robot {profile.name!r}")
+        by_name: dict[str, int] = {}
+        link_by_name: dict[str, int] = {}
+        for j in range(pb.getNumJoints(self.robot, physicsClientId=self.client)):
+            info = pb.getJointInfo(self.robot, j, physicsClientId=self.client)
+            by_name[info[1].decode()] = j
+            link_by_name[info[12].decode()] = j
+        try:
+            self.joints = tuple(by_name[n] for n in profile.joint_names)
+        except KeyError as err:
+            raise ConfigError(f"robot {profile.name!r} URDF lacks joint {err.args[0]!r}") from err
+        self.pad_link = link_by_name.get(profile.pad_link or "suctionPad", self.joints[3])
+        e = self.config.engine
+        for j, v_max, f_max in zip(self.joints, self._max_velocities(), self._max_forces(), strict=True):
+            pb.changeDynamics(self.robot, j, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client)
+            pb.setJointMotorControl2(
+                self.robot, j, pb.POSITION_CONTROL, targetPosition=0.0, force=f_max, maxVelocity=v_max,
+                positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
+            )
+
+    def _max_velocities(self) -> tuple[float, ...]:
+        p = self.config.profile
+        return (p.revolute_max_velocity_rad_s,) * 2 + (p.prismatic_max_velocity_m_s, p.revolute_max_velocity_rad_s)
+
+    def _max_forces(self) -> tuple[float, ...]:
+        p = self.config.profile
+        return (p.revolute_max_torque_nm,) * 2 + (p.prismatic_max_force_n, p.revolute_max_torque_nm)
+
+    def _create_object(self, o) -> int:
+        c = self.client
+        half = [s / 2 for s in o.size_m]
+        col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=list(o.rgba), physicsClientId=c)
+        orn = pb.getQuaternionFromEuler((0.0, 0.0, o.yaw_rad))
+        body = pb.createMultiBody(o.mass_kg, col, vis, list(o.pos_m), orn, physicsClientId=c)
+        pb.changeDynamics(body, -1, lateralFriction=o.friction, physicsClientId=c)
+        return body
+
+    # -- acting -----------------------------------------------------------------------------
+    def set_motor(self, joint: int, target: float, max_velocity: float) -> None:
+        e = self.config.engine
+        pb.setJointMotorControl2(
+            self.robot, self.joints[joint], pb.POSITION_CONTROL, targetPosition=target,
+            force=self._max_forces()[joint], maxVelocity=max_velocity,
+            positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
+        )
+
+    def reset_joint(self, joint: int, q: float) -> None:
+        """Kinematic set (like simxSetJointPosition): position jumps, velocity zero."""
+        pb.resetJointState(self.robot, self.joints[joint], q, 0.0, physicsClientId=self.client)
+
+    def step(self) -> None:
+        pb.stepSimulation(physicsClientId=self.client)
+
+    # -- reading ----------------------------------------------------------------------------
+    def joint_states(self) -> list[JointState]:
+        return [JointState(*s) for s in pb.getJointStates(self.robot, self.joints, physicsClientId=self.client)]
+
+    def object_poses(self) -> tuple[tuple[float, ...], ...]:
+        out = []
+        for body in self.object_ids:
+            pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
+            out.append(pos + orn)
+        return tuple(out)
+
+    def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> tuple[int, float]:
+        """The scene object hit by a vertical ray going down from z_from_m, and the hit distance."""
+        hit = pb.rayTest((x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client)[0]
+        body = hit[0]
+        if body < 0 or body not in self.object_ids:
+            return NO_BODY, math.inf
+        return self.object_ids.index(body), hit[2] * length_m
+
+    # -- holding ----------------------------------------------------------------------------
+    def attach(self, obj: int, pad_root_pos_m: tuple[float, float, float], pad_yaw_rad: float) -> None:
+        """Fix object `obj` rigidly to the pad where it is now. The pad root's pose comes from the
+        joint angles (exact), not from getLinkState (float32 and one step old)."""
+        c = self.client
+        body = self.object_ids[obj]
+        link_orn = pb.getQuaternionFromEuler((0.0, 0.0, pad_yaw_rad))
+        com_local_pos, com_local_orn = pb.getDynamicsInfo(self.robot, self.pad_link, physicsClientId=c)[3:5]
+        com_pos, com_orn = pb.multiplyTransforms(pad_root_pos_m, link_orn, com_local_pos, com_local_orn)
+        obj_pos, obj_orn = pb.getBasePositionAndOrientation(body, physicsClientId=c)
+        inv_pos, inv_orn = pb.invertTransform(com_pos, com_orn)
+        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        self._constraint = pb.createConstraint(
+            self.robot, self.pad_link, body, -1, pb.JOINT_FIXED, (0, 0, 0),
+            parentFramePosition=rel_pos, childFramePosition=(0, 0, 0),
+            parentFrameOrientation=rel_orn, childFrameOrientation=(0, 0, 0, 1), physicsClientId=c,
+        )
+        pb.changeConstraint(self._constraint, maxForce=1e4, physicsClientId=c)
+        self._held_body = body
+        self._robot_collides_with(body, False)  # a held object is part of the tool, like its links
+
+    def detach(self) -> None:
+        if self._constraint != NO_CONSTRAINT:
+            pb.removeConstraint(self._constraint, physicsClientId=self.client)
+            self._constraint = NO_CONSTRAINT
+            self._robot_collides_with(self._held_body, True)
+
+    def _robot_collides_with(self, body: int, enable: bool) -> None:
+        for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client)):
+            pb.setCollisionFilterPair(self.robot, body, link, -1, int(enable), physicsClientId=self.client)
+
+    def hold_wrench(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """Force (N) and torque (N·m) the hold constraint applied in the last step; zeros if none."""
+        if self._constraint == NO_CONSTRAINT:
+            return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        s = pb.getConstraintState(self._constraint, physicsClientId=self.client)
+        return (s[0], s[1], s[2]), (s[3], s[4], s[5]) if len(s) >= 6 else (0.0, 0.0, 0.0)
+
+    def close(self) -> None:
+        if pb.isConnected(self.client):
+            pb.disconnect(self.client)
+
+
+def pybullet_version() -> str:
+    return str(pb.getAPIVersion())

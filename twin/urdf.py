@@ -108,6 +108,26 @@ def urdf_from_profile(profile: RobotProfile) -> str:
     return "".join(parts)
 
 
+def urdf_text(profile: RobotProfile) -> str:
+    """The URDF the world loads for this profile: the user's file, or one built from primitives."""
+    if profile.urdf_path:
+        try:
+            return Path(profile.urdf_path).read_text()
+        except OSError as err:
+            raise ConfigError(f"cannot read URDF {profile.urdf_path!r}: {err}") from err
+    return urdf_from_profile(profile)
+
+
+def mesh_paths(profile: RobotProfile) -> list[Path]:
+    """The mesh files a user URDF references (resolved next to the URDF), sorted; [] for built-ins."""
+    if not profile.urdf_path:
+        return []
+    base = Path(profile.urdf_path).parent
+    root = ET.fromstring(urdf_text(profile))
+    names = {m.get("filename", "") for m in root.iter("mesh")}
+    return sorted((base / n.removeprefix("file://")).resolve() for n in names if n)
+
+
 def _xyz(elem: ET.Element | None, attr: str = "xyz") -> tuple[float, float, float]:
     if elem is None or elem.get(attr) is None:
         return (0.0, 0.0, 0.0)

@@ -16,7 +16,7 @@ from typing import NamedTuple
 from twin.config import TwinConfig
 from twin.errors import ConfigError
 from twin.types import NO_BODY
-from twin.urdf import urdf_from_profile
+from twin.urdf import urdf_text
 
 NO_CONSTRAINT = -1
 
@@ -96,12 +96,10 @@ class World:
     def _load_robot(self) -> None:
         profile = self.config.profile
         flags = pb.URDF_USE_INERTIA_FROM_FILE
+        self.urdf_text = urdf_text(profile)
         if profile.urdf_path:
-            with open(profile.urdf_path) as f:
-                self.urdf_text = f.read()
             self.robot = pb.loadURDF(profile.urdf_path, useFixedBase=True, flags=flags, physicsClientId=self.client)
         else:
-            self.urdf_text = urdf_from_profile(profile)
             fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"twin_{profile.name}_")
             try:
                 with os.fdopen(fd, "w") as f:

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# System packages the tests drive for real: tmux (terminal UI tests), Xvfb (PyBullet window),
+# mesa-vulkan-drivers (headless Rerun viewer screenshots). Installs only what is missing.
+set -euo pipefail
+need=()
+command -v tmux >/dev/null 2>&1 || need+=(tmux)
+command -v Xvfb >/dev/null 2>&1 || need+=(xvfb)
+dpkg -s mesa-vulkan-drivers >/dev/null 2>&1 || need+=(mesa-vulkan-drivers)
+if [ ${#need[@]} -gt 0 ]; then
+  if [ "$(id -u)" -ne 0 ]; then
+    echo "setup_test_system: missing ${need[*]}; run as root or install them: apt-get install ${need[*]}" >&2
+    exit 1
+  fi
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need[@]}" >/dev/null
+fi

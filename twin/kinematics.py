@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from twin.errors import OutOfReach
 from twin.profiles import RobotProfile
 
 
-@dataclass(frozen=True)
-class PadPose:
-    """The pad tip in the robot base frame."""
+class PadPose(NamedTuple):
+    """The pad tip in the robot base frame (a NamedTuple: it is computed every physics step)."""
 
     x_m: float
     y_m: float

@@ -22,6 +22,9 @@ class SuctionEvent:
     data: dict
 
 
+_NOTHING: tuple = ()
+
+
 class Suction:
     def __init__(self, params: SuctionParams, pad_length_m: float, world: World) -> None:
         self.params = params
@@ -33,12 +36,18 @@ class Suction:
         self._held_this_period = False
 
     def update(self, on: bool, tip_m: tuple[float, float, float], heading_rad: float) -> list[SuctionEvent]:
-        """Advance the pad's state for the coming step; returns what happened."""
+        """Advance the pad's state for the coming step; returns what happened. The sensor ray is
+        cast only while the pad is on and empty (what it sees otherwise cannot matter)."""
+        if not on and not self.on:
+            return _NOTHING  # the common case, kept cheap: an idle pad senses nothing
         events: list[SuctionEvent] = []
         p = self.params
         x, y, z_tip = tip_m
         root_z = z_tip + self.pad_length_m
-        self.sensed, _ = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
+        if on and self.held == NO_BODY:
+            self.sensed, _ = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
+        else:
+            self.sensed = self.held if on else NO_BODY
         if on and not self.on:
             self._held_this_period = False
         if not on and self.on and self.held == NO_BODY and not self._held_this_period:

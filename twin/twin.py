@@ -42,6 +42,7 @@ class Twin:
         self.targets = [0.0, 0.0, 0.0, 0.0]
         self.max_velocities = list(self.world._max_velocities())
         self.limits = self.profile.joint_limits()
+        self._suction_wanted = False  # any of the profile's suction signals is non-zero
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
 
@@ -56,16 +57,18 @@ class Twin:
 
     def step(self, n: int = 1) -> Frame:
         """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
+        sinks = self.sinks
         for _ in range(n):
             f = self.frame
-            on = any(self.signals.get(s, 0) for s in self.profile.suction_signals)
             pad = f.pad_pose
-            for ev in self.suction_pad.update(on, (pad[0], pad[1], pad[2]), self._heading(f)):
+            happened = self.suction_pad.update(self._suction_wanted, (pad[0], pad[1], pad[2]), self._heading(f))
+            for ev in happened:
                 self.event(ev.kind, self._body_name(ev.body), ev.message, **ev.data)
             self.world.step()
             self.step_index += 1
-            self.frame = self._read_frame()
-            self._emit_frame(self.frame)
+            f = self.frame = self._read_frame()
+            for s in sinks:
+                s.on_frame(f)
         return self.frame
 
     def wait(self, seconds: float) -> Frame:
@@ -76,26 +79,17 @@ class Twin:
 
     # -- state ------------------------------------------------------------------------------
     def _read_frame(self) -> Frame:
-        states = self.world.joint_states()
-        q = tuple(s.q for s in states)
+        q, qd, effort = self.world.joint_states()
         pad = kinematics.fk(self.profile, q)
         half = 0.5 * pad.heading_rad
-        wrench = self.world.hold_wrench()
+        force, torque = self.world.hold_wrench()
         sp = self.suction_pad
+        step = self.step_index
         return Frame(
-            step=self.step_index,
-            t_ns=self.step_index * self.config.dt_ns,
-            joint_q=q,
-            joint_qd=tuple(s.qd for s in states),
-            joint_effort=tuple(s.effort for s in states),
-            joint_target=tuple(self.targets),
-            suction_on=sp.on,
-            sensed_body=sp.sensed,
-            held_body=sp.held,
-            hold_force_n=wrench[0],
-            hold_torque_nm=wrench[1],
-            pad_pose=(pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
-            object_poses=self.world.object_poses(),
+            step, step * self.config.dt_ns, q, qd, effort, tuple(self.targets),
+            sp.on, sp.sensed, sp.held, force, torque,
+            (pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
+            self.world.object_poses(),
         )
 
     def _heading(self, f: Frame) -> float:
@@ -301,6 +295,7 @@ def _do_signal(twin: Twin, args: dict) -> None:
         twin.signals.pop(args["name"], None)
     else:
         twin.signals[args["name"]] = int(args["value"])
+    twin._suction_wanted = any(twin.signals.get(s, 0) for s in twin.profile.suction_signals)
 
 
 def _do_key(twin: Twin, args: dict) -> None:

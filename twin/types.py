@@ -7,15 +7,17 @@ poses are (x_m, y_m, z_m, qx, qy, qz, qw); time is integer nanoseconds of simula
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 Pose = tuple[float, float, float, float, float, float, float]
 NO_BODY = -1
 
 
-@dataclass(frozen=True, slots=True)
-class Frame:
-    """The state after `step` physics steps (step 0 is the initial state)."""
+class Frame(NamedTuple):
+    """The state after `step` physics steps (step 0 is the initial state).
+
+    A NamedTuple rather than a dataclass: one is built every physics step, and this is the
+    cheapest immutable record Python offers."""
 
     step: int
     t_ns: int

@@ -11,14 +11,13 @@ import ctypes
 import math
 import os
 import tempfile
-from typing import NamedTuple
-
 from twin.config import TwinConfig
 from twin.errors import ConfigError
 from twin.types import NO_BODY
 from twin.urdf import urdf_text
 
 NO_CONSTRAINT = -1
+_NO_WRENCH = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
 def _import_pybullet_quietly():
@@ -44,13 +43,6 @@ def _import_pybullet_quietly():
 
 
 pb = _import_pybullet_quietly()
-
-
-class JointState(NamedTuple):
-    q: float
-    qd: float
-    reaction: tuple[float, ...]
-    effort: float
 
 
 class World:
@@ -163,8 +155,10 @@ class World:
         pb.stepSimulation(physicsClientId=self.client)
 
     # -- reading ----------------------------------------------------------------------------
-    def joint_states(self) -> list[JointState]:
-        return [JointState(*s) for s in pb.getJointStates(self.robot, self.joints, physicsClientId=self.client)]
+    def joint_states(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """Positions, velocities and applied motor efforts of the four joints (float64)."""
+        s0, s1, s2, s3 = pb.getJointStates(self.robot, self.joints, physicsClientId=self.client)
+        return (s0[0], s1[0], s2[0], s3[0]), (s0[1], s1[1], s2[1], s3[1]), (s0[3], s1[3], s2[3], s3[3])
 
     def object_poses(self) -> tuple[tuple[float, ...], ...]:
         out = []
@@ -215,7 +209,7 @@ class World:
     def hold_wrench(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Force (N) and torque (N·m) the hold constraint applied in the last step; zeros if none."""
         if self._constraint == NO_CONSTRAINT:
-            return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+            return _NO_WRENCH
         s = pb.getConstraintState(self._constraint, physicsClientId=self.client)
         return (s[0], s[1], s[2]), (s[3], s[4], s[5]) if len(s) >= 6 else (0.0, 0.0, 0.0)
 

@@ -1,0 +1,16 @@
+"""Record-and-replay PyBullet digital twin of the MTB SCARA pick-and-place robot."""
+
+from __future__ import annotations
+
+from os import PathLike
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from twin.recording import Recording
+
+
+def load(path: str | PathLike) -> Recording:
+    """Load an MCAP recording as a twin.recording.Recording (frames as numpy columns, commands, events)."""
+    from twin.record.mcap_reader import load as load_mcap
+
+    return load_mcap(path)

@@ -6,9 +6,13 @@ import argparse
 import sys
 import time
 
+from twin.cli_compare import add_compare_commands
+from twin.cli_record import add_record_commands, add_record_options, record_paths
+from twin.cli_view import add_view_command
 from twin.config import TwinConfig, dt_ns_from_hz
 from twin.errors import TwinError
 from twin.profiles import get_profile
+from twin.remote.command import add_serve_command
 from twin.tasks import accepted_params, resolve, run_task
 from twin.twin import Twin
 
@@ -33,19 +37,34 @@ def _config(args: argparse.Namespace) -> TwinConfig:
     return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
 
 
+def _add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True) -> None:
+    """--record FILE.mcap / --no-record / --rrd FILE.rrd / --rate N (shared by run, teleop, serve)."""
+    add_record_options(p, record_by_default=record_by_default)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from twin.record import open_recorders  # only record/ touches mcap and rerun
+
     fn = resolve(args.task)
     config = _config(args)
     params = accepted_params(fn, {"cycles": args.cycles})
+    mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
+    run = {"source": "task", "task": args.task, "params": params}
     summary = _Summary()
-    twin = Twin(config, gui=args.gui, sinks=[summary])
-    wall0 = time.perf_counter()
-    try:
-        run_task(twin, fn, params)
-    finally:
-        wall_s = time.perf_counter() - wall0
-        _print_summary(twin, summary, wall_s)
-        twin.close()
+    with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:
+        twin = Twin(config, gui=args.gui, sinks=[summary, *sinks])
+        wall0 = time.perf_counter()
+        try:
+            run_task(twin, fn, params)
+        finally:
+            wall_s = time.perf_counter() - wall0
+            _print_summary(twin, summary, wall_s)
+            twin.close()
+            for path in (mcap_path, rrd_path):
+                if path is not None:
+                    print(f"recorded {path}")
     return 0
 
 
@@ -86,14 +105,55 @@ def _print_summary(twin: Twin, summary: _Summary, wall_s: float) -> None:
         print(f"placement error: worst {worst * 1000:.2f} mm over {len(placed)} cycle(s)")
 
 
+def cmd_teleop(args: argparse.Namespace) -> int:
+    from twin.teleop import TeleopOptions, run_teleop, summary_lines
+
+    mcap, rrd = record_paths(args, f"teleop_{args.robot}")
+    session = run_teleop(TeleopOptions(
+        robot=args.robot, rate_hz=args.rate_hz, gui=args.gui, keymap_path=args.keymap or "", keys=args.keys,
+        key_interval_s=args.key_interval, record_path=str(mcap) if mcap else None,
+        rrd_path=str(rrd) if rrd else None, record_rate=args.rate,
+    ))
+    for line in summary_lines(session):
+        print(line)
+    return 0
+
+
+def _add_teleop_parser(sub) -> None:
+    p = sub.add_parser("teleop", help="drive the robot from the keyboard (terminal screen, window, or --keys)",
+                       description="Keyboard teleoperation. Quit: Esc, Ctrl-C, Ctrl-D, and q unless the key map "
+                                   "binds q (seed000's elbow). Every key press is recorded and replayable.")
+    _add_twin_options(p)
+    add_record_options(p, record_by_default=False)
+    p.add_argument("--keymap", metavar="FILE", help="your own key map (.toml or .json); default: the robot's map")
+    p.add_argument("--keys", metavar="KEYS", help='scripted keys, e.g. "d*30 e 8 wait*2 s" (a character or a '
+                   'name like up/down/left/right/space; wait: no key; *N repeats), run in simulated time')
+    p.add_argument("--key-interval", metavar="SECONDS", type=float, default=0.5,
+                   help="simulated time after each scripted key (default 0.5 s)")
+    p.set_defaults(func=cmd_teleop)
+
+
+class _OneLineErrors(argparse.ArgumentParser):
+    """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit it."""
+
+    def error(self, message: str):
+        self.exit(2, f"twin: error: {message} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="twin", description="Record-and-replay digital twin of the MTB SCARA robot")
+    parser = _OneLineErrors(prog="twin", description="Record-and-replay digital twin of the MTB SCARA robot")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a task (built-in name or path/to/task.py)")
     p.add_argument("task")
     _add_twin_options(p)
     p.add_argument("--cycles", type=_positive_int, default=2, help="pick-and-place cycles (default 2)")
+    _add_record_options(p)
     p.set_defaults(func=cmd_run)
+    _add_teleop_parser(sub)
+    add_compare_commands(sub)
+    add_record_commands(sub)
+    add_serve_command(sub)
+    add_view_command(sub)
     return parser
 
 

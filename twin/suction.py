@@ -34,6 +34,7 @@ class Suction:
         self.sensed = NO_BODY
         self.held = NO_BODY
         self._held_this_period = False
+        self._broken_this_period = False  # a broken hold stays broken until the pad is switched off
 
     def update(self, on: bool, tip_m: tuple[float, float, float], heading_rad: float) -> list[SuctionEvent]:
         """Advance the pad's state for the coming step; returns what happened. The sensor ray is
@@ -50,16 +51,18 @@ class Suction:
             self.sensed = self.held if on else NO_BODY
         if on and not self.on:
             self._held_this_period = False
+            self._broken_this_period = False
         if not on and self.on and self.held == NO_BODY and not self._held_this_period:
             events.append(SuctionEvent("suction_empty", NO_BODY, "suction on, nothing sensed", {}))
         self.on = on
         if self.held != NO_BODY and not on:
             events.append(self._drop("release", "suction off"))
         elif self.held != NO_BODY and not p.infinite_strength:
-            reason = self._overload()
+            reason = self._overload((x, y, z_tip))
             if reason:
                 events.append(self._drop("break", reason))
-        if on and self.held == NO_BODY and self.sensed != NO_BODY:
+                self._broken_this_period = True
+        if on and self.held == NO_BODY and self.sensed != NO_BODY and not self._broken_this_period:
             self.world.attach(self.sensed, (x, y, root_z), heading_rad)
             self.held = self.sensed
             self._held_this_period = True
@@ -72,11 +75,18 @@ class Suction:
         self.held = NO_BODY
         return SuctionEvent(kind, body, why, {})
 
-    def _overload(self) -> str:
-        """Why the hold must break now (pull, shear or peel over its limit), or ''."""
+    def _overload(self, tip_m: tuple[float, float, float]) -> str:
+        """Why the hold must break now (pull, shear or peel over its limit), or ''.
+
+        The pad points down (-z, a SCARA never tilts it). Pull is the force drawing the object away
+        from the cup (the pad's upward force on it; pressing the object down is not pull), shear the
+        sideways force, peel the torque about x and y taken at the cup's face (the pad tip)."""
         p = self.params
         (fx, fy, fz), (tx, ty, _tz) = self.world.hold_wrench()
-        pull_n, shear_n, peel_nm = abs(fz), math.hypot(fx, fy), math.hypot(tx, ty)
+        cx, cy, cz = self.world.object_poses()[self.held][:3]
+        rx, ry, rz = cx - tip_m[0], cy - tip_m[1], cz - tip_m[2]  # tip -> object's centre of mass
+        peel_x, peel_y = tx + ry * fz - rz * fy, ty + rz * fx - rx * fz
+        pull_n, shear_n, peel_nm = fz, math.hypot(fx, fy), math.hypot(peel_x, peel_y)
         if pull_n > p.max_pull_force_n:
             return f"pull {pull_n:.3f} N > max_pull_force {p.max_pull_force_n} N"
         if shear_n > p.max_shear_force_n:

@@ -314,9 +314,10 @@ def _do_key(twin: Twin, args: dict) -> None:
         op = action[0]
         if op in ("jog", "jog_keep_heading"):
             j = twin._joint(action[1])
-            _do_joint_target(twin, {"joint": j, "q": twin.targets[j] + float(action[2])})
-            if op == "jog_keep_heading":
-                _do_joint_target(twin, {"joint": WRIST, "q": twin.targets[WRIST] - float(action[2])})
+            before = twin.targets[j]
+            _do_joint_target(twin, {"joint": j, "q": before + float(action[2])})
+            if op == "jog_keep_heading" and twin.targets[j] != before:  # turn back by what the joint moved
+                _do_joint_target(twin, {"joint": WRIST, "q": twin.targets[WRIST] - (twin.targets[j] - before)})
         elif op == "target":
             j = twin._joint(action[1])
             lo, hi = twin.limits[j]

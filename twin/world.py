@@ -11,6 +11,7 @@ import ctypes
 import math
 import os
 import tempfile
+
 from twin.config import TwinConfig
 from twin.errors import ConfigError
 from twin.types import NO_BODY
@@ -51,6 +52,8 @@ class World:
     def __init__(self, config: TwinConfig, *, gui: bool = False) -> None:
         self.config = config
         self.gui = gui
+        if gui:
+            _require_display()
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
         if self.client < 0:
             raise ConfigError("cannot open a PyBullet window; run without --gui or under a display")
@@ -62,6 +65,7 @@ class World:
         self.pad_link = -1
         self.object_ids: tuple[int, ...] = ()
         self._constraint = NO_CONSTRAINT
+        self._keys_down: set[int] = set()
         self.build()
 
     # -- building ---------------------------------------------------------------------------
@@ -70,6 +74,7 @@ class World:
         c = self.client
         pb.resetSimulation(physicsClientId=c)
         self._constraint = NO_CONSTRAINT
+        self._overlapping: list[tuple[int, int]] = []  # (link, body) pairs released while touching
         e = self.config.engine
         pb.setPhysicsEngineParameter(
             fixedTimeStep=self.config.dt_s,
@@ -153,6 +158,8 @@ class World:
 
     def step(self) -> None:
         pb.stepSimulation(physicsClientId=self.client)
+        if self._overlapping:
+            self._collide_once_apart()
 
     # -- reading ----------------------------------------------------------------------------
     def joint_states(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
@@ -195,27 +202,119 @@ class World:
         pb.changeConstraint(self._constraint, maxForce=1e4, physicsClientId=c)
         self._held_body = body
         self._robot_collides_with(body, False)  # a held object is part of the tool, like its links
+        self._overlapping = [(link, b) for link, b in self._overlapping if b != body]
 
     def detach(self) -> None:
         if self._constraint != NO_CONSTRAINT:
             pb.removeConstraint(self._constraint, physicsClientId=self.client)
             self._constraint = NO_CONSTRAINT
-            self._robot_collides_with(self._held_body, True)
+            self._restore_collisions(self._held_body)
+
+    def _restore_collisions(self, body: int) -> None:
+        """A released object collides with the robot again, except with links it overlaps now (a box
+        lifted into the arm's volume would be shot out); those pairs wait until they are apart."""
+        c = self.client
+        for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=c)):
+            if pb.getClosestPoints(self.robot, body, 0.0, linkIndexA=link, physicsClientId=c):
+                self._overlapping.append((link, body))
+            else:
+                pb.setCollisionFilterPair(self.robot, body, link, -1, 1, physicsClientId=c)
+
+    def _collide_once_apart(self) -> None:
+        c = self.client
+        still = []
+        for link, body in self._overlapping:
+            if pb.getClosestPoints(self.robot, body, 0.0, linkIndexA=link, physicsClientId=c):
+                still.append((link, body))
+            else:
+                pb.setCollisionFilterPair(self.robot, body, link, -1, 1, physicsClientId=c)
+        self._overlapping = still
 
     def _robot_collides_with(self, body: int, enable: bool) -> None:
         for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client)):
             pb.setCollisionFilterPair(self.robot, body, link, -1, int(enable), physicsClientId=self.client)
 
     def hold_wrench(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-        """Force (N) and torque (N·m) the hold constraint applied in the last step; zeros if none."""
+        """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
+        object in the last step, world frame; zeros if nothing is held. A box hanging still gets +m·g in z.
+
+        getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
+        along world axes, the torque along the constraint frame's axes, which are rigid with the object.
+        """
         if self._constraint == NO_CONSTRAINT:
             return _NO_WRENCH
         s = pb.getConstraintState(self._constraint, physicsClientId=self.client)
-        return (s[0], s[1], s[2]), (s[3], s[4], s[5]) if len(s) >= 6 else (0.0, 0.0, 0.0)
+        _pos, orn = pb.getBasePositionAndOrientation(self._held_body, physicsClientId=self.client)
+        r = pb.getMatrixFromQuaternion(orn)  # row-major: world = r @ constraint frame
+        tx, ty, tz = -s[3], -s[4], -s[5]
+        torque = (r[0] * tx + r[1] * ty + r[2] * tz, r[3] * tx + r[4] * ty + r[5] * tz,
+                  r[6] * tx + r[7] * ty + r[8] * tz)
+        return (-s[0], -s[1], -s[2]), torque
+
+    # -- the window's keyboard (teleop) -------------------------------------------------------
+    def keyboard_events(self) -> list[str]:
+        """Names of the keys pressed in the PyBullet window since the last call ([] headless)."""
+        if not self.gui:
+            return []
+        return decode_key_events(pb.getKeyboardEvents(physicsClientId=self.client), self._keys_down)
+
+    def connected(self) -> bool:
+        """False once the PyBullet window has been closed."""
+        return bool(pb.isConnected(self.client))
 
     def close(self) -> None:
         if pb.isConnected(self.client):
             pb.disconnect(self.client)
+
+
+def _require_display() -> None:
+    """PyBullet's GUI calls exit() when it cannot reach an X server: check for one first (Linux)."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    display = os.environ.get("DISPLAY", "")
+    if not display:
+        raise ConfigError("--gui needs a display but DISPLAY is not set; run without --gui or under Xvfb")
+    try:
+        xlib = ctypes.CDLL("libX11.so.6")
+    except OSError as err:
+        raise ConfigError(f"--gui needs libX11 (X11 client library), which cannot be loaded: {err}") from err
+    xlib.XOpenDisplay.restype = ctypes.c_void_p
+    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    handle = xlib.XOpenDisplay(display.encode())
+    if not handle:
+        raise ConfigError(f"--gui cannot connect to the X display DISPLAY={display!r}; run without --gui or under Xvfb")
+    xlib.XCloseDisplay(handle)
+
+
+_KEY_NAMES = {
+    pb.B3G_UP_ARROW: "up", pb.B3G_DOWN_ARROW: "down", pb.B3G_LEFT_ARROW: "left", pb.B3G_RIGHT_ARROW: "right",
+    pb.B3G_SPACE: "space", pb.B3G_RETURN: "enter", 9: "tab", pb.B3G_BACKSPACE: "backspace",
+    pb.B3G_DELETE: "delete", pb.B3G_INSERT: "insert", pb.B3G_HOME: "home", pb.B3G_END: "end",
+    pb.B3G_PAGE_UP: "pageup", pb.B3G_PAGE_DOWN: "pagedown", 27: "esc",
+    **{pb.B3G_F1 + i: f"f{i + 1}" for i in range(12)},
+}
+
+
+def decode_key_events(events: dict[int, int], keys_down: set[int]) -> list[str]:
+    """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or when
+    only its release arrives (a quick tap may show up only as released). Shift+letter gives the capital."""
+    shift = bool(events.get(pb.B3G_SHIFT, 0) & pb.KEY_IS_DOWN)
+    names = []
+    for code, state in sorted(events.items()):
+        name = _KEY_NAMES.get(code) or (chr(code) if 33 <= code <= 126 else None)
+        pressed = False
+        if state & pb.KEY_WAS_TRIGGERED:
+            pressed = code not in keys_down
+            keys_down.add(code)
+        if state & pb.KEY_WAS_RELEASED:
+            pressed = pressed or code not in keys_down
+            keys_down.discard(code)
+        if pressed and name is not None:
+            names.append(name.upper() if shift and len(name) == 1 else name)
+    return names
 
 
 def pybullet_version() -> str:

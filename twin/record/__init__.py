@@ -1,0 +1,67 @@
+"""Recording a run: `open_recorders(...)` gives the sinks (MCAP, optionally Rerun) and ends them cleanly."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from twin.config import TwinConfig
+from twin.errors import TwinError
+from twin.urdf import mesh_paths, urdf_text
+
+
+@contextmanager
+def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | None = None,
+                   rrd_path: str | Path | None = None, rate: int = 1) -> Iterator[list]:
+    """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file is
+    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised."""
+    from twin.record.mcap_writer import McapRecorder
+
+    urdf = urdf_text(config.profile)
+    sinks: list = []
+    try:
+        if mcap_path is not None:
+            sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=mesh_paths(config.profile),
+                                      rate=rate))
+        if rrd_path is not None:
+            from twin.record.rerun_writer import RerunRecorder
+
+            sinks.append(RerunRecorder(rrd_path, config, urdf))
+    except BaseException as err:
+        _note(err, _close_all(sinks, "error", "recording could not start"))
+        raise
+    try:
+        yield sinks
+    except KeyboardInterrupt as err:
+        _note(err, _close_all(sinks, "interrupted", "KeyboardInterrupt"))
+        raise
+    except BaseException as err:
+        text = str(err) if isinstance(err, TwinError) else f"{type(err).__name__}: {err}"
+        _note(err, _close_all(sinks, "error", text))
+        raise
+    failure = _close_all(sinks, "ok", "")
+    if failure is not None:
+        raise failure
+
+
+def _close_all(sinks: list, outcome: str, error: str) -> Exception | None:
+    """Close every sink even if one fails; return the first failure."""
+    from twin.record.mcap_writer import McapRecorder
+
+    first: Exception | None = None
+    for sink in sinks:
+        try:
+            if isinstance(sink, McapRecorder):
+                sink.close(outcome=outcome, error=error)
+            else:
+                sink.close()
+        except Exception as err:  # noqa: BLE001 - keep closing the others
+            first = first or err
+    return first
+
+
+def _note(err: BaseException, failure: Exception | None) -> None:
+    """The run's own exception stays the one raised; a failure to close rides along as a note."""
+    if failure is not None:
+        err.add_note(f"while closing the recordings: {failure}")

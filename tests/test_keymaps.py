@@ -1,0 +1,159 @@
+"""Key maps: the seeds' bindings act as the reports describe, user files are checked entry by entry."""
+
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from twin.config import TwinConfig
+from twin.errors import ConfigError
+from twin.keymaps import BUILTIN, help_lines, keymap_for, load_keymap, parse_keys, quit_keys
+from twin.profiles import PROFILES
+from twin.twin import Twin
+from twin.world import decode_key_events, pb
+
+DEG = math.radians(1)
+
+
+def _targets_after(profile: str, keys: list[str]) -> tuple[float, ...]:
+    p = PROFILES[profile]
+    twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))
+    try:
+        for key in keys:
+            twin.press_key(key)
+        twin.step()
+        return tuple(twin.targets), twin.signals.get(p.suction_signals[0])
+    finally:
+        twin.close()
+
+
+@pytest.mark.parametrize("name", sorted(PROFILES))
+def test_every_builtin_map_is_valid_and_described(name):
+    keymap = keymap_for(PROFILES[name])
+    assert keymap and list(keymap) == sorted(keymap)
+    lines = help_lines(keymap)
+    assert len(lines) == len(keymap) and all(line.strip() for line in lines)
+
+
+def test_seed000_keys_do_what_report_000_says():
+    t, _ = _targets_after("seed000", ["d", "d", "a"])
+    assert t[0] == pytest.approx(DEG) and t[1] == 0.0
+    t, _ = _targets_after("seed000", ["e", "q", "q"])
+    assert t[1] == pytest.approx(-DEG) and t[0] == 0.0
+    t, suction = _targets_after("seed000", ["5"])
+    assert t[2] == PROFILES["seed000"].z_stroke_m and suction is None
+    t, suction = _targets_after("seed000", ["5", "8"])  # 8 raises Z by 5 cm and switches suction on
+    assert t[2] == pytest.approx(PROFILES["seed000"].z_stroke_m - 0.05) and suction == 1
+    _, suction = _targets_after("seed000", ["8", "s"])
+    assert suction == 0
+
+
+def test_seed001_arrows_keep_the_pad_heading():
+    t, _ = _targets_after("seed001", ["left", "left", "up", "down", "down", "down"])
+    shoulder, elbow, _z, wrist = t
+    assert shoulder == pytest.approx(2 * DEG) and elbow == pytest.approx(-2 * DEG)
+    assert shoulder + elbow + wrist == pytest.approx(0.0, abs=1e-12)
+    t, suction = _targets_after("seed001", ["3"])
+    assert t[2] == PROFILES["seed001"].z_stroke_m and suction == 1
+    t, suction = _targets_after("seed001", ["3", "4", "5"])
+    assert t[2] == 0.0 and suction == 0
+
+
+def test_quit_keys_never_steal_a_bound_key():
+    assert "q" not in quit_keys(BUILTIN["seed000"])  # q is the elbow there
+    assert quit_keys(BUILTIN["mtb"])[0] == "q"
+    for keymap in BUILTIN.values():
+        assert {"esc", "ctrl-c", "ctrl-d"} <= set(quit_keys(keymap))
+        assert not set(keymap) & {"esc", "ctrl-c", "ctrl-d"}
+
+
+def test_parse_keys_tokens_and_repeats():
+    assert parse_keys("d*3 up  x * **2 wait*2 esc") == ["d", "d", "d", "up", "x", "*", "*", "*", "wait", "wait", "esc"]
+    assert parse_keys("") == []
+    for bad, shown in (("dd", "'dd'"), ("up*0", "*1 or more"), ("Up", "'Up'")):
+        with pytest.raises(ConfigError, match=r".*" + shown.replace("*", r"\*")):
+            parse_keys(bad)
+
+
+def test_user_keymap_toml_with_degrees_and_extends(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text('extends = "seed000"\n[keys]\nw = [["jog", "elbow", "2.5deg"]]\n'
+                    'x = [["target", "MTB_axis3", 0.1], ["signal", "lamp", 3]]\nd = ["jog", "shoulder", 0.1]\n')
+    keymap = load_keymap(path, PROFILES["mtb"])
+    assert keymap["w"] == [["jog", "elbow", math.radians(2.5)]]
+    assert keymap["x"] == [["target", "z", 0.1], ["signal", "lamp", 3]]
+    assert keymap["d"] == [["jog", "shoulder", 0.1]]  # a single action without the outer list
+    assert keymap["a"] == [["jog", "shoulder", -DEG]]  # from seed000
+
+
+def test_user_keymap_json(tmp_path):
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps({"keys": {"space": [["suction", 1]], "left": [["jog_keep_heading", "AB", 0.2]]}}))
+    assert load_keymap(path, PROFILES["seed002"]) == {
+        "left": [["jog_keep_heading", "shoulder", 0.2]], "space": [["suction", 1]]}
+
+
+BAD_ENTRIES = [
+    ('[keys]\nk = [["jog", "knee", 1]]', "unknown joint 'knee'"),
+    ('[keys]\nk = [["spin", "elbow", 1]]', "op one of jog"),
+    ('[keys]\nk = [["jog", "elbow"]]', "has 2 items"),
+    ('[keys]\nk = [["jog", "elbow", "fast"]]', "value 'fast' is not a finite number"),
+    ('[keys]\nk = [["jog", "z", "5deg"]]', "expected metres"),
+    ('[keys]\nk = [["jog_keep_heading", "z", 0.01]]', "shoulder or elbow"),
+    ('[keys]\nk = [["suction", 2]]', "suction value 2"),
+    ('[keys]\nk = [["signal", "lamp", 1.5]]', "signal value 1.5"),
+    ('[keys]\nesc = [["suction", 1]]', "key 'esc' is not a key name"),
+    ('[keys]\nk = []', "non-empty list of actions"),
+    ('[keys]\nk = [["jog", "elbow", 1]', "cannot be read"),
+    ('keys = 3', "expected a table `keys`"),
+    ('extends = "robot9"\n[keys]\nk = [["suction", 1]]', "extends 'robot9' is unknown"),
+    ('colour = 1\n[keys]\nk = [["suction", 1]]', "unknown entries ['colour']"),
+]
+
+
+@pytest.mark.parametrize(("text", "message"), BAD_ENTRIES)
+def test_bad_keymap_entry_is_one_clear_error(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_keymap(path, PROFILES["mtb"])
+    assert message in str(err.value) and "bad.toml" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_bad_keymap_file_on_the_command_line_exits_2_and_records_nothing(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('[keys]\nk = [["jog", "knee", 1]]\n')
+    rec = tmp_path / "run.mcap"
+    out = subprocess.run([sys.executable, "-m", "twin.cli", "teleop", "--keymap", str(path), "--keys", "k", "--record",
+                          str(rec)], check=False, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and "unknown joint 'knee'" in out.stderr and "Traceback" not in out.stderr
+    assert not rec.exists()
+    missing = subprocess.run([sys.executable, "-m", "twin.cli", "teleop", "--keymap", str(tmp_path / "no.toml"),
+                              "--keys", "k"], check=False, capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
+
+
+def test_window_key_events_count_each_press_once():
+    down: set[int] = set()
+    a, trig, rel, is_down = ord("a"), pb.KEY_WAS_TRIGGERED, pb.KEY_WAS_RELEASED, pb.KEY_IS_DOWN
+    assert decode_key_events({a: trig | is_down}, down) == ["a"]
+    assert decode_key_events({a: is_down}, down) == []  # held
+    assert decode_key_events({a: rel}, down) == []  # its release is not a second press
+    assert decode_key_events({a: rel}, down) == ["a"]  # a quick tap seen only as released
+    assert decode_key_events({a: trig | rel}, down) == ["a"]
+    assert decode_key_events({pb.B3G_LEFT_ARROW: trig, pb.B3G_SHIFT: is_down, ord("d"): trig}, down) == ["D", "left"]
+    assert decode_key_events({27: trig, pb.B3G_F1 + 1: trig, 7: trig}, down) == ["esc", "f2"]
+
+
+def test_readme_example_keymap_loads(tmp_path):
+    readme = (Path(__file__).parent.parent / "README.md").read_text()
+    path = tmp_path / "example.toml"
+    path.write_text(re.search(r"```toml\n(.*?)```", readme, re.DOTALL).group(1))
+    keymap = load_keymap(path, PROFILES["mtb"])
+    assert keymap["w"] == [["jog", "elbow", math.radians(2)]] and keymap["n"] == [["signal", "lamp", 1]]
+    assert keymap["left"] == [["jog_keep_heading", "shoulder", math.radians(1)]] and "g" in keymap

@@ -1,0 +1,152 @@
+"""`twin serve` as a process: startup, the port it reports, clean shutdown, bad command lines.
+
+ServerProcess (used by the other test_remote_* modules) starts `twin serve --port 0` on loopback,
+reads the port the server bound from its first line, and always terminates it.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import Self
+
+import pytest
+from coppeliasim_zmqremoteapi_client import RemoteAPIClient
+
+STARTUP_TIMEOUT_S = 30.0
+
+
+class ServerProcess:
+    """A `twin serve` subprocess on a free loopback port; its output lines are kept in `lines`."""
+
+    def __init__(self, *args: str) -> None:
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if "--record" not in args:
+            args = (*args, "--no-record")  # never write into the working tree
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "twin.cli", "serve", "--host", "127.0.0.1", "--port", "0", *args],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+        )
+        self.lines: list[str] = []
+        self._queue: queue.Queue[str | None] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+        self.port = 0
+        try:
+            line = self.wait_for(r"listening on tcp://127\.0\.0\.1:(\d+)", STARTUP_TIMEOUT_S)
+        except BaseException:
+            self.stop()
+            raise
+        self.port = int(re.search(r":(\d+)", line).group(1))
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self._queue.put(line.rstrip("\n"))
+        self._queue.put(None)
+
+    def wait_for(self, pattern: str, timeout_s: float = 10.0) -> str:
+        """The first output line (from now on, or already seen) matching `pattern`."""
+        for line in self.lines:
+            if re.search(pattern, line):
+                return line
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                line = self._queue.get(timeout=max(0.01, deadline - time.monotonic()))
+            except queue.Empty:
+                break
+            if line is None:
+                break
+            self.lines.append(line)
+            if re.search(pattern, line):
+                return line
+        raise AssertionError(f"no line matching {pattern!r}; output so far:\n" + "\n".join(self.lines))
+
+    def client(self) -> RemoteAPIClient:
+        return RemoteAPIClient("127.0.0.1", self.port)
+
+    def stop(self) -> int:
+        """SIGINT (finalizes a running run's recording), then kill if it does not end."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5)
+        return self.proc.returncode
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def test_serve_reports_its_port_serves_and_shuts_down_cleanly_on_sigint(tmp_path):
+    with ServerProcess("--stepped", "--robot", "seed002", "--record", str(tmp_path / "run.mcap")) as server:
+        sim = server.client().require("sim")
+        assert sim.getObjectAlias(sim.getObject("/AB")) == "AB"
+        sim.startSimulation()
+        sim.setStepping(True)
+        for _ in range(5):
+            sim.step()
+        assert server.stop() == 0
+        server.wait_for(r"shutting down")
+        # the run was still going: shutting down ends it and finalizes its recording
+        server.wait_for(r"simulation stopped: run 1 lasted 5 steps.*run\.mcap")
+    assert (tmp_path / "run.mcap").stat().st_size > 0
+
+
+def test_serve_refuses_a_busy_port_with_one_line():
+    with ServerProcess("--stepped") as first:
+        proc = subprocess.run([sys.executable, "-m", "twin.cli", "serve", "--port", str(first.port)],
+                              capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 2
+    assert f"cannot listen on tcp://127.0.0.1:{first.port}" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--port", "70000"], "port '70000' is invalid"),
+    (["--speed", "0"], "speed 0.0 is out of range"),
+    (["--robot", "nope"], "unknown robot 'nope'"),
+])
+def test_serve_rejects_bad_options(args, expected):
+    proc = subprocess.run([sys.executable, "-m", "twin.cli", "serve", *args], capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert proc.returncode == 2
+    assert expected in proc.stderr
+
+
+def test_realtime_follows_the_wall_clock_until_a_client_steps():
+    with ServerProcess("--realtime", "--speed", "2") as server:
+        sim = server.client().require("sim")
+        dt_s = sim.getSimulationTimeStep()
+        t_start_sent = time.monotonic()
+        sim.startSimulation()
+        t_start_done = time.monotonic()
+        time.sleep(0.3)
+        t_query_sent = time.monotonic()
+        t_sim = sim.getSimulationTime()
+        t_query_done = time.monotonic()
+        # the server steps up to floor(elapsed wall time x speed / dt) before it answers
+        assert 2 * (t_query_sent - t_start_done) - 2 * dt_s <= t_sim <= 2 * (t_query_done - t_start_sent) + dt_s
+        sim.setStepping(True)  # now this client's sim.step() is the clock
+        frozen = sim.getSimulationTime()
+        time.sleep(0.1)
+        assert sim.getSimulationTime() == frozen
+        sim.step()
+        assert sim.getSimulationTime() == pytest.approx(frozen + dt_s, abs=1e-12)
+        t_resume = time.monotonic()
+        sim.setStepping(False)
+        time.sleep(0.1)
+        t_now = sim.getSimulationTime()
+        # back on the wall clock from where the stepping left it: no jump over the stepped time
+        assert frozen + dt_s < t_now <= frozen + dt_s + 2 * (time.monotonic() - t_resume) + dt_s
+        sim.stopSimulation()

@@ -1,0 +1,171 @@
+"""The suction pad in real PyBullet: attach, release, the measured hold wrench and when a hold breaks."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from twin.columns import FrameCollector
+from twin.config import SceneObject, SuctionParams, TwinConfig
+from twin.twin import Twin
+from twin.types import NO_BODY
+
+G_M_S2 = 9.81
+BOX_XY_M = (0.5, 0.0)
+HIGH = 1e3  # a limit that is never reached
+
+
+def _twin(mass_kg: float = 0.1, size_z_m: float = 0.05, **suction) -> tuple[Twin, FrameCollector]:
+    box = SceneObject("box", size_m=(0.05, 0.05, size_z_m), mass_kg=mass_kg, pos_m=(*BOX_XY_M, size_z_m / 2))
+    sink = FrameCollector()
+    return Twin(TwinConfig(objects=(box,), suction=SuctionParams(**suction)), sinks=[sink]), sink
+
+
+def _kinds(sink: FrameCollector) -> list[str]:
+    return [e.kind for e in sink.events if e.kind != "phase"]
+
+
+def _pick(twin: Twin, dx_m: float = 0.0, *, gentle: bool = False) -> None:
+    """Pick the box. `gentle` stops the pad 0.1 mm past where its sensor first sees the box top:
+    lowering to the end of the stroke drags the attached box 2 mm into the floor, a shove of tens
+    of newtons that a weak finite hold would not survive."""
+    twin.move_to(BOX_XY_M[0] + dx_m, BOX_XY_M[1], heading_rad=0.0)
+    twin.suction(True)
+    if gentle:
+        twin.z_to(0.05 + SuctionParams().sensor_offset_m - twin.profile.pad_length_m + 0.0059)
+    else:
+        twin.lower()
+    twin.raise_()
+
+
+def test_switching_off_releases_and_the_box_falls():
+    twin, sink = _twin()
+    _pick(twin)
+    assert twin.frame.held_body == 0
+    assert twin.object_pose("box")[2] > 0.2  # lifted with the pad
+    twin.suction(False)
+    twin.wait(1.0)
+    assert twin.frame.held_body == NO_BODY
+    assert twin.object_pose("box")[2] == pytest.approx(0.025, abs=1e-3)  # back on the floor
+    assert _kinds(sink) == ["attach", "release"]
+    release = next(e for e in sink.events if e.kind == "release")
+    assert (release.body, release.message) == ("box", "suction off")
+    assert twin.frame.hold_force_n == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("mass_kg", [0.1, 0.3])
+def test_a_box_hanging_still_pulls_with_its_weight(mass_kg):
+    twin, _ = _twin(mass_kg)
+    _pick(twin)
+    twin.wait(1.0)
+    f = twin.frame
+    fx, fy, fz = f.hold_force_n
+    assert fz == pytest.approx(mass_kg * G_M_S2, rel=0.01)  # the pad holds the box up: +z on the box
+    assert math.hypot(fx, fy) < 1e-3 * mass_kg * G_M_S2
+    assert max(abs(t) for t in f.hold_torque_nm) < 1e-4
+
+
+def test_the_hold_force_is_in_world_axes_and_opposes_the_centripetal_pull():
+    """Swinging the shoulder at constant speed: the pad pulls the box towards the shoulder axis."""
+    twin, sink = _twin()
+    _pick(twin)
+    twin.set_joint_target("MTB_axis1", 1.0)
+    twin.step(40)  # at full speed (3 rad/s) by now
+    f = sink.frames[-1]
+    x, y = f.object_poses[0][:2]
+    w = f.joint_qd[0]
+    fx, fy, _ = f.hold_force_n
+    expected = 0.1 * w * w * math.hypot(x, y)  # m ω² r, towards the axis
+    assert fx * x + fy * y < 0.0
+    assert math.hypot(fx, fy) == pytest.approx(expected, rel=0.05)
+
+
+def test_an_empty_pad_switched_off_reports_suction_empty():
+    twin, sink = _twin()
+    twin.move_to(-0.4, 0.4)  # nowhere near the box
+    twin.suction(True)
+    twin.lower()
+    twin.suction(False)
+    twin.step()
+    twin.raise_()
+    assert _kinds(sink) == ["suction_empty"]
+    ev = sink.events[-1] if sink.events[-1].kind == "suction_empty" else None
+    assert ev is not None and ev.message == "suction on, nothing sensed" and ev.body == ""
+    assert twin.object_pose("box")[:2] == pytest.approx(BOX_XY_M, abs=1e-3)
+
+
+def test_stopping_the_simulation_releases_what_is_held():
+    twin, sink = _twin()
+    _pick(twin)
+    twin.stop()
+    assert sink.events[-1].kind == "release" and sink.events[-1].message == "simulation stopped"
+
+
+def test_a_heavy_box_breaks_a_finite_hold_on_pull():
+    twin, sink = _twin(mass_kg=0.5, infinite_strength=False, max_shear_force_n=HIGH, max_peel_torque_nm=HIGH)
+    _pick(twin)
+    twin.wait(1.0)
+    breaks = [e for e in sink.events if e.kind == "break"]
+    assert len(breaks) == 1 and breaks[0].body == "box"
+    assert breaks[0].message.startswith("pull ") and "> max_pull_force 3.0 N" in breaks[0].message
+    assert twin.frame.held_body == NO_BODY
+    assert twin.object_pose("box")[2] == pytest.approx(0.025, abs=2e-3)  # fell back
+
+
+def test_the_same_box_holds_with_infinite_strength():
+    twin, sink = _twin(mass_kg=0.5)
+    _pick(twin)
+    twin.wait(1.0)
+    assert "break" not in _kinds(sink) and twin.frame.held_body == 0
+
+
+def test_a_fast_swing_breaks_a_weak_hold_on_shear():
+    twin, sink = _twin(infinite_strength=False, max_pull_force_n=HIGH, max_shear_force_n=5.0,
+                       max_peel_torque_nm=HIGH)
+    _pick(twin, gentle=True)
+    assert _kinds(sink) == ["attach"]  # lifting is not shear
+    twin.move_to(-0.3, -0.55)
+    breaks = [e for e in sink.events if e.kind == "break"]
+    assert len(breaks) == 1 and breaks[0].message.startswith("shear ")
+
+
+def test_peel_is_the_torque_at_the_cup_face():
+    """A box held 15 mm off its centre pulls with a peel torque of d·m·g·(1 + a/g) at the pad tip (0 at
+    its centre of mass, where the constraint acts): the jerk of lifting it breaks the stock 0.1 N·m limit,
+    while a centred box has almost none."""
+    limits = {"infinite_strength": False, "max_pull_force_n": HIGH, "max_shear_force_n": HIGH}
+    centred, sink_c = _twin(**limits)
+    _pick(centred, gentle=True)
+    centred.wait(0.5)
+    assert "break" not in _kinds(sink_c)
+    offset, sink_o = _twin(**limits)
+    _pick(offset, dx_m=0.015, gentle=True)
+    breaks = [e for e in sink_o.events if e.kind == "break"]
+    assert len(breaks) == 1 and breaks[0].message.startswith("peel torque ")
+
+    hanging, _ = _twin()
+    _pick(hanging, dx_m=0.015)
+    hanging.wait(1.0)
+    f = hanging.frame
+    tip = np.array(f.pad_pose[:3])
+    com = np.array(f.object_poses[0][:3])
+    at_tip = np.array(f.hold_torque_nm) + np.cross(com - tip, np.array(f.hold_force_n))
+    assert math.hypot(at_tip[0], at_tip[1]) == pytest.approx(0.015 * 0.1 * G_M_S2, rel=0.05)
+
+
+def test_pressing_the_held_box_down_is_not_pull():
+    """A tall box held and pushed into the floor: the pad pushes it down (negative z), which must
+    not count as pull; lifting it afterwards keeps the hold."""
+    twin, sink = _twin(size_z_m=0.07, infinite_strength=False, max_pull_force_n=20.0, max_shear_force_n=HIGH,
+                       max_peel_torque_nm=HIGH)
+    twin.move_to(*BOX_XY_M)
+    twin.suction(True)
+    twin.z_to(0.06, settle=False)  # 10 mm into the box's top
+    twin.wait(0.6)
+    pressed = min(f.hold_force_n[2] for f in sink.frames)
+    assert pressed < -20.0
+    twin.raise_()
+    twin.wait(0.5)
+    assert _kinds(sink) == ["attach"] and twin.frame.held_body == 0

@@ -1,0 +1,158 @@
+"""The benchmark entry point: `python tools/bench.py [--only NAME ...] [--repeats N]`.
+
+It first measures the physics-only baseline (plane + the mtb robot + a box, stepSimulation alone,
+DIRECT mode, 240 Hz, through twin.world.World) as a median over repeats, then runs the sections:
+every tools/bench_*.py, sorted by name, each defining `bench(ctx) -> list[tuple[str, str]]` of
+(label, value) rows. It prints one table; every ratio in it is measured in this one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import platform
+import statistics
+import sys
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+TOOLS = Path(__file__).resolve().parent
+PHYSICS_STEPS = 20_000
+WARMUP_STEPS = 200
+DT_S = 1.0 / 240.0
+
+
+@dataclass(frozen=True)
+class BenchContext:
+    """What every section gets: the baseline, how often to repeat, and a timing helper."""
+
+    physics_steps_per_s: float  # median over repeats
+    physics_samples: tuple[float, ...]  # each repeat's steps/s
+    repeats: int
+    physics_step_us: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "physics_step_us", 1e6 / self.physics_steps_per_s)
+
+    def median_rate(self, run: Callable[[], int]) -> float:
+        """Median over `repeats` of count / wall seconds, where `run()` does the work and returns the count."""
+        samples = []
+        for _ in range(self.repeats):
+            t0 = time.perf_counter()
+            count = run()
+            samples.append(count / (time.perf_counter() - t0))
+        return statistics.median(samples)
+
+    def ratio(self, steps_per_s: float) -> str:
+        """A step rate with its ratio to physics-only, e.g. '31,250 (0.78x)'."""
+        return f"{steps_per_s:,.0f} ({steps_per_s / self.physics_steps_per_s:.2f}x)"
+
+
+def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
+    """One sample of the bare PyBullet loop: the default twin scene, stepSimulation only."""
+    from twin.config import TwinConfig
+    from twin.world import World
+
+    world = World(TwinConfig())
+    try:
+        for _ in range(WARMUP_STEPS):
+            world.step()
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            world.step()
+        return steps / (time.perf_counter() - t0)
+    finally:
+        world.close()
+
+
+def discover() -> dict[str, Path]:
+    """Section name (the part after bench_) -> module path, sorted by name."""
+    return {p.stem.removeprefix("bench_"): p for p in sorted(TOOLS.glob("bench_*.py"))}
+
+
+def _load(path: Path):
+    if str(TOOLS) not in sys.path:
+        sys.path.insert(0, str(TOOLS))  # sections may import one another or this module
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    fn = getattr(module, "bench", None)
+    if not callable(fn):
+        raise TypeError(f"{path.name} defines no bench(ctx)")
+    return fn
+
+
+def _table(rows: list[tuple[str, str, str]]) -> list[str]:
+    w0 = max(len(r[0]) for r in rows)
+    w1 = max(len(r[1]) for r in rows)
+    rule = "-" * (w0 + w1 + 6 + max(len(r[2]) for r in rows))
+    lines = [rule]
+    for i, (section, label, value) in enumerate(rows):
+        lines.append(f"{section:<{w0}} | {label:<{w1}} | {value}")
+        if i == 0:
+            lines.append(rule)
+    lines.append(rule)
+    return lines
+
+
+def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS) -> int:
+    sections = discover()
+    unknown = sorted(set(only) - set(sections))
+    if unknown:
+        print(f"bench: error: unknown section {unknown[0]!r}; expected one of {', '.join(sections)}", file=sys.stderr)
+        return 2
+    chosen = {name: path for name, path in sections.items() if not only or name in only}
+    from twin.world import pybullet_version
+
+    t_start = time.perf_counter()
+    samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))
+    ctx = BenchContext(statistics.median(samples), samples, repeats)
+    realtime = ctx.physics_steps_per_s * DT_S
+    rows = [("section", "measure", "value"),
+            ("machine", "python / pybullet API / cpus",
+             f"{platform.python_version()} / {pybullet_version()} / {os.cpu_count()}"),
+            ("physics", f"physics-only steps/s (median of {repeats})",
+             f"{ctx.physics_steps_per_s:,.0f} ({ctx.physics_step_us:.1f} us/step, {realtime:.0f}x real time at 240 Hz)"),
+            ("physics", "spread over repeats", f"{min(samples):,.0f} .. {max(samples):,.0f}")]
+    failed = 0
+    for name, path in chosen.items():
+        t0 = time.perf_counter()
+        try:
+            section_rows = _load(path)(ctx)
+        except Exception as err:  # noqa: BLE001 - a broken section is reported in the table; the others run
+            failed += 1
+            rows.append((name, "FAILED", f"{type(err).__name__}: {err}"))
+            traceback.print_exc(file=sys.stderr)
+            continue
+        rows.extend((name, str(label), str(value)) for label, value in section_rows)
+        rows.append((name, "section wall time", f"{time.perf_counter() - t0:.1f} s"))
+    rows.append(("total", "wall time", f"{time.perf_counter() - t_start:.1f} s"))
+    print("\n".join(_table(rows)))
+    return 1 if failed else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--only", action="append", default=[], metavar="NAME",
+                        help=f"run only this section (repeatable): {', '.join(discover())}")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats per measurement, median reported (default 3)")
+    parser.add_argument("--physics-steps", type=int, default=PHYSICS_STEPS,
+                        help=f"steps per physics-only sample (default {PHYSICS_STEPS})")
+    parser.add_argument("--list", action="store_true", help="list the sections and exit")
+    args = parser.parse_args(argv)
+    if args.list:
+        print("\n".join(discover()))
+        return 0
+    if args.repeats < 1 or args.physics_steps < 1:
+        print(f"bench: error: --repeats {args.repeats} and --physics-steps {args.physics_steps} must be >= 1",
+              file=sys.stderr)
+        return 2
+    return run(args.only, args.repeats, args.physics_steps)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

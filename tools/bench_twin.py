@@ -1,0 +1,85 @@
+"""Benchmark section: the twin itself, without recording.
+
+pick_place (2 cycles, mtb) in steps per wall second and as a ratio to physics-only; the twin's own
+cost per step over bare stepSimulation; idle stepping; building a twin. `python tools/bench_twin.py`
+runs it alone (with the baseline).
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+
+from twin.config import TwinConfig
+from twin.profiles import PROFILES
+from twin.tasks import TASKS, run_task
+from twin.twin import Twin
+
+CYCLES = 2
+IDLE_STEPS = 5_000
+
+
+def pick_place_steps(profile: str = "mtb") -> int:
+    """One run of pick_place with no sinks; returns the physics steps it took."""
+    twin = Twin(TwinConfig(profile=PROFILES[profile]))
+    try:
+        run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
+        return twin.step_index
+    finally:
+        twin.close()
+
+
+def _timed_pick_place() -> float:
+    """steps/s of the task alone (building the twin is timed separately)."""
+    twin = Twin(TwinConfig())
+    try:
+        t0 = time.perf_counter()
+        run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
+        return twin.step_index / (time.perf_counter() - t0)
+    finally:
+        twin.close()
+
+
+def _idle_rate() -> float:
+    """steps/s of twin.step() with nothing commanded: Frame building and the suction rule."""
+    twin = Twin(TwinConfig())
+    try:
+        t0 = time.perf_counter()
+        twin.step(IDLE_STEPS)
+        return IDLE_STEPS / (time.perf_counter() - t0)
+    finally:
+        twin.close()
+
+
+def _build_ms() -> float:
+    t0 = time.perf_counter()
+    twin = Twin(TwinConfig())
+    elapsed = time.perf_counter() - t0
+    twin.close()
+    return elapsed * 1000.0
+
+
+def bench(ctx) -> list[tuple[str, str]]:
+    repeats = max(5, int(ctx.repeats))  # a 2-cycle run is short (~0.1 s): take a few more samples
+    physics = ctx.physics_steps_per_s
+    steps = pick_place_steps()
+    run_rate = statistics.median(_timed_pick_place() for _ in range(repeats))
+    idle_rate = statistics.median(_idle_rate() for _ in range(repeats))
+    build_ms = statistics.median(_build_ms() for _ in range(repeats))
+    sim_s = steps * TwinConfig().dt_ns * 1e-9
+    return [
+        (f"pick_place {CYCLES} cycles, no recording: steps/s (ratio to physics-only)",
+         f"{run_rate:,.0f} ({run_rate / physics:.2f}x)"),
+        ("pick_place: steps, simulated s, real-time factor",
+         f"{steps}, {sim_s:.2f} s, {run_rate * TwinConfig().dt_ns * 1e-9:.0f}x"),
+        ("twin cost per step over stepSimulation (pick_place)", f"{(1 / run_rate - 1 / physics) * 1e6:.1f} us"),
+        ("twin.step() idle: steps/s (ratio to physics-only)", f"{idle_rate:,.0f} ({idle_rate / physics:.2f}x)"),
+        ("building a Twin (connect, URDF, scene)", f"{build_ms:.1f} ms"),
+    ]
+
+
+if __name__ == "__main__":
+    from bench import main  # tools/ is sys.path[0] when run as a script
+
+    sys.exit(main(["--only", "twin", *sys.argv[1:]]))

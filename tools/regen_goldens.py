@@ -1,0 +1,89 @@
+#!/usr/bin/env python3
+"""Remake the golden recordings in recordings/ from the current code.
+
+    python tools/regen_goldens.py            # every golden
+    python tools/regen_goldens.py NAME ...   # only these (e.g. pick_place_mtb)
+    python tools/regen_goldens.py --list     # what would be made, and how
+
+Each golden is one task run recorded through the same recorder as `twin run --record`; its MCAP
+metadata holds the whole TwinConfig and the task with its parameters, so `twin check` re-runs it
+from the file alone. Identical code gives byte-identical files (the writer stamps no wall time).
+Run this only when a change in behaviour is intended, then review `twin diff` against the old files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from twin.check import record_task
+from twin.config import SceneObject, SuctionParams, TwinConfig
+from twin.errors import TwinError
+from twin.profiles import PROFILES
+from twin.record import open_recorders
+
+ROOT = Path(__file__).resolve().parent.parent
+RECORDINGS = ROOT / "recordings"
+RATE_STEPS = 1  # every physics step: exact checks see every step (about 0.5 MB per 10 s of simulated time)
+
+
+@dataclass(frozen=True)
+class Golden:
+    name: str
+    config: TwinConfig
+    task: str
+    params: dict
+    how: str
+
+
+def goldens() -> list[Golden]:
+    out = [Golden(f"pick_place_{name}", TwinConfig(profile=profile), "pick_place", {"cycles": 2},
+                  f"pick_place, 2 cycles, robot {name}, default scene (one 50 mm, 0.1 kg box at (0.2, 0.7))")
+           for name, profile in sorted(PROFILES.items())]
+    heavy = TwinConfig(objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False))
+    out.append(Golden("pick_place_break_mtb", heavy, "pick_place", {"cycles": 1},
+                      "pick_place, 1 cycle, robot mtb, a 0.5 kg box (4.9 N) on the stock finite-strength pad "
+                      "(max pull 3 N, shear 1 N, peel 0.1 N·m): the hold breaks"))
+    return out
+
+
+def make(golden: Golden, out_dir: Path = RECORDINGS) -> Path:
+    """Record one golden into out_dir/NAME.mcap."""
+    path = out_dir / f"{golden.name}.mcap"
+    run = {"source": "task", "task": golden.task, "params": golden.params}
+    with open_recorders(golden.config, run, mcap_path=path, rate=RATE_STEPS) as sinks:
+        record_task(golden.config, golden.task, golden.params, sinks=sinks)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("names", nargs="*", help="goldens to remake (default: all)")
+    parser.add_argument("--list", action="store_true", help="list the goldens and how each is made")
+    parser.add_argument("--out", default=str(RECORDINGS), help="output folder (default recordings/)")
+    args = parser.parse_args(argv)
+    known = {g.name: g for g in goldens()}
+    unknown = [n for n in args.names if n not in known]
+    if unknown:
+        print(f"regen_goldens: error: unknown golden {unknown[0]!r}; expected one of {', '.join(known)}",
+              file=sys.stderr)
+        return 2
+    chosen = [known[n] for n in args.names] if args.names else list(known.values())
+    if args.list:
+        for g in chosen:
+            print(f"{g.name}.mcap: {g.how}")
+        return 0
+    try:
+        for g in chosen:
+            path = make(g, Path(args.out))
+            print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB)")
+    except TwinError as err:
+        print(f"regen_goldens: error: {err}", file=sys.stderr)
+        return err.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,196 @@
+"""Golden-recording checks: re-run each golden from the current code and diff it against the file.
+
+A golden with a task (run.source == "task") is re-run by resolving its task on the configuration
+in its metadata; one without (teleop, remote) has its commands replayed. Goldens are checked in
+parallel processes; `update` rewrites the ones that differ.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from twin.columns import FrameCollector
+from twin.compare import compare
+from twin.config import TwinConfig
+from twin.errors import ConfigError, TwinError
+from twin.recording import Recording
+from twin.replay import REPLAYED_EVENT_KINDS, collected, replay
+from twin.report import first_line, render_text
+from twin.tasks import resolve, run_task
+from twin.tolerances import Tolerances
+from twin.twin import Sink, Twin
+
+DEFAULT_DIR = "recordings"
+
+
+def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[Sink] = (),
+                task_dir: str | os.PathLike | None = None) -> Recording:
+    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised)."""
+    fn = resolve(_task_path(task, task_dir))
+    collector = FrameCollector()
+    twin = Twin(config, sinks=[collector, *sinks])
+    try:
+        run_task(twin, fn, dict(params))
+    except TwinError:
+        pass  # the task_error event is part of the run; the golden recorded the same
+    finally:
+        twin.close()
+    return collected(collector, config, {"source": "task", "task": task, "params": dict(params)})
+
+
+def _task_path(task: str, task_dir: str | os.PathLike | None) -> str:
+    """A task file named relative to where it was recorded: try the working directory, then task_dir."""
+    if task.endswith(".py") and not Path(task).is_file() and task_dir is not None:
+        beside = Path(task_dir) / task
+        if beside.is_file():
+            return str(beside)
+    return task
+
+
+def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, frozenset[str] | None]:
+    """Re-run golden from the current code: its task if it has one, else its commands.
+
+    Returns the new run and the event kinds to compare (None: all).
+    """
+    run = golden.run or {}
+    if run.get("source") == "task" and run.get("task"):
+        task_dir = Path(golden.path).parent if golden.path else None
+        new = record_task(golden.config, run["task"], run.get("params") or {}, sinks=sinks, task_dir=task_dir)
+        new.run = dict(run)
+        return new, None
+    return replay(golden, sinks=sinks), REPLAYED_EVENT_KINDS
+
+
+@dataclass
+class Outcome:
+    """What checking one golden gave."""
+
+    path: str
+    status: str  # "match", "differ", "updated", "error"
+    exit_code: int
+    summary: str  # the first divergence or the error, one line
+    report: str  # the full text report ("" on error)
+    frames: int = 0
+    seconds: float = 0.0
+
+
+def check_one(path: str, tolerances: Tolerances, update: bool = False) -> Outcome:
+    """Load one golden, re-run it, diff; with update, rewrite it when it differs."""
+    from twin.record import open_recorders
+    from twin.record.mcap_reader import load
+
+    t0 = time.perf_counter()
+    try:
+        golden = load(path)
+        if update:
+            tmp = Path(path).with_name(Path(path).name + ".tmp")
+            with open_recorders(golden.config, golden.run, mcap_path=str(tmp), rate=_rate(golden)) as sinks:
+                new, kinds = rerun(golden, sinks=sinks)
+        else:
+            new, kinds = rerun(golden)
+        result = compare(golden, new, tolerances, event_kinds=kinds)
+        report = render_text(result)
+        if result.match:
+            if update:
+                tmp.unlink()
+            return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
+        summary = first_line(result.first)
+        if update:
+            os.replace(tmp, path)
+            return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, len(golden.frames),
+                           time.perf_counter() - t0)
+        return Outcome(path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0)
+    except TwinError as err:
+        return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+
+
+def _rate(rec: Recording) -> int:
+    try:
+        return max(1, int(rec.meta.get("twin.recording", {}).get("rate_steps", 1)))
+    except (TypeError, ValueError):
+        return 1
+
+
+def golden_paths(paths: Sequence[str]) -> list[str]:
+    """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped)."""
+    if not paths:
+        if not Path(DEFAULT_DIR).is_dir():
+            raise ConfigError(f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap files or folders")
+        paths = [DEFAULT_DIR]
+    out: list[str] = []
+    for p in paths:
+        path = Path(p)
+        if path.is_dir():
+            found = sorted(str(f) for f in path.glob("*.mcap") if not f.name.endswith(".obtained.mcap"))
+            if not found:
+                raise ConfigError(f"folder {p!r} holds no .mcap recordings")
+            out += found
+        elif path.exists():
+            out.append(str(path))
+        else:
+            raise ConfigError(f"golden {p!r} does not exist; expected an .mcap file or a folder of them")
+    return out
+
+
+class Progress:
+    """A progress bar on a terminal; one plain line per golden elsewhere (CI logs)."""
+
+    def __init__(self, total: int, stream: TextIO | None = None) -> None:
+        self.total, self.done, self.stream = total, 0, stream or sys.stderr
+        self.tty = self.stream.isatty()
+
+    def __call__(self, outcome: Outcome) -> None:
+        self.done += 1
+        name = Path(outcome.path).name
+        if self.tty:
+            width = 30
+            filled = width * self.done // self.total
+            self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} {name:<40.40}")
+            if self.done == self.total:
+                self.stream.write("\n")
+        else:
+            self.stream.write(f"[{self.done}/{self.total}] {name}: {outcome.status} ({outcome.seconds:.2f} s)\n")
+        self.stream.flush()
+
+
+def check_all(paths: Sequence[str], tolerances: Tolerances, *, update: bool = False, jobs: int = 1,
+              progress: Callable[[Outcome], None] | None = None) -> list[Outcome]:
+    """Check every golden, in `jobs` processes; outcomes in the order of paths."""
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
+    results: dict[str, Outcome] = {}
+    if jobs == 1 or len(paths) <= 1:
+        for p in paths:
+            results[p] = check_one(p, tolerances, update)
+            if progress:
+                progress(results[p])
+    else:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
+            futures = {pool.submit(check_one, p, tolerances, update): p for p in paths}
+            for fut in as_completed(futures):
+                outcome = fut.result()
+                results[futures[fut]] = outcome
+                if progress:
+                    progress(outcome)
+    return [results[p] for p in paths]
+
+
+def summary_table(outcomes: list[Outcome]) -> str:
+    rows = [("golden", "status", "frames", "time", "detail")] + [
+        (o.path, o.status, str(o.frames), f"{o.seconds:.2f} s", o.summary) for o in outcomes]
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4] for r in rows]
+    counts = {s: sum(o.status == s for o in outcomes) for s in ("match", "differ", "updated", "error")}
+    lines.append(", ".join(f"{n} {s}" for s, n in counts.items() if n) or "nothing checked")
+    return "\n".join(lines) + "\n"
+
+
+def exit_code(outcomes: list[Outcome]) -> int:
+    return max((o.exit_code for o in outcomes), default=0)

@@ -1,0 +1,152 @@
+"""The `twin diff`, `twin replay` and `twin check` commands: argument parsing and printing only.
+
+Exit codes: 0 match, 1 mismatch, 2 unreadable or bad input, 3 runs not comparable (diff/replay).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from twin.errors import ConfigError
+from twin.tolerances import FIELDS, PRESETS, Tolerances
+
+_TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
+    f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
+
+
+def _whole(text: str | None, what: str, minimum: int) -> int | None:
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = minimum - 1
+    if value < minimum:
+        raise ConfigError(f"{what} {text!r} is invalid; expected a whole number >= {minimum}")
+    return value
+
+
+def _add_tolerance_options(p: argparse.ArgumentParser, default: str) -> None:
+    p.add_argument("--tolerance", default=default, metavar="PRESET",
+                   help=f"preset: {', '.join(PRESETS)} (default {default}); see recordings/README.md")
+    p.add_argument("--tol", action="append", default=[], metavar="CHANNEL.FIELD=VALUE", help=_TOL_HELP)
+    p.add_argument("--event-window", default=None, metavar="STEPS",
+                   help="events match when within this many steps (default: the preset's)")
+
+
+def _tolerances(args: argparse.Namespace) -> Tolerances:
+    tol = Tolerances.from_preset(args.tolerance).with_overrides(args.tol)
+    return tol.with_event_window(_whole(args.event_window, "event window", 0))
+
+
+def _add_report_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--report", action="append", default=[], metavar="FILE",
+                   help="also write the report to FILE.md, FILE.json or FILE.xml (JUnit); repeatable")
+    p.add_argument("--rrd", default=None, metavar="FILE.rrd",
+                   help="write a Rerun recording showing both runs (the candidate as a ghost) and the error")
+    p.add_argument("--quiet", "-q", action="store_true", help="print only the verdict and first divergence")
+
+
+def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
+    from twin.report import render_text, report_format, write_report
+
+    for path in args.report:
+        report_format(path)
+    lines = render_text(result).splitlines()
+    if args.quiet:
+        lines = lines[:1] + [line for line in lines if line.startswith(("first divergence", "  expected"))]
+    print("\n".join(lines))
+    for path in args.report:
+        write_report(result, path)
+    if args.rrd:
+        from twin.record.rerun_diff import write_diff_rrd
+
+        write_diff_rrd(golden, candidate, result, args.rrd)
+    return result.exit_code
+
+
+def cmd_diff(args: argparse.Namespace) -> int:
+    from twin.compare import compare
+    from twin.record.mcap_reader import load
+
+    tol = _tolerances(args)
+    golden, candidate = load(args.golden), load(args.candidate)
+    result = compare(golden, candidate, tol, force=args.force)
+    return _emit(result, golden, candidate, args)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from twin.compare import compare
+    from twin.record.mcap_reader import load
+    from twin.replay import REPLAYED_EVENT_KINDS, replay
+
+    tol = _tolerances(args)
+    rec = load(args.recording)
+    if args.record:
+        from twin.record import open_recorders
+
+        with open_recorders(rec.config, rec.run, mcap_path=args.record) as sinks:
+            new = replay(rec, sinks=sinks)
+        new.path = args.record
+    else:
+        new = replay(rec)
+    result = compare(rec, new, tol, event_kinds=REPLAYED_EVENT_KINDS)
+    result.notes.append("replay compares the events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS)))
+    return _emit(result, rec, new, args)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from twin.check import Progress, check_all, exit_code, golden_paths, summary_table
+
+    tol = _tolerances(args)
+    jobs = _whole(args.jobs, "jobs", 1)
+    if args.junit and not args.junit.endswith(".xml"):
+        raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
+    paths = golden_paths(args.paths)
+    outcomes = check_all(paths, tol, update=args.update, jobs=jobs, progress=Progress(len(paths)))
+    if args.junit:
+        from pathlib import Path
+
+        from twin.report import render_check_junit
+
+        try:
+            Path(args.junit).write_text(render_check_junit(outcomes))
+        except OSError as err:
+            raise ConfigError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
+    for o in outcomes:
+        if o.status == "differ" and args.verbose:
+            print(f"== {o.path}\n{o.report}")
+    print(summary_table(outcomes), end="")
+    updated = [o.path for o in outcomes if o.status == "updated"]
+    if updated:
+        print("rewrote: " + ", ".join(updated))
+    return exit_code(outcomes)
+
+
+def add_compare_commands(sub: argparse._SubParsersAction) -> None:
+    """Add diff, replay and check to the `twin` command's subparsers."""
+    p = sub.add_parser("diff", help="compare two recordings by content (exit 0 match, 1 mismatch, 2 bad input, "
+                                    "3 not comparable)")
+    p.add_argument("golden", help="the reference recording (.mcap)")
+    p.add_argument("candidate", help="the recording to check (.mcap)")
+    _add_tolerance_options(p, "exact")
+    p.add_argument("--force", action="store_true",
+                   help="compare even when robot profile, time step or scene objects differ")
+    _add_report_options(p)
+    p.set_defaults(func=cmd_diff)
+
+    p = sub.add_parser("replay", help="rebuild the twin from a recording, feed its commands back, compare")
+    p.add_argument("recording", help="the recording to replay (.mcap)")
+    p.add_argument("--record", default=None, metavar="NEW.mcap", help="also record the replayed run")
+    _add_tolerance_options(p, "exact")
+    _add_report_options(p)
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap)")
+    p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/)")
+    p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which)")
+    p.add_argument("--jobs", "-j", default="1", metavar="N", help="parallel processes (default 1)")
+    p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
+    p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")
+    _add_tolerance_options(p, "exact")
+    p.set_defaults(func=cmd_check)

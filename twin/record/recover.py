@@ -1,0 +1,119 @@
+"""`twin recover`: rewrite the readable part of a recording cut short (crash, kill -9) as a complete file.
+
+Reads up to the first damaged record, keeps only the frames all three block channels hold (a
+chunk may end between them), drops commands and events after the last kept frame, and writes
+everything else unchanged, plus a `twin.recovered` metadata record.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+
+from twin.errors import RecordingError
+from twin.record import schemas as S
+from twin.record import wire
+from twin.record.mcap_reader import Scan, recording_from_scan, scan
+
+BLOCK_TOPICS = (S.JOINTS.topic, S.SUCTION.topic, S.POSES.topic)
+
+
+@dataclass
+class RecoverReport:
+    source: str
+    output: str
+    was_complete: bool
+    problem: str
+    messages_kept: int
+    messages_dropped: int
+    frames: int
+    last_step: int
+    duration_s: float
+
+    def lines(self) -> list[str]:
+        state = "was already complete" if self.was_complete else f"was cut short ({self.problem})"
+        return [
+            f"{self.source} {state}",
+            (f"wrote {self.output}: {self.frames:,} frames, steps 0..{self.last_step}, {self.duration_s:.3f} s "
+             f"simulated; {self.messages_kept:,} messages kept, {self.messages_dropped:,} dropped past the last "
+             "whole frame"),
+        ]
+
+
+def _last_common_step(s: Scan) -> int:
+    """The last step every block channel holds (blocks hold whole runs of frames)."""
+    topics = s.by_topic()
+    last = None
+    for topic in BLOCK_TOPICS:
+        steps = [wire.array_of(wire.split_fields(m.data), S.STEP, "<i8") for m in topics.get(topic, [])]
+        ends = [int(a.max()) for a in steps if a.size]
+        end = max(ends) if ends else -1
+        last = end if last is None else min(last, end)
+    return -1 if last is None else last
+
+
+def _keep(s: Scan, message, last_step: int, dt_ns: int) -> bool:
+    topic = s.topic_of(message)
+    if topic in BLOCK_TOPICS:
+        steps = wire.array_of(wire.split_fields(message.data), S.STEP, "<i8")
+        return bool(steps.size) and int(np.max(steps)) <= last_step
+    if topic in (S.COMMANDS.topic, S.EVENTS.topic):
+        try:
+            return int(json.loads(message.data)["step"]) <= last_step
+        except (ValueError, KeyError, TypeError) as err:
+            raise RecordingError(f"{s.path!r}: a {topic} message is not a twin JSON record: {err}") from err
+    return message.log_time <= max(0, last_step) * dt_ns
+
+
+def recover(source: str | Path, output: str | Path) -> RecoverReport:
+    """Write the readable, consistent part of `source` to `output` (a complete MCAP file)."""
+    s = scan(source, strict=False)
+    out_path = Path(output)
+    if out_path.exists() and out_path.resolve() == Path(source).resolve():
+        raise RecordingError(f"recover would overwrite its input {str(source)!r}; choose another -o path")
+    if out_path.suffix != ".mcap":
+        raise RecordingError(f"output path {str(output)!r} should end in .mcap")
+    if S.META_CONFIG not in s.metadata:
+        raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
+                             " nothing to recover")
+    dt_ns = int(json.loads(s.metadata[S.META_CONFIG]["json"])["dt_ns"])
+    last_step = _last_common_step(s)
+    kept = [m for m in s.messages if _keep(s, m, last_step, dt_ns)]
+    try:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        with open(out_path, "wb") as f:
+            _write(f, s, kept, last_step)
+    except OSError as err:
+        raise RecordingError(f"cannot write {str(output)!r}: {err.strerror or err}") from err
+    recording = recording_from_scan(scan(out_path, strict=True))  # the result must load
+    return RecoverReport(
+        source=str(source), output=str(output), was_complete=s.complete, problem=s.problem,
+        messages_kept=len(kept), messages_dropped=len(s.messages) - len(kept), frames=len(recording.frames),
+        last_step=last_step, duration_s=max(0, last_step) * dt_ns * 1e-9,
+    )
+
+
+def _write(f, s: Scan, kept: list, last_step: int) -> None:
+    writer = Writer(f, compression=CompressionType.ZSTD)
+    writer.start(profile="", library=S.LIBRARY)
+    schema_ids = {sid: writer.register_schema(x.name, x.encoding, x.data) for sid, x in sorted(s.schemas.items())}
+    channel_ids = {
+        cid: writer.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
+        for cid, c in sorted(s.channels.items())
+    }
+    for name, record in s.metadata.items():
+        if name != S.META_RECOVERED:
+            writer.add_metadata(name, record)
+    writer.add_metadata(S.META_RECOVERED, {
+        "source": Path(s.path).name, "problem": s.problem if not s.complete else "none (the source was complete)",
+        "last_step": str(last_step), "source_bytes": str(s.size_bytes),
+    })
+    for a in s.attachments:
+        writer.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+    for m in kept:
+        writer.add_message(channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+    writer.finish()

@@ -1,0 +1,342 @@
+"""`twin serve`: a ZeroMQ REP server speaking CoppeliaSim's remote API (protocol v2) over a Scene.
+
+Time: in realtime mode the twin follows the wall clock (times `speed`): before each request and on
+idle poll timeouts it steps up to floor(elapsed_wall * speed / dt). While any client is in stepping
+mode (sim.setStepping(True)), and always in stepped mode, the twin advances only on sim.step(),
+once every stepping client has asked for its next step. Wall-clock time never enters the twin:
+every call that changes it is a Command stamped with the step it took effect at.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import zmq
+from zmq.utils.monitor import parse_monitor_message
+
+from twin.config import TwinConfig
+from twin.errors import ConfigError, TwinError
+from twin.remote.protocol import (
+    EMPTY_REPLY,
+    MAX_REQUEST_BYTES,
+    WAIT_REPLY,
+    Param,
+    RequestError,
+    Signature,
+    VersionMismatch,
+    check_args,
+    decode,
+    encode_err,
+    encode_ret,
+    encode_version_mismatch,
+)
+from twin.remote.session import Scene
+from twin.remote.sim_api import SimApi
+
+MODES = ("realtime", "stepped")
+IDLE_POLL_S = 0.1
+DEFAULT_CLIENT_TIMEOUT_S = 600.0
+STEP_GRACE_S = 10.0  # a stepping client silent this long no longer holds the others back
+WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
+ZMQ_MAX_MSG_BYTES = 64 * MAX_REQUEST_BYTES  # beyond this ZMQ drops the peer; below it we answer with an error
+
+
+@dataclass(slots=True)
+class _Client:
+    label: str
+    last_seen_s: float
+    timeout_s: float
+    stepping: bool = False
+    wants_step: bool = False
+    wait_until_step: int = -1  # the step its pending sim.step() waits for; -1: none
+    fd: int = -1  # the TCP connection its last request came over (ZMQ_SRCFD), to notice it closing
+
+
+class Server:
+    """One REP socket, one Scene; serves requests until stop() is called."""
+
+    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
+                 speed: float = 1.0, log: Callable[[str], None] = print) -> None:
+        if mode not in MODES:
+            raise ConfigError(f"server mode {mode!r} is unknown; expected one of {', '.join(MODES)}")
+        if not (math.isfinite(speed) and 0.01 <= speed <= 1000.0):
+            raise ConfigError(f"speed {speed} is out of range; expected 0.01..1000 (1 = real time)")
+        self.scene = scene
+        self.mode = mode
+        self.speed = speed
+        self.log = log
+        self.api = SimApi(scene)
+        self.clients: dict[str, _Client] = {}
+        self._n_clients = 0
+        self._anchor: tuple[float, int] | None = None  # (wall s, step) where realtime pacing started
+        self._stop = False
+        self._next_reap_s = 0.0
+        self._info_reply = encode_ret([self.api.info()])
+        self.context = zmq.Context()
+        self.socket = self.context.socket(zmq.REP)
+        self.socket.setsockopt(zmq.LINGER, 0)
+        self.socket.setsockopt(zmq.MAXMSGSIZE, ZMQ_MAX_MSG_BYTES)
+        try:
+            if port == 0:
+                port = self.socket.bind_to_random_port(f"tcp://{host}")
+            else:
+                self.socket.bind(f"tcp://{host}:{port}")
+        except zmq.ZMQError as err:
+            self.socket.close()
+            self.context.term()
+            raise ConfigError(f"cannot listen on tcp://{host}:{port}: {err}") from err
+        self.host, self.port = host, port
+        self._monitor = self.socket.get_monitor_socket(zmq.EVENT_DISCONNECTED)
+
+    # -- loop --------------------------------------------------------------------------------
+    def serve_forever(self) -> None:
+        sock, monitor = self.socket, self._monitor
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        poller.register(monitor, zmq.POLLIN)
+        served = 0
+        while not self._stop:
+            try:
+                frame = sock.recv(zmq.NOBLOCK, copy=False)
+            except zmq.Again:
+                ready = dict(poller.poll(self._poll_timeout_ms()))
+                if monitor in ready:
+                    self._drain_monitor()
+                if sock in ready:
+                    continue
+                now = time.monotonic()
+                self._pace(now)
+                if now >= self._next_reap_s:
+                    self._reap(now)
+                continue
+            served += 1
+            if served % 64 == 0:
+                self._drain_monitor()
+            now = time.monotonic()
+            self._pace(now)
+            if frame.more:  # one request is one frame: read the rest so the socket can answer
+                parts = 1
+                while sock.getsockopt(zmq.RCVMORE):
+                    sock.recv()
+                    parts += 1
+                reply = encode_err(f"malformed request: {parts} message parts; expected one CBOR map in one part")
+            else:
+                reply = self.handle(frame.bytes, now, _source_fd(frame))
+            sock.send(reply)
+            self._pace(time.monotonic())
+
+    def stop(self) -> None:
+        """Ask the loop to end (signal-safe); it returns within one idle poll."""
+        self._stop = True
+
+    def close(self) -> None:
+        try:
+            self.scene.close()
+        finally:
+            self.socket.disable_monitor()
+            self._monitor.close(linger=0)
+            self.socket.close()
+            self.context.term()
+
+    def _poll_timeout_ms(self) -> int:
+        if self._anchor is not None:
+            return max(1, min(int(IDLE_POLL_S * 1000), int(self.scene.config.dt_s / self.speed * 1000)))
+        return int(IDLE_POLL_S * 1000)
+
+    def _pace(self, now: float) -> None:
+        """Realtime mode: step the twin up to the wall clock, unless a client is stepping."""
+        scene = self.scene
+        if self.mode != "realtime" or not scene.running or any(c.stepping for c in self.clients.values()):
+            self._anchor = None
+            return
+        if self._anchor is None:
+            self._anchor = (now, scene.twin.step_index)
+            return
+        wall0, step0 = self._anchor
+        due = step0 + int((now - wall0) * self.speed * 1e9 / scene.config.dt_ns) - scene.twin.step_index
+        if due > 0:  # all of it: a request must see the simulated time its wall-clock moment is due
+            scene.advance(due)
+
+    def _drain_monitor(self) -> None:
+        """A client's TCP connection closed (its program ended or closed the socket): forget it."""
+        while self._monitor.poll(0):
+            event = parse_monitor_message(self._monitor.recv_multipart())
+            if event["event"] != zmq.EVENT_DISCONNECTED:
+                continue
+            fd = int(event["value"])
+            for uuid, c in list(self.clients.items()):
+                if c.fd == fd:
+                    del self.clients[uuid]
+                    self.log(f"{c.label} disconnected")
+
+    def _reap(self, now: float) -> None:
+        self._next_reap_s = now + 1.0
+        for uuid, c in list(self.clients.items()):
+            if now - c.last_seen_s > c.timeout_s:
+                del self.clients[uuid]
+                self.log(f"{c.label} disconnected (silent for more than {c.timeout_s:g} s)")
+
+    # -- requests ----------------------------------------------------------------------------
+    def handle(self, raw: bytes, now: float, fd: int = -1) -> bytes:
+        """One request in, one reply out; never raises for a client's bad input."""
+        try:
+            req = decode(raw)
+        except VersionMismatch as err:
+            self.log(f"refused a request: {err}")
+            return encode_version_mismatch(str(err))
+        except RequestError as err:
+            self.log(f"refused a request: {err}")
+            return encode_err(str(err))
+        client = self.clients.get(req.uuid)
+        if client is None:
+            client = self._connect(req.uuid, req.first, now)
+        client.last_seen_s = now
+        client.fd = fd
+        func = req.func
+        try:
+            entry = self.api.functions.get(func)
+            if entry is not None:
+                params, fn = entry
+                self.api.client = client.label
+                result = fn(*check_args(params, req.args))
+                if func == "sim.stopSimulation":
+                    self._reset_stepping()
+                return EMPTY_REPLY if result is None else encode_ret([result])
+            if func == "sim.step":
+                return self._step(client, req.args)
+            if func == "_*executed*_":
+                return self._executed(client)
+            if func == "sim.setStepping":
+                (enable,) = check_args(_STEPPING_PARAMS, req.args)
+                return encode_ret([self._set_stepping(client, enable)])
+            if func == "zmqRemoteApi.require":
+                (name,) = check_args(_MODULE_PARAMS, req.args)
+                _check_module(name)
+                return EMPTY_REPLY
+            if func == "zmqRemoteApi.info":
+                (name,) = check_args(_MODULE_PARAMS, req.args)
+                _check_module(name)
+                return self._info_reply
+            return encode_err(f"No such function: {func[:120]}")
+        except (RequestError, TwinError) as err:
+            return encode_err(f"{func}: {err}")
+        except Exception as err:  # noqa: BLE001 - a bug of ours: report it, keep serving
+            self.log(f"internal error in {func}: {type(err).__name__}: {err}\n{traceback.format_exc()}")
+            return encode_err(f"{func}: internal error: {type(err).__name__}: {err}")
+
+    def _connect(self, uuid: str, first: dict | None, now: float) -> _Client:
+        self._n_clients += 1
+        timeout = (first or {}).get("timeout")
+        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout < 1e7:
+            timeout = DEFAULT_CLIENT_TIMEOUT_S
+        c = _Client(label=f"client {self._n_clients}", last_seen_s=now, timeout_s=float(timeout))
+        self.clients[uuid] = c
+        lang = (first or {}).get("lang")
+        self.log(f"{c.label} connected (uuid {uuid[:8]}, {lang if isinstance(lang, str) else 'unknown language'})")
+        return c
+
+    # -- stepping ----------------------------------------------------------------------------
+    def _set_stepping(self, client: _Client, enable: bool) -> int:
+        previous = int(client.stepping)
+        client.stepping = enable
+        if not enable:
+            client.wants_step = False
+            self._try_advance()
+        return previous
+
+    def _reset_stepping(self) -> None:
+        for c in self.clients.values():
+            c.stepping = c.wants_step = False
+            c.wait_until_step = -1
+
+    def _step(self, client: _Client, args: list) -> bytes:
+        check_args(_STEP_PARAMS, args)
+        if not self.scene.running:
+            state = "paused" if self.scene.state else "stopped"
+            raise RequestError(f"the simulation is {state}; call sim.startSimulation() first")
+        client.wants_step = True
+        client.wait_until_step = self.scene.twin.step_index + 1
+        self._try_advance()
+        return self._wait_reply(client)
+
+    def _executed(self, client: _Client) -> bytes:
+        if client.wait_until_step < 0:
+            raise RequestError("no call of this client is waiting (callbacks are not supported)")
+        self._try_advance()
+        reply = self._wait_reply(client)
+        if reply is WAIT_REPLY:
+            time.sleep(WAIT_BACKOFF_S)
+        return reply
+
+    def _try_advance(self) -> None:
+        """One step once every stepping client (and every client in sim.step) has asked for it."""
+        now = time.monotonic()
+        asked = False
+        for c in self.clients.values():
+            if c.wants_step:
+                asked = True
+            elif c.stepping:
+                if now - c.last_seen_s < STEP_GRACE_S:
+                    return
+                c.stepping = False
+                self.log(f"{c.label} silent for {STEP_GRACE_S:g} s: no longer holds back stepping")
+        if asked and self.scene.running:
+            self.scene.advance(1)
+            for c in self.clients.values():
+                c.wants_step = False
+
+    def _wait_reply(self, client: _Client) -> bytes:
+        if client.wait_until_step <= self.scene.twin.step_index or not self.scene.running:
+            client.wait_until_step = -1
+            client.wants_step = False
+            return EMPTY_REPLY
+        return WAIT_REPLY
+
+
+def _source_fd(frame: zmq.Frame) -> int:
+    try:
+        return int(frame.get(zmq.SRCFD))
+    except (zmq.ZMQError, AttributeError, TypeError):
+        return -1
+
+
+def _check_module(name: str) -> None:
+    if name != "sim":
+        raise RequestError(f"no such module {name!r:.60}; this twin offers 'sim'")
+
+
+_STEPPING_PARAMS = Signature(Param("enable", "bool"))
+_STEP_PARAMS = Signature(Param("wait", "bool", True))
+_MODULE_PARAMS = Signature(Param("name", "str"))
+
+
+def serve(config: TwinConfig, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
+          speed: float = 1.0, mcap_path: str | None = None, rrd_path: str | None = None, rate: int = 1,
+          start: bool = False, log: Callable[[str], None] = print) -> int:
+    """Run the server until SIGINT/SIGTERM; each start..stop run is recorded to its own file."""
+    scene = Scene(config, mcap_path=mcap_path, rrd_path=rrd_path, rate=rate, mode=mode, log=log)
+    try:
+        server = Server(scene, host=host, port=port, mode=mode, speed=speed, log=log)
+    except BaseException:
+        scene.twin.close()
+        raise
+    previous = {s: signal.signal(s, lambda *_: server.stop()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        pace = f"{mode}, speed {speed:g}x" if mode == "realtime" else mode
+        if host not in ("127.0.0.1", "localhost", "::1"):
+            log(f"warning: listening on {host}, reachable from other machines")
+        log(f"twin serve: listening on tcp://{server.host}:{server.port} (robot {config.profile.name}, {pace})")
+        if start:
+            scene.start()
+        server.serve_forever()
+        log("twin serve: shutting down")
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        server.close()
+    return 0

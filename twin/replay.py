@@ -1,0 +1,84 @@
+"""Replay: rebuild a twin from a recording's metadata alone and feed its Commands back.
+
+A run is a pure function of (configuration, commands): replaying the commands of step s before
+the physics step that starts at s reproduces the frames bit for bit on the same machine. Task-level
+annotations (phases, placement reports, task start/end) come from the task's code, not from
+commands, so a replay regenerates only the events in REPLAYED_EVENT_KINDS and compares those.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+from twin.columns import FrameCollector
+from twin.errors import RecordingError
+from twin.recording import Recording
+from twin.twin import Sink, Twin
+
+# Events the twin itself emits while applying commands and stepping (not the task's annotations).
+REPLAYED_EVENT_KINDS = frozenset({"attach", "release", "break", "suction_empty", "joint_limit", "key_unknown"})
+
+
+def collected(collector: FrameCollector, rec_config, run: dict, *, path: str = "") -> Recording:
+    """An in-memory Recording of what a FrameCollector saw."""
+    return Recording(config=rec_config, frames=collector.columns(), commands=list(collector.commands),
+                     events=list(collector.events), run=dict(run), meta={}, finalized=True, path=path)
+
+
+def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
+    """Re-run rec's commands on a fresh twin built from rec.config, up to rec's last step."""
+    if len(rec.frames) == 0:
+        raise RecordingError(f"recording {rec.path or '<memory>'} has no frames to replay")
+    first, last = int(rec.frames.step[0]), int(rec.frames.step[-1])
+    if first != 0:
+        raise RecordingError(f"recording {rec.path or '<memory>'} starts at step {first}; replay needs step 0")
+    commands = sorted(rec.commands, key=lambda c: c.step)  # stable: keeps the recorded order within a step
+    if commands and commands[-1].step > last:
+        raise RecordingError(f"recording {rec.path or '<memory>'} has a command at step {commands[-1].step}, "
+                             f"after its last frame (step {last})")
+    collector = FrameCollector()
+    twin = Twin(rec.config, sinks=[collector, *sinks])
+    try:
+        i = 0
+        while True:
+            while i < len(commands) and commands[i].step == twin.step_index:
+                twin.apply(commands[i])
+                i += 1
+            if twin.step_index >= last:
+                break
+            next_step = commands[i].step if i < len(commands) else last
+            twin.step(max(1, min(next_step, last) - twin.step_index))
+    finally:
+        twin.close()
+    return collected(collector, rec.config, rec.run, path="<replay>")
+
+
+def feed(rec: Recording, sinks: Sequence[Sink]) -> None:
+    """Send a recording's frames, commands and events to sinks, step by step: frame s, then the
+    commands and events stamped s (those happen after frame s, before frame s + 1)."""
+    commands = sorted(rec.commands, key=lambda c: c.step)
+    events = sorted(rec.events, key=lambda e: e.step)
+    ci = ei = 0
+    steps = rec.frames.step
+    for i in range(len(rec.frames)):
+        frame = rec.frames.frame(i)
+        for s in sinks:
+            s.on_frame(frame)
+        upto = int(steps[i + 1]) if i + 1 < len(steps) else None
+        while ci < len(commands) and (upto is None or commands[ci].step < upto):
+            for s in sinks:
+                s.on_command(commands[ci])
+            ci += 1
+        while ei < len(events) and (upto is None or events[ei].step < upto):
+            for s in sinks:
+                s.on_event(events[ei])
+            ei += 1
+
+
+def save(rec: Recording, path: str | os.PathLike, *, rate: int = 1) -> None:
+    """Write an in-memory recording to an MCAP file (the same writer as `twin run --record`)."""
+    from twin.record import open_recorders
+
+    with open_recorders(rec.config, rec.run, mcap_path=path, rate=rate) as sinks:
+        feed(rec, sinks)

@@ -1,0 +1,134 @@
+"""Tolerances for comparing two runs: per channel and field, in physical units, with presets.
+
+Names are `channel.field`. Joint values are rad for the revolute joints and m for the prismatic Z
+joint (one number covers both: 1e-3 means 1 mrad or 1 mm). A tolerance of 0 means bit-identical;
+`inf` switches a field off. Discrete fields (suction state, run length) compare exactly unless off.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+from twin.errors import ConfigError
+
+INF = math.inf
+
+# name -> (unit, what it is). The order is the report's order.
+FIELDS: dict[str, tuple[str, str]] = {
+    "joints.position": ("rad|m", "joint angle (wrapped) or Z travel"),
+    "joints.velocity": ("rad/s|m/s", "joint velocity"),
+    "joints.effort": ("N·m|N", "motor torque or force"),
+    "joints.target": ("rad|m", "motor target (wrapped)"),
+    "suction.on": ("", "pad switched on (exact or off)"),
+    "suction.sensed": ("", "object the pad's sensor sees (exact or off)"),
+    "suction.held": ("", "object the pad holds (exact or off)"),
+    "hold.force": ("N", "norm of the hold force difference"),
+    "hold.torque": ("N·m", "norm of the hold torque difference"),
+    "pad.position": ("m", "distance between pad tips"),
+    "pad.orientation": ("rad", "angle between pad orientations"),
+    "objects.position": ("m", "distance between object positions, every step"),
+    "objects.orientation": ("rad", "angle between object orientations, every step"),
+    "final.position": ("m", "distance between final object positions"),
+    "final.orientation": ("rad", "angle between final object orientations"),
+    "run.length": ("steps", "difference in the last step"),
+}
+DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held"})
+
+_ALL_ZERO = {name: 0.0 for name in FIELDS}
+_PHYSICAL = {
+    "joints.position": 1e-3,  # 1 mrad, 1 mm
+    "joints.velocity": 1e-2,  # 10 mrad/s, 10 mm/s
+    "joints.effort": 0.5,  # N·m | N: under 1 % of the motors' 60 N·m / 60 N
+    "joints.target": 1e-3,
+    "suction.on": 0.0,
+    "suction.sensed": 0.0,
+    "suction.held": 0.0,
+    "hold.force": 0.1,  # N: a tenth of the stock pad's 1 N shear limit
+    "hold.torque": 0.01,  # N·m: a tenth of its 0.1 N·m peel limit
+    "pad.position": 1e-3,
+    "pad.orientation": 1e-3,
+    "objects.position": 1e-3,
+    "objects.orientation": 1e-3,
+    "final.position": 1e-3,
+    "final.orientation": 1e-3,
+    "run.length": 0.0,
+}
+_OUTCOME = {name: INF for name in FIELDS} | {"final.position": 5e-3, "final.orientation": 0.05}
+
+# preset -> (field tolerances, event window in steps)
+PRESETS: dict[str, tuple[dict[str, float], int]] = {
+    "exact": (_ALL_ZERO, 0),
+    "tight": ({name: 0.0 if name in DISCRETE or name == "run.length" else 1e-9 for name in FIELDS}, 0),
+    "physical": (_PHYSICAL, 12),
+    "outcome": (_OUTCOME, 2400),
+}
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Per-field tolerances (FIELDS units) and the event time window in physics steps."""
+
+    preset: str = "exact"
+    values: dict[str, float] = field(default_factory=lambda: dict(_ALL_ZERO))
+    event_window_steps: int = 0
+    overrides: tuple[str, ...] = ()
+
+    @staticmethod
+    def from_preset(name: str) -> Tolerances:
+        if name not in PRESETS:
+            raise ConfigError(f"unknown tolerance preset {name!r}; expected one of {', '.join(PRESETS)}")
+        values, window = PRESETS[name]
+        return Tolerances(name, dict(values), window)
+
+    def __getitem__(self, name: str) -> float:
+        return self.values[name]
+
+    def with_overrides(self, specs: list[str] | tuple[str, ...]) -> Tolerances:
+        """Apply `channel.field=VALUE` (or `channel=VALUE` for every field of a channel)."""
+        values = dict(self.values)
+        for spec in specs:
+            names, value = parse_override(spec)
+            for name in names:
+                values[name] = value
+        return replace(self, values=values, overrides=self.overrides + tuple(specs))
+
+    def with_event_window(self, steps: int | None) -> Tolerances:
+        if steps is None:
+            return self
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+            raise ConfigError(f"event window {steps!r} is invalid; expected a whole number of steps >= 0")
+        return replace(self, event_window_steps=steps)
+
+    def to_dict(self) -> dict:
+        return {
+            "preset": self.preset,
+            "event_window_steps": self.event_window_steps,
+            "overrides": list(self.overrides),
+            "fields": {name: _json_number(self.values[name]) for name in FIELDS},
+        }
+
+
+def parse_override(spec: str) -> tuple[list[str], float]:
+    """`joints.position=1e-4` -> (["joints.position"], 1e-4); `hold=inf` -> every hold.* field."""
+    known = ", ".join(FIELDS)
+    if not isinstance(spec, str) or spec.count("=") != 1:
+        raise ConfigError(f"tolerance {spec!r} is malformed; expected CHANNEL.FIELD=VALUE, e.g. joints.position=1e-4")
+    name, text = (s.strip() for s in spec.split("="))
+    if name in FIELDS:
+        names = [name]
+    else:
+        names = [f for f in FIELDS if f.split(".")[0] == name]
+        if not names:
+            raise ConfigError(f"tolerance {spec!r} names unknown field {name!r}; expected one of {known}")
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if math.isnan(value) or value < 0:
+        raise ConfigError(f"tolerance {spec!r} has value {text!r}; expected a number >= 0 or inf")
+    return names, value
+
+
+def _json_number(value: float) -> float | str:
+    return "inf" if math.isinf(value) else value

@@ -210,6 +210,8 @@ def test_the_official_client_raises_the_servers_message(sim):
         sim.getObject("/nowhere")
     with pytest.raises(Exception, match="argument 2 \\(targetPosition\\)"):
         sim.setJointTargetPosition(sim.getObject("/MTB_axis1"), "far")
+    with pytest.raises(Exception, match="callbacks are not supported"):
+        sim.addLog(sim.verbosity_scriptinfos, test_the_official_client_raises_the_servers_message)
     assert sim.getSimulationState() == sim.simulation_stopped
 
 

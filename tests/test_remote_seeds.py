@@ -37,7 +37,7 @@ def run_seed(seed: str, tmp_path: Path, *server_args: str):
         proc = subprocess.run([sys.executable, str(CLIENTS / f"{seed}.py")], capture_output=True, text=True,
                               env=env, timeout=60, check=False)
         assert proc.returncode == 0, proc.stdout + proc.stderr
-        assert "Connected to remote API server" in proc.stdout
+        assert f"{seed} client: connected" in proc.stdout
         server.wait_for(rf"\[info\] client \d+: {seed} client")
         sim = server.client().require("sim")
         box = sim.getObjectPosition(sim.getObject("/box"), sim.handle_world)

@@ -125,6 +125,15 @@ def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
     assert green[:, right].sum() > 100
 
 
+def _end_group(proc: subprocess.Popen) -> None:
+    """Stop the twin process started here and the viewer it started (its own session's group)."""
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+    except ProcessLookupError:
+        pass  # already gone
+    proc.wait(timeout=10)
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -148,8 +157,7 @@ def test_web_viewer_is_served_on_localhost(recorded, rerun_home):
                 time.sleep(0.2)
         assert "web viewer" in page.lower() and "<html" in page.lower()
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)  # the twin process and the viewer it started
-        proc.wait(timeout=10)
+        _end_group(proc)
     assert proc.stdout.read().startswith(f"serving the web viewer at http://127.0.0.1:{port}")
 
 
@@ -168,9 +176,7 @@ def test_native_viewer_opens_a_window_and_stays_up(recorded, rerun_home):
             time.sleep(4.0)  # a viewer that cannot start exits within a second or two
             alive = proc.poll() is None
         finally:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGTERM)  # twin and the viewer it started: the group started here
-            proc.wait(timeout=10)
+            _end_group(proc)
         assert alive, proc.stderr.read()[-2000:]
     finally:
         xvfb.terminate()

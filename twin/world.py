@@ -300,8 +300,9 @@ _KEY_NAMES = {
 
 def decode_key_events(events: dict[int, int], keys_down: set[int]) -> list[str]:
     """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or when
-    only its release arrives (a quick tap may show up only as released). Shift+letter gives the capital."""
-    shift = bool(events.get(pb.B3G_SHIFT, 0) & pb.KEY_IS_DOWN)
+    only its release arrives (a quick tap may show up only as released). Shift+letter gives the capital
+    when Shift is down, or was pressed, in the same poll."""
+    shift = bool(events.get(pb.B3G_SHIFT, 0) & (pb.KEY_IS_DOWN | pb.KEY_WAS_TRIGGERED))
     names = []
     for code, state in sorted(events.items()):
         name = _KEY_NAMES.get(code) or (chr(code) if 33 <= code <= 126 else None)

@@ -7,6 +7,7 @@ An .mcap recording is drawn into a temporary .rrd first (twin.load + write_rrd);
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import subprocess
 import tempfile
@@ -103,14 +104,15 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
     with tempfile.TemporaryFile() as log:
         started = time.monotonic()
         proc = subprocess.Popen([rerun_executable(), "--headless", "--port", str(port), "--window-size", window_size,
-                                 "--hide-welcome-screen"], env=env, stdout=subprocess.DEVNULL, stderr=log)
+                                 "--hide-welcome-screen"], env=env, stdout=subprocess.DEVNULL, stderr=log,
+                                start_new_session=True)
         try:
             client = _connect(ViewerClient, f"rerun+http://127.0.0.1:{port}/proxy", proc, log)
-            client.open(str(Path(rrd).resolve()))
-            timelines = _wait_loaded(client, proc)
-            # Start-up notifications fade after a moment; do not photograph them.
-            time.sleep(max(0.0, started + TOAST_FADE_S - time.monotonic()))
             try:
+                client.open(str(Path(rrd).resolve()))
+                timelines = _wait_loaded(client, proc)
+                # Start-up notifications fade after a moment; do not photograph them.
+                time.sleep(max(0.0, started + TOAST_FADE_S - time.monotonic()))
                 if scene.TIME_TIMELINE not in timelines:  # not a twin recording: show its end
                     at_ns = None
                     client.set_time(play_state="following")
@@ -123,15 +125,24 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
             except (RuntimeError, ValueError, OSError) as err:
                 raise ViewerError(f"the headless Rerun viewer failed to take the screenshot: {err}") from err
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            _stop(proc)
     if not out.is_file():
         raise ViewerError(f"the headless viewer did not write {str(out)!r}")
     return (None if at_ns is None else at_ns * 1e-9), problems
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """End the viewer started here, and anything it started (its own process group)."""
+    for sig, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, None)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass  # already gone
+        try:
+            proc.wait(timeout=wait_s)
+            return
+        except subprocess.TimeoutExpired:
+            continue
 
 
 def _free_port() -> int:

@@ -110,6 +110,8 @@ def _float(v: Any) -> float:
 def _str(v: Any) -> str:
     if not isinstance(v, str):
         raise TypeError("a string")
+    if v.endswith("@func"):  # how the official client sends a Python function
+        raise TypeError("a string, not a Python function (callbacks are not supported)")
     return v
 
 

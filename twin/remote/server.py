@@ -160,7 +160,15 @@ class Server:
         wall0, step0 = self._anchor
         due = step0 + int((now - wall0) * self.speed * 1e9 / scene.config.dt_ns) - scene.twin.step_index
         if due > 0:  # all of it: a request must see the simulated time its wall-clock moment is due
-            scene.advance(due)
+            try:
+                scene.advance(due)
+            except Exception as err:  # noqa: BLE001 - e.g. a recorder failing: end the run, keep serving
+                self.log(f"error while stepping the twin: {type(err).__name__}: {err}; stopping the simulation")
+                self._anchor = None
+                try:
+                    scene.stop()
+                except Exception as stop_err:  # noqa: BLE001
+                    self.log(f"error while stopping the simulation: {type(stop_err).__name__}: {stop_err}")
 
     def _drain_monitor(self) -> None:
         """A client's TCP connection closed (its program ended or closed the socket): forget it."""

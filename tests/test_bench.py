@@ -22,9 +22,12 @@ def test_only_twin_prints_the_baseline_and_the_twins_ratio():
             for line in done.stdout.splitlines() if line.count("|") == 2}
     physics = float(rows[("physics", "physics-only steps/s (median of 1)")].split()[0].replace(",", ""))
     assert physics > 0
-    rate, ratio = re.match(r"([\d,]+) \(([\d.]+)x\)",
+    rate, ratio = re.match(r"([\d,]+) \(([\d.]+)x idle",
                            rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")]).groups()
     assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006  # measured against that baseline
+    motion = float(rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")].split()[0]
+                   .replace(",", ""))
+    assert physics > motion > 0  # a moving arm with contacts costs more than an idle one
     assert not any(section in ("record", "diff", "remote") for section, _ in rows)  # --only selected
 
 

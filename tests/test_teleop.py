@@ -2,23 +2,24 @@
 exactly; unknown keys, joint limits and bad options."""
 
 import math
-import os
-import shutil
 import subprocess
 import sys
+import time
 
 import pytest
 
 from twin.cli import main
 from twin.columns import FrameCollector
 from twin.errors import ConfigError
+from twin.keymaps import parse_keys
 from twin.kinematics import fk, ik
 from twin.profiles import PROFILES
 from twin.record.mcap_reader import load
 from twin.replay import REPLAYED_EVENT_KINDS, collected, replay
 from twin.tasks.pick_place import POINT_A_M, POINT_B_M
-from twin.teleop import TeleopOptions, run_teleop, summary_lines, teleop_config
+from twin.teleop import EventLog, Session, TeleopOptions, run_teleop, summary_lines, teleop_config
 from twin.teleop_ui import status_lines
+from twin.twin import Twin
 
 # Per seed map: the keys for shoulder +1/-1 deg, elbow +1/-1 deg, and the pick/place key sequences (with
 # `wait` intervals for the Z stroke, 0.2 m at 0.5 m/s, when keys come every KEY_INTERVAL_S).
@@ -212,13 +213,16 @@ def test_teleop_config_carries_the_keymap():
         teleop_config(TeleopOptions(robot="seed001", keymap_path="/nonexistent/map.toml"))
 
 
-@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs Xvfb (tools/setup_test_system.sh)")
-def test_gui_window_runs_a_scripted_session(tmp_path):
-    env = {**os.environ, "HOME": str(tmp_path)}
-    # -noreset: the display check before PyBullet connects must not make Xvfb reset under PyBullet's feet
-    xvfb = ["xvfb-run", "-a", "-s", "-screen 0 1024x768x24 -noreset"]
-    out = subprocess.run([*xvfb, sys.executable, "-m", "twin.cli", "teleop", "--gui", "--keys", "d*2 k",
-                          "--key-interval", "0.1"], check=False, capture_output=True, text=True, timeout=60, env=env,
-                         stdin=subprocess.DEVNULL)
-    assert out.returncode == 0, out.stderr[-2000:]
-    assert "teleop (scripted) robot mtb: 3 key presses" in out.stdout and "72 steps" in out.stdout
+def test_paced_script_runs_in_real_time_with_the_same_commands():
+    """With a window (--gui) a script is paced to wall-clock time; the Commands and Frames are the same."""
+    _, fast = _scripted("mtb", "d k wait", interval_s=0.1)
+    config = teleop_config(TeleopOptions(robot="mtb"))
+    collector = FrameCollector()
+    twin = Twin(config, sinks=[collector])
+    session = Session(twin, EventLog())
+    start_s = time.monotonic()
+    session.run_scripted(parse_keys("d k wait"), 0.1, pace=session.real_time_pacer())
+    wall_s = time.monotonic() - start_s
+    twin.close()
+    assert 0.3 <= wall_s < 1.5  # 72 steps of 1/240 s
+    assert collector.commands == fast.commands and collector.columns().equals(fast.frames)

@@ -139,7 +139,7 @@ def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_pa
     assert twin.returncode == 0, err[-2000:]
     summary = next(line for line in out.splitlines() if line.startswith("teleop (gui)"))
     assert summary.startswith("teleop (gui) robot mtb: 4 key presses (2 not in the key map)"), summary
-    assert summary.endswith("ended by window closed"), summary
+    assert summary.endswith(("ended by esc", "ended by window closed")), summary  # whoever saw Esc first
     rec = load(record)
     assert rec.finalized and rec.run["params"]["mode"] == "gui"
     assert [c.args["key"] for c in rec.commands] == ["A", "k", "z", "left"]

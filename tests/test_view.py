@@ -123,6 +123,8 @@ def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
     assert orange[:, right].sum() > 300  # the elbow and z lines
     assert blue[:, right].sum() > 300  # the shoulder line
     assert green[:, right].sum() > 100
+    _one_line_error(capsys, ["view", str(recorded["rrd"]), "--screenshot", str(png), "--at", "99"],
+                    "time 99.000 s is after the end of the recording")
 
 
 def _end_group(proc: subprocess.Popen) -> None:

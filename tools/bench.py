@@ -1,7 +1,11 @@
 """The benchmark entry point: `python tools/bench.py [--only NAME ...] [--repeats N]`.
 
-It first measures the physics-only baseline (plane + the mtb robot + a box, stepSimulation alone,
-DIRECT mode, 240 Hz, through twin.world.World) as a median over repeats, then runs the sections:
+It first measures two physics-only baselines as medians over repeats: the idle scene (plane + the
+mtb robot + a box, stepSimulation alone, DIRECT mode, 240 Hz, through twin.world.World), and the
+same physics doing pick_place's work (the task's motor targets and holds applied straight to the
+World at their steps, stepSimulation alone: no Frames, no suction rule, no sinks). A moving arm
+with contacts costs about twice an idle one, so the second is the fair yardstick for the twin's
+own overhead on that task. Then it runs the sections:
 every tools/bench_*.py, sorted by name, each defining `bench(ctx) -> list[tuple[str, str]]` of
 (label, value) rows. It prints one table; every ratio in it is measured in this one run.
 """
@@ -30,9 +34,10 @@ DT_S = 1.0 / 240.0
 class BenchContext:
     """What every section gets: the baseline, how often to repeat, and a timing helper."""
 
-    physics_steps_per_s: float  # median over repeats
+    physics_steps_per_s: float  # median over repeats, idle scene
     physics_samples: tuple[float, ...]  # each repeat's steps/s
     repeats: int
+    motion_physics_steps_per_s: float = 0.0  # median over repeats, pick_place's motion (0: not measured)
     physics_step_us: float = field(init=False)
 
     def __post_init__(self) -> None:
@@ -48,8 +53,11 @@ class BenchContext:
         return statistics.median(samples)
 
     def ratio(self, steps_per_s: float) -> str:
-        """A step rate with its ratio to physics-only, e.g. '31,250 (0.78x)'."""
-        return f"{steps_per_s:,.0f} ({steps_per_s / self.physics_steps_per_s:.2f}x)"
+        """A step rate with its ratios to both physics-only baselines, e.g. '31,250 (0.45x idle, 0.78x motion)'."""
+        text = f"{steps_per_s:,.0f} ({steps_per_s / self.physics_steps_per_s:.2f}x idle"
+        if self.motion_physics_steps_per_s:
+            text += f", {steps_per_s / self.motion_physics_steps_per_s:.2f}x same motion"
+        return text + ")"
 
 
 def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
@@ -65,6 +73,49 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
         for _ in range(steps):
             world.step()
         return steps / (time.perf_counter() - t0)
+    finally:
+        world.close()
+
+
+def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
+    """One sample of the bare PyBullet loop doing pick_place's work (see the module docstring)."""
+    from twin.columns import FrameCollector
+    from twin.config import TwinConfig
+    from twin.tasks import TASKS
+    from twin.twin import Twin
+    from twin.world import World
+
+    collector = FrameCollector()
+    twin = Twin(sinks=[collector])
+    TASKS["pick_place"](twin, cycles=cycles)
+    n_steps, profile = twin.step_index, twin.profile
+    twin.close()
+    actions: dict[int, list[tuple]] = {}
+    for c in collector.commands:  # commands first: the twin applies them before its suction rule
+        if c.kind == "joint_target":
+            actions.setdefault(c.step, []).append(("motor", profile.joint_index(c.args["joint"]), c.args["q"]))
+    for e in collector.events:
+        if e.kind == "attach":
+            f = collector.frames[e.step]
+            root = (f.pad_pose[0], f.pad_pose[1], f.pad_pose[2] + profile.pad_length_m)
+            yaw = f.joint_q[0] + f.joint_q[1] + f.joint_q[3]
+            actions.setdefault(e.step, []).append(("attach", 0, root, yaw))
+        elif e.kind in ("release", "break"):
+            actions.setdefault(e.step, []).append(("detach",))
+    world = World(TwinConfig())
+    v_max = world._max_velocities()
+    try:
+        t0 = time.perf_counter()
+        for step in range(n_steps):
+            for action in actions.get(step, ()):
+                if action[0] == "motor":
+                    world.set_motor(action[1], action[2], v_max[action[1]])
+                elif action[0] == "attach":
+                    world.attach(action[1], action[2], action[3])
+                else:
+                    world.detach()
+            world.step()
+        return n_steps / (time.perf_counter() - t0)
     finally:
         world.close()
 
@@ -110,14 +161,17 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS) -> in
 
     t_start = time.perf_counter()
     samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))
-    ctx = BenchContext(statistics.median(samples), samples, repeats)
+    motion = tuple(pick_place_physics_steps_per_s() for _ in range(repeats))
+    ctx = BenchContext(statistics.median(samples), samples, repeats, statistics.median(motion))
     realtime = ctx.physics_steps_per_s * DT_S
     rows = [("section", "measure", "value"),
             ("machine", "python / pybullet API / cpus",
              f"{platform.python_version()} / {pybullet_version()} / {os.cpu_count()}"),
             ("physics", f"physics-only steps/s (median of {repeats})",
              f"{ctx.physics_steps_per_s:,.0f} ({ctx.physics_step_us:.1f} us/step, {realtime:.0f}x real time at 240 Hz)"),
-            ("physics", "spread over repeats", f"{min(samples):,.0f} .. {max(samples):,.0f}")]
+            ("physics", "spread over repeats", f"{min(samples):,.0f} .. {max(samples):,.0f}"),
+            ("physics", "physics-only steps/s, pick_place's motion and holds (median)",
+             f"{ctx.motion_physics_steps_per_s:,.0f} ({1e6 / ctx.motion_physics_steps_per_s:.1f} us/step)")]
     failed = 0
     for name, path in chosen.items():
         t0 = time.perf_counter()

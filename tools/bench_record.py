@@ -12,29 +12,15 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 from twin.config import TwinConfig
 from twin.record import open_recorders
 from twin.record.mcap_reader import load
 from twin.tasks import TASKS, run_task
 from twin.twin import Twin
-from twin.world import World
 
 CYCLES = 16
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": CYCLES}}
-
-
-def physics_steps_per_s(steps: int = 20_000) -> float:
-    """PyBullet stepping alone (the scene of a default twin), steps per wall second."""
-    world = World(TwinConfig())
-    try:
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            world.step()
-        return steps / (time.perf_counter() - t0)
-    finally:
-        world.close()
 
 
 def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> tuple[int, float, float, int]:
@@ -84,7 +70,6 @@ def _have_rerun_writer() -> bool:
 
 
 def bench(ctx) -> list[tuple[str, str]]:
-    physics = ctx.physics_steps_per_s
     repeats = max(1, int(ctx.repeats))
     modes = {"twin, no recording": (False, False), "twin + MCAP": (True, False)}
     if _have_rerun_writer():
@@ -105,7 +90,7 @@ def bench(ctx) -> list[tuple[str, str]]:
             rates[name] = statistics.median(samples)
             cpu_us[name] = statistics.median(cpu_samples)
             rows.append((f"{name}: steps/s (ratio to physics-only)",
-                         f"{rates[name]:,.0f} ({rates[name] / physics:.2f}x); CPU {cpu_us[name]:.1f} us/step"))
+                         f"{ctx.ratio(rates[name])}; CPU {cpu_us[name]:.1f} us/step"))
         plain, with_mcap = rates["twin, no recording"], rates["twin + MCAP"]
         rows.append(("twin + MCAP: speed relative to no recording (wall; CPU)",
                      f"{with_mcap / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP']:.2f}x"))
@@ -128,12 +113,11 @@ def bench(ctx) -> list[tuple[str, str]]:
 
 
 def main() -> int:
-    physics = physics_steps_per_s()
-    ctx = SimpleNamespace(physics_steps_per_s=physics, repeats=3)
-    print(f"physics-only: {physics:,.0f} steps/s")
-    for name, value in bench(ctx):
-        print(f"{name}: {value}")
-    return 0
+    """Run this section alone, with bench.py's baselines."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench import main as bench_main
+
+    return bench_main(["--only", "record"])
 
 
 if __name__ == "__main__":

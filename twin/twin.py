@@ -57,14 +57,14 @@ class Twin:
 
     def step(self, n: int = 1) -> Frame:
         """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
-        sinks = self.sinks
+        sinks, pad_model, world = self.sinks, self.suction_pad, self.world
         for _ in range(n):
-            f = self.frame
-            pad = f.pad_pose
-            happened = self.suction_pad.update(self._suction_wanted, (pad[0], pad[1], pad[2]), self._heading(f))
-            for ev in happened:
-                self.event(ev.kind, self._body_name(ev.body), ev.message, **ev.data)
-            self.world.step()
+            if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
+                f = self.frame
+                pad = f.pad_pose
+                for ev in pad_model.update(self._suction_wanted, (pad[0], pad[1], pad[2]), self._heading(f)):
+                    self.event(ev.kind, self._body_name(ev.body), ev.message, **ev.data)
+            world.step()
             self.step_index += 1
             f = self.frame = self._read_frame()
             for s in sinks:
@@ -232,12 +232,14 @@ class Twin:
     def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
         """Step until every joint is at its target and still; an Event if it times out."""
         max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
+        checks = tuple(zip(range(4), self.targets, SETTLE_TOL, SETTLE_SPEED_TOL, strict=True))
         for _ in range(max_steps):
             f = self.frame
-            if all(
-                abs(f.joint_q[j] - self.targets[j]) <= SETTLE_TOL[j] and abs(f.joint_qd[j]) <= SETTLE_SPEED_TOL[j]
-                for j in range(4)
-            ):
+            q, qd = f.joint_q, f.joint_qd
+            for j, target, tol, speed_tol in checks:
+                if abs(q[j] - target) > tol or abs(qd[j]) > speed_tol:
+                    break
+            else:
                 return True
             self.step()
         self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Self
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 
 from twin.columns import FrameColumns
@@ -78,6 +79,9 @@ class RerunRecorder:
         self.batch_steps = batch_steps
         tree = scene.load_urdf_tree(config, urdf_text)
         self._joints = [JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, tree)]
+        # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per batch.
+        self._frame_names = [(pa.array([j.parent_frame] * batch_steps, pa.utf8()),
+                              pa.array([j.child_frame] * batch_steps, pa.utf8())) for j in self._joints]
         self._object_paths = [scene.object_path(o.name) for o in config.objects]
         self._buf = _Buffers(batch_steps, len(config.objects))
         self._n = 0
@@ -161,10 +165,11 @@ class RerunRecorder:
         send = self.stream.send_columns
         for j, joint in enumerate(self._joints):
             translations, quaternions = joint.transforms(b.joint_q[:n, j])
+            parents, children = self._frame_names[j]
             # Frame names go in every row: the viewer does not join a static frame name to timed poses.
             send(scene.joint_path(joint.name), indexes=times, columns=rr.Transform3D.columns(
                 translation=translations, quaternion=quaternions,
-                parent_frame=[joint.parent_frame] * n, child_frame=[joint.child_frame] * n))
+                parent_frame=parents.slice(0, n), child_frame=children.slice(0, n)))
         for k, path in enumerate(self._object_paths):
             poses = b.object_poses[:n, k]
             send(path, indexes=times, columns=rr.Transform3D.columns(translation=poses[:, :3], quaternion=poses[:, 3:]))

@@ -113,9 +113,13 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
                 timelines = _wait_loaded(client, proc)
                 # Start-up notifications fade after a moment; do not photograph them.
                 time.sleep(max(0.0, started + TOAST_FADE_S - time.monotonic()))
-                if scene.TIME_TIMELINE not in timelines:  # not a twin recording: show its end
+                end_ns = timelines.get(scene.TIME_TIMELINE)
+                if end_ns is None:  # not a twin recording: show its end
                     at_ns = None
                     client.set_time(play_state="following")
+                elif at_ns is not None and at_ns > end_ns:
+                    raise ViewerError(f"time {at_ns * 1e-9:.3f} s is after the end of the recording "
+                                      f"({end_ns * 1e-9:.3f} s of simulated time)")
                 elif at_ns is None:
                     client.set_time(scene.TIME_TIMELINE, play_state="following")
                 else:
@@ -170,13 +174,13 @@ def _connect(client_cls, url: str, proc: subprocess.Popen, log):
             time.sleep(0.1)
 
 
-def _wait_loaded(client, proc: subprocess.Popen) -> set[str]:
-    """Wait until the viewer holds the whole recording; returns its timeline names."""
+def _wait_loaded(client, proc: subprocess.Popen) -> dict[str, int]:
+    """Wait until the viewer holds the whole recording; returns each timeline's last time."""
     deadline = time.monotonic() + LOAD_TIMEOUT_S
     while True:
         state = client.get_state()
         if not state.loading and state.recordings and all(r.timelines for r in state.recordings):
-            return {t.name for r in state.recordings for t in r.timelines}
+            return {t.name: t.end for r in state.recordings for t in r.timelines if t.end is not None}
         if time.monotonic() > deadline or proc.poll() is not None:
             raise ViewerError(f"the Rerun viewer did not finish loading the recording in {LOAD_TIMEOUT_S:.0f} s")
         time.sleep(0.1)

@@ -66,7 +66,10 @@ class World:
         self.object_ids: tuple[int, ...] = ()
         self._constraint = NO_CONSTRAINT
         self._keys_down: set[int] = set()
-        self.build()
+        try:
+            self.build()
+        except pb.error as err:  # e.g. the window was closed (Esc) while the scene was loading
+            raise ConfigError(f"PyBullet stopped while building the scene: {err}") from err
 
     # -- building ---------------------------------------------------------------------------
     def build(self) -> None:

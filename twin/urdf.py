@@ -7,12 +7,17 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
+
 from twin.errors import ConfigError
 from twin.profiles import RobotProfile
 
 ALUMINIUM_KG_M3 = 2700.0
 LINK_WIDTH_M = 0.08
 QUILL_RADIUS_M = 0.012
+# Link 2's arm rides on a hub above the elbow axis, high enough that the pad and a held 5 cm box
+# pass under it at the top of the Z stroke (otherwise a carried box would sit inside the arm).
+LINK2_RISE_M = 0.075
 QUILL_LENGTH_M = 0.30
 PAD_RADIUS_M = 0.02
 PAD_MASS_KG = 0.05
@@ -33,17 +38,45 @@ def _f(v: float) -> str:
 
 
 def _link(name: str, geom: str, origin_xyz: tuple[float, float, float], mass: float,
-          inertia: tuple[float, float, float], inertial_xyz: tuple[float, float, float], rgba: str) -> str:
-    ox, oy, oz = (_f(v) for v in origin_xyz)
+          inertia: tuple[float, float, float], inertial_xyz: tuple[float, float, float], rgba: str,
+          extra_parts: tuple[tuple[str, tuple[float, float, float]], ...] = (),
+          inertial_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> str:
+    """A link: one or more (geometry, origin) parts drawn and colliding alike; principal moments
+    of inertia (ixx, iyy, izz) about the inertial origin, whose axes are turned by inertial_rpy."""
     ix, iy, iz = (_f(v) for v in inertial_xyz)
+    rr, rp, ry = (_f(v) for v in inertial_rpy)
     xx, yy, zz = (_f(v) for v in inertia)
+    shapes = []
+    for part_geom, (ox, oy, oz) in ((geom, origin_xyz), *extra_parts):
+        o = f'<origin xyz="{_f(ox)} {_f(oy)} {_f(oz)}"/>'
+        shapes.append(f'    <visual>{o}<geometry>{part_geom}</geometry><material name="{name}_m">'
+                      f'<color rgba="{rgba}"/></material></visual>\n'
+                      f'    <collision>{o}<geometry>{part_geom}</geometry></collision>\n')
     return f"""  <link name="{name}">
-    <inertial><origin xyz="{ix} {iy} {iz}"/><mass value="{_f(mass)}"/>
+    <inertial><origin xyz="{ix} {iy} {iz}" rpy="{rr} {rp} {ry}"/><mass value="{_f(mass)}"/>
       <inertia ixx="{xx}" ixy="0" ixz="0" iyy="{yy}" iyz="0" izz="{zz}"/></inertial>
-    <visual><origin xyz="{ox} {oy} {oz}"/><geometry>{geom}</geometry><material name="{name}_m"><color rgba="{rgba}"/></material></visual>
-    <collision><origin xyz="{ox} {oy} {oz}"/><geometry>{geom}</geometry></collision>
-  </link>
+{"".join(shapes)}  </link>
 """
+
+
+def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, float, float]]]
+              ) -> tuple[float, tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]:
+    """Mass, centre of mass, principal moments and the rpy of the principal axes of rigid parts
+    given as (mass, centre, principal moments about that centre, axes along the link frame's)."""
+    mass = sum(m for m, _c, _i in parts)
+    com = np.sum([m * np.asarray(c) for m, c, _i in parts], axis=0) / mass
+    tensor = np.zeros((3, 3))
+    for m, c, moments in parts:
+        d = np.asarray(c) - com
+        tensor += np.diag(moments) + m * (d @ d * np.eye(3) - np.outer(d, d))
+    moments, axes = np.linalg.eigh(tensor)
+    order = [int(np.argmax(np.abs(axes[k]))) for k in range(3)]  # keep each axis near the link's own
+    moments, axes = moments[order], axes[:, order]
+    axes *= np.sign(np.diag(axes))
+    roll = math.atan2(axes[2, 1], axes[2, 2])
+    pitch = math.atan2(-axes[2, 0], math.hypot(axes[0, 0], axes[1, 0]))
+    yaw = math.atan2(axes[1, 0], axes[0, 0])
+    return mass, tuple(com.tolist()), tuple(moments.tolist()), (roll, pitch, yaw)
 
 
 def _joint(name: str, kind: str, parent: str, child: str, xyz: tuple[float, float, float], axis: str,
@@ -71,6 +104,14 @@ def urdf_from_profile(profile: RobotProfile) -> str:
     m_base = 8.0
     m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25  # hollow section: 25 % fill
     m2 = ALUMINIUM_KG_M3 * (l2 + LINK_WIDTH_M) * LINK_WIDTH_M * h2 * 0.25
+    hub_r = LINK_WIDTH_M / 2
+    m_hub = ALUMINIUM_KG_M3 * math.pi * hub_r**2 * LINK2_RISE_M * 0.25
+    arm2_centre = (l2 / 2, 0.0, LINK2_RISE_M + h2 / 2)
+    hub_centre = (0.0, 0.0, LINK2_RISE_M / 2)
+    link2_mass, link2_com, link2_inertia, link2_rpy = _combined([
+        (m2, arm2_centre, _box_inertia(m2, l2 + LINK_WIDTH_M, LINK_WIDTH_M, h2)),
+        (m_hub, hub_centre, _cyl_inertia(m_hub, hub_r, LINK2_RISE_M)),
+    ])
     m3 = ALUMINIUM_KG_M3 * math.pi * QUILL_RADIUS_M**2 * QUILL_LENGTH_M
     pad_offset = pad_root_height_m(p) - p.elbow_height_m  # axis4 above the Z joint's frame
     pad_h = p.pad_length_m
@@ -88,8 +129,9 @@ def urdf_from_profile(profile: RobotProfile) -> str:
         _joint(n2, "revolute", "MTB_link1", "MTB_link2", (l1, 0.0, h1), "0 0 1",
                *limits[1], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
         _link("MTB_link2", f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
-              (l2 / 2, 0.0, h2 / 2), m2, _box_inertia(m2, l2 + LINK_WIDTH_M, LINK_WIDTH_M, h2),
-              (l2 / 2, 0.0, h2 / 2), "0.9 0.6 0.2 1"),
+              arm2_centre, link2_mass, link2_inertia, link2_com, "0.9 0.6 0.2 1",
+              extra_parts=((f'<cylinder radius="{_f(hub_r)}" length="{_f(LINK2_RISE_M)}"/>', hub_centre),),
+              inertial_rpy=link2_rpy),
         _joint(n3, "prismatic", "MTB_link2", "MTB_link3", (l2, 0.0, 0.0), "0 0 -1",
                *limits[2], p.prismatic_max_force_n, p.prismatic_max_velocity_m_s),
         _link("MTB_link3", f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',

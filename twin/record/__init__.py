@@ -13,18 +13,26 @@ from twin.urdf import mesh_paths, urdf_text
 
 @contextmanager
 def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | None = None,
-                   rrd_path: str | Path | None = None, rate: int = 1) -> Iterator[list]:
+                   rrd_path: str | Path | None = None, rate: int = 1, background: bool = True) -> Iterator[list]:
     """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file is
-    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised."""
+    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised.
+
+    background: the writers run in a recorder process on the other core (the same files, byte for
+    byte, at a fraction of the stepping thread's time); False keeps them in this process."""
     from twin.record.mcap_writer import McapRecorder
 
     urdf = urdf_text(config.profile)
     sinks: list = []
     try:
-        if mcap_path is not None:
+        if background and (mcap_path is not None or rrd_path is not None):
+            from twin.record.recorder_process import RecorderProcess
+
+            sinks.append(RecorderProcess(config, run, urdf=urdf, meshes=mesh_paths(config.profile),
+                                         mcap_path=mcap_path, rrd_path=rrd_path, rate=rate))
+        elif mcap_path is not None:
             sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=mesh_paths(config.profile),
                                       rate=rate))
-        if rrd_path is not None:
+        if rrd_path is not None and not background:
             from twin.record.rerun_writer import RerunRecorder
 
             sinks.append(RerunRecorder(rrd_path, config, urdf))
@@ -48,11 +56,12 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
 def _close_all(sinks: list, outcome: str, error: str) -> Exception | None:
     """Close every sink even if one fails; return the first failure."""
     from twin.record.mcap_writer import McapRecorder
+    from twin.record.recorder_process import RecorderProcess
 
     first: Exception | None = None
     for sink in sinks:
         try:
-            if isinstance(sink, McapRecorder):
+            if isinstance(sink, McapRecorder | RecorderProcess):
                 sink.close(outcome=outcome, error=error)
             else:
                 sink.close()

@@ -179,6 +179,20 @@ class McapRecorder:
         self._last_flush_ns = t_ns
 
     # -- ending ---------------------------------------------------------------------------------
+    def abandon(self) -> None:
+        """The run died without closing (its process was killed): write out what arrived, leave the
+        file without a summary or finalized marker, as a crash would (twin recover reads it)."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            if self._frames:
+                self._write_block()
+            self._write_pending()
+            self._writer.flush()
+        finally:
+            self._file.close()
+
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Write what is buffered (and the final frame, whatever the rate), the finalized marker, the
         summary; close the file. Idempotent."""

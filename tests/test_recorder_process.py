@@ -1,0 +1,98 @@
+"""Recording in a recorder process: the same files as in-process writers, errors at once, and a
+run whose process dies leaves a recoverable, unfinalized file."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+from twin.config import TwinConfig
+from twin.errors import RecordingError
+from twin.record import open_recorders
+from twin.record import schemas as S
+from twin.record.mcap_reader import load, scan
+from twin.record.recover import recover
+from twin.tasks import TASKS, run_task
+from twin.twin import Twin
+
+RUN = {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
+
+
+def _record(path, *, background: bool, data=None) -> None:
+    config = TwinConfig()
+    with open_recorders(config, RUN, mcap_path=path, background=background) as sinks:
+        twin = Twin(config, sinks=sinks)
+        if data is not None:
+            twin.event("note", message="odd data", value=data)
+        run_task(twin, TASKS["pick_place"], {"cycles": 1})
+        twin.close()
+
+
+def test_background_and_in_process_writers_make_the_same_bytes(tmp_path):
+    _record(tmp_path / "bg.mcap", background=True)
+    _record(tmp_path / "fg.mcap", background=False)
+    assert (tmp_path / "bg.mcap").read_bytes() == (tmp_path / "fg.mcap").read_bytes()
+    assert load(tmp_path / "bg.mcap").finalized
+
+
+def test_event_data_marshal_cannot_carry_still_arrives(tmp_path):
+    _record(tmp_path / "np.mcap", background=True, data=np.float64(0.25))
+    notes = [e for e in load(tmp_path / "np.mcap").events if e.kind == "note"]
+    assert len(notes) == 1 and notes[0].data["value"] == 0.25
+
+
+def test_a_writer_that_cannot_start_fails_at_once_in_one_line(tmp_path):
+    (tmp_path / "a_file").write_text("not a folder")
+    impossible = tmp_path / "a_file" / "x.mcap"
+    with pytest.raises(RecordingError) as err, open_recorders(TwinConfig(), RUN, mcap_path=impossible):
+        pytest.fail("the block must not run when the recorder cannot start")
+    assert "a_file" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
+    path = tmp_path / "killed.mcap"
+    script = textwrap.dedent(f"""
+        import os, signal
+        from twin.config import TwinConfig
+        from twin.record import open_recorders
+        from twin.twin import Twin
+        config = TwinConfig()
+        with open_recorders(config, {RUN!r}, mcap_path={str(path)!r}) as sinks:
+            twin = Twin(config, sinks=sinks)
+            twin.move_to(0.3, 0.3)
+            twin.wait(5.0)
+            os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    _wait_until_settled(path)  # the orphaned recorder writes what it got once it sees the pipe close
+    kept = scan(path, strict=False)
+    assert not kept.complete and S.META_FINALIZED not in kept.metadata
+    fixed = tmp_path / "fixed.mcap"
+    recover(path, fixed)
+    frames = load(fixed).frames
+    assert frames.t_ns[-1] * 1e-9 >= twin_seconds(path) - 1.0  # all but at most the last second
+
+
+def twin_seconds(_path) -> float:
+    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run shows."""
+    twin = Twin()
+    twin.move_to(0.3, 0.3)
+    twin.wait(5.0)
+    return twin.t_s
+
+
+def _wait_until_settled(path, timeout_s: float = 10.0) -> None:
+    deadline, last, stable = time.monotonic() + timeout_s, -1, 0
+    while time.monotonic() < deadline and stable < 5:
+        size = path.stat().st_size if path.exists() else -1
+        stable = stable + 1 if size == last and size > 0 else 0
+        last = size
+        time.sleep(0.05)
+    assert stable >= 5, f"{path} kept changing or never appeared"

@@ -1,0 +1,155 @@
+"""Recording on the machine's other core: a sink that batches the twin's stream to a recorder
+process, which runs the same MCAP and Rerun writers.
+
+The stepping thread then pays about a microsecond a frame (a tuple copy and a share of one
+marshal + pipe write per batch) instead of the writers' encoding and compression. Files are
+byte-for-byte what the in-process writers make, since the same writer code sees the same stream.
+If the twin's process dies, the recorder sees the pipe close and leaves the MCAP file unfinalized
+(and recoverable) with everything that reached it.
+"""
+
+from __future__ import annotations
+
+import marshal
+import multiprocessing
+import os
+import pickle
+import signal
+from pathlib import Path
+
+from twin.config import TwinConfig
+from twin.errors import RecordingError
+from twin.types import Command, Event, Frame
+
+BATCH_FRAMES = 32  # frames per pipe write: ~0.13 s of simulated time at 240 Hz
+_BATCH, _CLOSE = b"B", b"C"
+_COMMAND, _EVENT = 0, 1
+
+
+class RecorderProcess:
+    """A sink (on_frame/on_command/on_event) whose writers run in a child process."""
+
+    def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
+                 mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
+        self._items: list[tuple] = []
+        self._frames = 0
+        self._closed = False
+        import twin.record.mcap_writer
+        if rrd_path is not None:
+            import twin.record.rerun_writer  # noqa: F401 - (rerun takes ~0.3 s to import)
+        ctx = multiprocessing.get_context("fork")  # no re-import: the writers' modules are loaded here
+        self._conn, child_conn = ctx.Pipe()
+        self._process = ctx.Process(
+            target=_serve, args=(child_conn, self._conn, config, run, urdf, meshes, mcap_path, rrd_path, rate),
+            name="twin-recorder", daemon=True)
+        self._process.start()
+        child_conn.close()
+        self._expect_ok("recording could not start")
+
+    # -- sink -------------------------------------------------------------------------------
+    def on_frame(self, frame: Frame) -> None:
+        self._items.append(tuple(frame))  # floats, ints and bools from PyBullet: marshal's fast path
+        self._frames += 1
+        if self._frames >= BATCH_FRAMES:
+            self._send()
+
+    # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
+    # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
+    def on_command(self, command: Command) -> None:
+        self._items.append((_COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
+
+    def on_event(self, event: Event) -> None:
+        self._items.append((_EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
+
+    # -- plumbing -----------------------------------------------------------------------------
+    def _send(self) -> None:
+        payload = _BATCH + marshal.dumps(self._items)
+        self._items.clear()
+        self._frames = 0
+        try:
+            self._conn.send_bytes(payload)
+        except (BrokenPipeError, ConnectionResetError, OSError) as err:
+            raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
+
+    def _expect_ok(self, what: str) -> None:
+        try:
+            reply = self._conn.recv_bytes()
+        except (EOFError, OSError) as err:
+            raise RecordingError(f"{what}: the recorder process stopped ({self._exit_text()})") from err
+        if reply != b"OK":
+            self._process.join(timeout=5)
+            raise RecordingError(reply.decode(errors="replace"))
+
+    def _exit_text(self) -> str:
+        self._process.join(timeout=1)
+        code = self._process.exitcode
+        return "still running" if code is None else f"exit code {code}"
+
+    def close(self, outcome: str = "ok", error: str = "") -> None:
+        """Send what is buffered, have the writers finalize, wait for them. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._items:
+                self._send()
+            self._conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
+            self._expect_ok("recording could not be finished")
+        finally:
+            self._conn.close()
+            self._process.join(timeout=30)
+
+
+def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
+           mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
+    """The recorder process: build the writers, feed them each batch, finish on request."""
+    parent_end.close()  # the fork's copy of the twin's end: with it open, the twin's death would go unseen
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the twin's to handle; it then closes us
+    from twin.record.mcap_writer import McapRecorder  # already loaded by the parent
+
+    mcap, sinks = None, []
+    try:
+        if mcap_path is not None:
+            mcap = McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes, rate=rate)
+            sinks.append(mcap)
+        if rrd_path is not None:
+            from twin.record.rerun_writer import RerunRecorder
+
+            sinks.append(RerunRecorder(rrd_path, config, urdf))
+    except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
+        for sink in sinks:
+            sink.close()
+        conn.send_bytes(str(err).encode())
+        os._exit(0)
+    conn.send_bytes(b"OK")
+    frame_sinks = [s.on_frame for s in sinks]
+    while True:
+        try:
+            message = conn.recv_bytes()
+        except (EOFError, OSError):  # the twin's process died: keep what arrived, unfinalized
+            if mcap is not None:
+                mcap.abandon()
+            for sink in sinks:
+                if sink is not mcap:
+                    sink.close()
+            os._exit(0)
+        tag, body = message[:1], message[1:]
+        if tag == _CLOSE:
+            outcome, error = marshal.loads(body)
+            failure = ""
+            for sink in sinks:
+                try:
+                    sink.close(outcome=outcome, error=error) if sink is mcap else sink.close()
+                except Exception as err:  # noqa: BLE001 - keep closing the others, report the first
+                    failure = failure or str(err)
+            conn.send_bytes(failure.encode() if failure else b"OK")
+            os._exit(0)
+        for item in marshal.loads(body):
+            if len(item) == 2:
+                message = pickle.loads(item[1])
+                for sink in sinks:
+                    (sink.on_command if item[0] == _COMMAND else sink.on_event)(message)
+            else:
+                frame = Frame._make(item)
+                for on_frame in frame_sinks:
+                    on_frame(frame)

@@ -142,7 +142,7 @@ def test_fast_path_equals_the_protobuf_decoder_on_every_block(recorded):
 
 def _compose(a, b):
     """(translation, quaternion) a∘b."""
-    from twin.record.scene_tf import quat_mul, rotate
+    from twin.quat import quat_mul, rotate
 
     ta, qa = a
     tb, qb = b

@@ -7,6 +7,7 @@ import os
 import sys
 import time
 
+from twin.cli_args import whole_number
 from twin.cli_compare import add_compare_commands
 from twin.cli_record import add_record_commands, add_record_options, record_paths
 from twin.cli_view import add_view_command
@@ -18,16 +19,6 @@ from twin.tasks import accepted_params, resolve, run_task
 from twin.twin import Twin
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= 1")
-    return value
-
-
 def _add_twin_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
     p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
@@ -36,11 +27,6 @@ def _add_twin_options(p: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace) -> TwinConfig:
     return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
-
-
-def _add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True) -> None:
-    """--record FILE.mcap / --no-record / --rrd FILE.rrd / --rate N (shared by run, teleop, serve)."""
-    add_record_options(p, record_by_default=record_by_default)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -147,8 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a task (built-in name or path/to/task.py)")
     p.add_argument("task")
     _add_twin_options(p)
-    p.add_argument("--cycles", type=_positive_int, default=2, help="pick-and-place cycles (default 2)")
-    _add_record_options(p)
+    p.add_argument("--cycles", type=whole_number(1), default=2, help="pick-and-place cycles (default 2)")
+    add_record_options(p)
     p.set_defaults(func=cmd_run)
     _add_teleop_parser(sub)
     add_compare_commands(sub)

@@ -6,19 +6,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from twin.cli_args import whole_number
 from twin.errors import ConfigError, RecordingError
 
 DEFAULT_FOLDER = "runs"
-
-
-def _whole_at_least_1(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= 1")
-    return value
 
 
 def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True) -> None:
@@ -29,7 +20,7 @@ def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = 
     if record_by_default:
         group.add_argument("--no-record", action="store_true", help="do not write an MCAP recording")
     p.add_argument("--rrd", metavar="FILE.rrd", help="also write a Rerun recording (a view, regenerable from MCAP)")
-    p.add_argument("--rate", type=_whole_at_least_1, default=1, metavar="N",
+    p.add_argument("--rate", type=whole_number(1), default=1, metavar="N",
                    help="record every Nth physics step (default 1: every step; the last step is always kept)")
     p.set_defaults(record_by_default=record_by_default)
 

@@ -6,17 +6,9 @@ import argparse
 import math
 import tempfile
 
+from twin.cli_args import port
+
 DEFAULT_WEB_PORT = 9090
-
-
-def _port(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 1 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"port {text!r} is invalid; expected a whole number 1..65535")
-    return value
 
 
 def _seconds(text: str) -> float:
@@ -38,7 +30,7 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--web", action="store_true", help="serve the web viewer on localhost (offline)")
     mode.add_argument("--rrd", metavar="OUT.rrd", help="convert an MCAP recording to a Rerun .rrd file and exit")
     mode.add_argument("--screenshot", metavar="OUT.png", help="render the viewer headless and save a PNG")
-    p.add_argument("--port", type=_port, default=DEFAULT_WEB_PORT,
+    p.add_argument("--port", type=port(), default=DEFAULT_WEB_PORT,
                    help=f"web viewer port with --web (default {DEFAULT_WEB_PORT})")
     p.add_argument("--at", type=_seconds, metavar="SECONDS",
                    help="with --screenshot: the simulated time to show (default: the end of the first hold)")

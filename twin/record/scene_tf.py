@@ -9,6 +9,7 @@ import struct
 import xml.etree.ElementTree as ET
 
 from twin.errors import ConfigError
+from twin.quat import quat_from_rpy, quat_mul, rotate
 from twin.record.wire import len_field, tag, varint
 from twin.types import Frame
 
@@ -19,27 +20,6 @@ IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
 # translation (Vector3, field 4) and rotation (Quaternion, field 5) of a FrameTransform in one pack
 _TAIL = struct.Struct("<BBBdBdBdBBBdBdBdBd")
 _VEC_LEN, _QUAT_LEN = 27, 36
-
-
-def quat_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """URDF fixed-axis roll, pitch, yaw (R = Rz·Ry·Rx) as (x, y, z, w)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy)
-
-
-def quat_mul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, float, float]:
-    x, y, z, _ = quat_mul(quat_mul(q, (v[0], v[1], v[2], 0.0)), (-q[0], -q[1], -q[2], q[3]))
-    return (x, y, z)
 
 
 def _floats(text: str | None, default: tuple[float, float, float]) -> tuple[float, float, float]:

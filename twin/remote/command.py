@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from twin.cli_args import port
 from twin.cli_record import add_record_options, record_paths
 from twin.config import TwinConfig, dt_ns_from_hz
 from twin.profiles import get_profile
@@ -22,23 +23,13 @@ ends the run and resets the scene. Each run is recorded (default runs/remote_<ro
 """
 
 
-def _port(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"port {text!r} is invalid; expected 0..65535 (0: any free port)")
-    return value
-
-
 def add_serve_command(sub) -> None:
     p = sub.add_parser("serve", help="serve CoppeliaSim's ZeroMQ remote API (drive the twin from its clients)",
                        description=SERVE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
     p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1, loopback only)")
-    p.add_argument("--port", type=_port, default=23000, help="port (default 23000, CoppeliaSim's; 0: any free port)")
+    p.add_argument("--port", type=port(allow_any=True), default=23000, help="port (default 23000, CoppeliaSim's; 0: any free port)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="advance with the wall clock (default)")

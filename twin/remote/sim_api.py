@@ -14,6 +14,7 @@ from collections.abc import Callable
 from twin import kinematics
 from twin.errors import UnknownName
 from twin.profiles import PAD_ALIASES, ROBOT_ALIASES
+from twin.quat import quat_mul, rotate, yaw_quat
 from twin.remote.protocol import Param, RequestError, Signature
 from twin.remote.session import (
     SIMULATION_ADVANCING_RUNNING,
@@ -161,12 +162,12 @@ class SimApi:
         q1, q2 = frame.joint_q[0], frame.joint_q[1]
         pad = kinematics.fk(p, frame.joint_q)
         if j == 0:
-            return (0.0, 0.0, p.shoulder_height_m, *_yaw_quat(q1))
+            return (0.0, 0.0, p.shoulder_height_m, *yaw_quat(q1))
         if j == 1:
-            return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *_yaw_quat(q1 + q2))
+            return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *yaw_quat(q1 + q2))
         if j == 2:
-            return (pad.x_m, pad.y_m, p.elbow_height_m, *_yaw_quat(q1 + q2))
-        return (pad.x_m, pad.y_m, pad.z_m + p.pad_length_m, *_yaw_quat(pad.heading_rad))
+            return (pad.x_m, pad.y_m, p.elbow_height_m, *yaw_quat(q1 + q2))
+        return (pad.x_m, pad.y_m, pad.z_m + p.pad_length_m, *yaw_quat(pad.heading_rad))
 
     def _relative_pose(self, handle: int, rel: int) -> tuple[float, ...]:
         pose = self.pose(handle)
@@ -176,8 +177,8 @@ class SimApi:
             rel = HANDLE_ROBOT
         base = self.pose(rel) if rel != handle else pose
         inv = (-base[3], -base[4], -base[5], base[6])
-        d = _rotate(inv, (pose[0] - base[0], pose[1] - base[1], pose[2] - base[2]))
-        return (*d, *_quat_mul(inv, pose[3:]))
+        d = rotate(inv, (pose[0] - base[0], pose[1] - base[1], pose[2] - base[2]))
+        return (*d, *quat_mul(inv, pose[3:]))
 
     # -- joints ------------------------------------------------------------------------------
     def set_joint_target_position(self, handle: int, q: float, motion: list) -> None:
@@ -236,22 +237,6 @@ class SimApi:
         out["setStepping"] = {"func": {}}
         out.update({k: {"const": v} for k, v in CONSTANTS.items()})
         return dict(sorted(out.items()))
-
-
-def _yaw_quat(yaw_rad: float) -> tuple[float, float, float, float]:
-    return (0.0, 0.0, math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad))
-
-
-def _quat_mul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-def _rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, float, float]:
-    x, y, z, _ = _quat_mul(_quat_mul(q, (v[0], v[1], v[2], 0.0)), (-q[0], -q[1], -q[2], q[3]))
-    return (x, y, z)
 
 
 def _euler_xyz(q: tuple[float, ...]) -> tuple[float, float, float]:

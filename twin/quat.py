@@ -1,0 +1,35 @@
+"""Quaternion arithmetic on (x, y, z, w) tuples: pure math, shared by the recorders and the remote API."""
+
+from __future__ import annotations
+
+import math
+
+Quat = tuple[float, float, float, float]
+
+
+def quat_from_rpy(roll: float, pitch: float, yaw: float) -> Quat:
+    """URDF fixed-axis roll, pitch, yaw (R = Rz·Ry·Rx)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
+
+
+def yaw_quat(yaw_rad: float) -> Quat:
+    """A rotation about +z."""
+    return (0.0, 0.0, math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad))
+
+
+def quat_mul(a: tuple[float, ...], b: tuple[float, ...]) -> Quat:
+    """The Hamilton product a·b (apply b, then a)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
+def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The vector v turned by the unit quaternion q."""
+    x, y, z, _ = quat_mul(quat_mul(q, (v[0], v[1], v[2], 0.0)), (-q[0], -q[1], -q[2], q[3]))
+    return (x, y, z)

@@ -90,6 +90,14 @@ def test_outcome_passes_a_solver_change_when_the_box_lands_within_5_mm(golden):
     assert compare(golden, candidate, Tolerances.from_preset("outcome")).match
 
 
+def test_outcome_fails_when_the_box_ends_at_nan(golden):
+    broken = copy.deepcopy(golden)
+    broken.frames.object_poses[-1, 0, :3] = np.nan  # e.g. a physics blow-up in the last step
+    result = compare(golden, broken, Tolerances.from_preset("outcome"))
+    assert not result.match
+    assert result.first.name == "final.position" and result.first.element == "box"
+
+
 def test_outcome_fails_when_the_box_lands_elsewhere(golden):
     moved = copy.deepcopy(golden)
     moved.frames.object_poses[-1, 0, 0] += 0.006

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from twin.config import TwinConfig
-from twin.errors import RecordingError
+from twin.errors import ConfigError, RecordingError
 from twin.record import open_recorders
 from twin.record import schemas as S
 from twin.record.mcap_reader import load, scan
@@ -96,3 +96,41 @@ def _wait_until_settled(path, timeout_s: float = 10.0) -> None:
         last = size
         time.sleep(0.05)
     assert stable >= 5, f"{path} kept changing or never appeared"
+
+
+def test_a_writer_error_mid_run_is_one_line_and_keeps_what_came_before(tmp_path):
+    """A full disk, for real: the recorder may write only so many bytes (RLIMIT_FSIZE), then gets EFBIG."""
+    path = tmp_path / "full.mcap"
+    script = textwrap.dedent(f"""
+        import resource, signal, sys
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, resource.RLIM_INFINITY))
+        from twin.cli import main
+        sys.exit(main(["run", "pick_place", "--cycles", "4", "--record", {str(path)!r}]))
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
+    assert "recording stopped by a writer error" in done.stderr
+    fixed = tmp_path / "fixed.mcap"
+    recover(path, fixed)
+    assert len(load(fixed).frames) > 100  # the part written before the disk filled up
+
+
+def test_twin_events_carry_plain_json_data_and_refuse_the_rest():
+    twin = Twin()
+    event = twin.event("measure", value=np.float64(0.25), point=np.array([1.0, 2.0]), pair=(1, 2))
+    assert event.data == {"pair": [1, 2], "point": [1.0, 2.0], "value": 0.25}
+    assert type(event.data["value"]) is float
+    with pytest.raises(ConfigError, match="'set'"):
+        twin.event("measure", tags={"a", "b"})  # a set's order varies between runs
+
+
+def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
+    from twin.record.mcap_writer import McapRecorder
+
+    path = tmp_path / "keep.mcap"
+    path.write_bytes(b"an earlier recording")
+    with pytest.raises(RecordingError, match="no_such_mesh.stl"):
+        McapRecorder(path, TwinConfig(), RUN, urdf="<robot/>", meshes=[tmp_path / "no_such_mesh.stl"])
+    assert path.read_bytes() == b"an earlier recording"

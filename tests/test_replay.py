@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import pytest
 
@@ -137,3 +138,13 @@ def test_check_replays_a_golden_without_a_task(recs):
 
     outcomes = check_all([str(recs / "teleop.mcap"), str(recs / "remote.mcap")], Tolerances.from_preset("exact"))
     assert [o.status for o in outcomes] == ["match", "match"]
+
+
+def test_replay_refuses_to_record_over_the_recording_it_replays(tmp_path, capsys):
+    golden = tmp_path / "golden.mcap"
+    golden.write_bytes((Path(__file__).resolve().parent.parent / "recordings" / "pick_place_mtb.mcap").read_bytes())
+    before = golden.read_bytes()
+    assert main(["replay", str(golden), "--record", str(golden)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is the recording being replayed" in err
+    assert golden.read_bytes() == before

@@ -87,10 +87,10 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False) -> Outcom
     from twin.record.mcap_reader import load
 
     t0 = time.perf_counter()
+    tmp = Path(path).with_name(Path(path).name + ".tmp")
     try:
         golden = load(path)
         if update:
-            tmp = Path(path).with_name(Path(path).name + ".tmp")
             with open_recorders(golden.config, golden.run, mcap_path=str(tmp), rate=_rate(golden)) as sinks:
                 new, kinds = rerun(golden, sinks=sinks)
         else:
@@ -98,8 +98,6 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False) -> Outcom
         result = compare(golden, new, tolerances, event_kinds=kinds)
         report = render_text(result)
         if result.match:
-            if update:
-                tmp.unlink()
             return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
         summary = first_line(result.first)
         if update:
@@ -109,6 +107,8 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False) -> Outcom
         return Outcome(path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0)
     except TwinError as err:
         return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+    finally:
+        tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
 
 
 def _rate(rec: Recording) -> int:

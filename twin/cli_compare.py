@@ -6,8 +6,9 @@ Exit codes: 0 match, 1 mismatch, 2 unreadable or bad input, 3 runs not comparabl
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.errors import ConfigError, RecordingError
 from twin.tolerances import FIELDS, PRESETS, Tolerances
 
 _TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
@@ -54,7 +55,8 @@ def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
         report_format(path)
     lines = render_text(result).splitlines()
     if args.quiet:
-        lines = lines[:1] + [line for line in lines if line.startswith(("first divergence", "  expected"))]
+        lines = lines[:1] + [line for line in lines if line.startswith(
+            ("first divergence", "  expected", "  the candidate has it", "  the golden has it"))]
     print("\n".join(lines))
     for path in args.report:
         write_report(result, path)
@@ -81,6 +83,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from twin.replay import REPLAYED_EVENT_KINDS, replay
 
     tol = _tolerances(args)
+    if args.record and Path(args.record).resolve() == Path(args.recording).resolve():
+        raise RecordingError(f"--record {args.record!r} is the recording being replayed; expected another path")
     rec = load(args.recording)
     if args.record:
         from twin.record import open_recorders

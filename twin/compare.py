@@ -314,7 +314,8 @@ def _final_stats(finals: list[FinalPose], tol: Tolerances, last_step: int, dt_ns
         t = tol[name]
         errs = [getattr(f, attr) for f in finals]
         worst_k = int(np.argmax(errs)) if errs else 0
-        bad = [f for f in finals if (f.expected[part] != f.actual[part] if t == 0 else getattr(f, attr) > t)]
+        # "not <=" so that a NaN error counts as bad, as it does in _final_poses
+        bad = [f for f in finals if (f.expected[part] != f.actual[part] if t == 0 else not getattr(f, attr) <= t)]
         stat = FieldStat(name, FIELDS[name][0], t, errs[worst_k] if errs else 0.0, last_step,
                          finals[worst_k].name if finals else "", float(np.sqrt(np.mean(np.square(errs)))) if errs
                          else 0.0, len(bad))

@@ -6,6 +6,7 @@ produces a Frame; every discrete happening an Event. All three go to the sinks, 
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any, Protocol
 
@@ -125,7 +126,8 @@ class Twin:
 
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
-        ev = Event(self.step_index, self.t_ns, kind, body, message, dict(sorted(data.items())))
+        """Emit an Event now; data must be JSON data (numpy values are turned into numbers and lists)."""
+        ev = Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data))
         for s in self.sinks:
             s.on_event(ev)
         return ev
@@ -252,6 +254,24 @@ class Twin:
 
     def close(self) -> None:
         self.world.close()
+
+
+def _json_data(kind: str, data: dict) -> dict:
+    """Event data as plain JSON values with sorted keys, exactly what a recording will give back."""
+    if not data:
+        return {}
+
+    def plain(value: Any) -> Any:
+        tolist = getattr(value, "tolist", None)  # numpy scalars and arrays
+        if callable(tolist):
+            return tolist()
+        raise TypeError(f"a value of type {type(value).__name__!r}")
+
+    try:
+        return json.loads(json.dumps(data, sort_keys=True, default=plain))
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
+                          "expected numbers, strings, booleans, None, lists and dicts") from err
 
 
 def _number(value: Any, what: str) -> float:

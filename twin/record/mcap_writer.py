@@ -38,8 +38,8 @@ def _json(value: object) -> bytes:
 
 
 def _plain(value: object) -> object:
-    item = getattr(value, "item", None)  # numpy scalars
-    return item() if callable(item) else str(value)
+    """Twin.event already makes event data plain JSON; anything else here is a programming error."""
+    raise TypeError(f"{type(value).__name__} value {value!r} is not JSON data")
 
 
 class McapRecorder:
@@ -53,6 +53,7 @@ class McapRecorder:
         if compression not in kinds:
             raise RecordingError(f"chunk compression {compression!r} is unknown; expected one of {sorted(kinds)}")
         check_run(run)  # before the file is opened: bad input must not clobber an existing file
+        mesh_files = _read_meshes(config, meshes)  # likewise an unreadable mesh
         self.path = Path(path)
         self.config = config
         self.rate = rate
@@ -81,12 +82,13 @@ class McapRecorder:
             raise RecordingError(f"cannot write recording {str(self.path)!r}: {err.strerror or err}") from err
         self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, compression=kinds[compression])
         try:
-            self._start(config, run, urdf, meshes, compression)
+            self._start(config, run, urdf, mesh_files, compression)
         except BaseException:
             self._file.close()
             raise
 
-    def _start(self, config: TwinConfig, run: dict, urdf: str, meshes: list[Path], compression: str) -> None:
+    def _start(self, config: TwinConfig, run: dict, urdf: str, mesh_files: list[tuple[str, str, bytes]],
+               compression: str) -> None:
         self._writer.start(profile="", library=S.LIBRARY)
         self._channel: dict[str, int] = {}
         for spec in S.CHANNELS:
@@ -97,12 +99,8 @@ class McapRecorder:
         for name, record in run_metadata(config, run, extra).items():
             self._writer.add_metadata(name, record)
         self._writer.add_attachment(0, 0, "robot.urdf", "application/xml", urdf.encode())
-        for mesh, name in _mesh_names(config, meshes):
-            try:
-                data = mesh.read_bytes()
-            except OSError as err:
-                raise RecordingError(f"cannot attach mesh {str(mesh)!r}: {err.strerror or err}") from err
-            self._writer.add_attachment(0, 0, name, _media_type(mesh), data)
+        for name, media_type, data in mesh_files:
+            self._writer.add_attachment(0, 0, name, media_type, data)
         self._add(S.ROBOT_DESCRIPTION.topic, 0, _json({"data": urdf}))
         self._writer.flush()
 
@@ -229,6 +227,17 @@ def _log_message(event: Event) -> bytes:
     msg = Log(level=level, message=text, name=event.kind, file=event.body, line=0)
     msg.timestamp.seconds, msg.timestamp.nanos = seconds, nanos
     return msg.SerializeToString(deterministic=True)
+
+
+def _read_meshes(config: TwinConfig, meshes: list[Path]) -> list[tuple[str, str, bytes]]:
+    """(attachment name, media type, bytes) of each mesh file, read before the recording is opened."""
+    out = []
+    for mesh, name in _mesh_names(config, meshes):
+        try:
+            out.append((name, _media_type(mesh), mesh.read_bytes()))
+        except OSError as err:
+            raise RecordingError(f"cannot attach mesh {str(mesh)!r}: {err.strerror or err}") from err
+    return out
 
 
 def _mesh_names(config: TwinConfig, meshes: list[Path]) -> list[tuple[Path, str]]:

@@ -44,7 +44,12 @@ class RecorderProcess:
             name="twin-recorder", daemon=True)
         self._process.start()
         child_conn.close()
-        self._expect_ok("recording could not start")
+        try:
+            self._expect_ok("recording could not start")
+        except RecordingError:
+            self._conn.close()
+            self._process.join(timeout=30)
+            raise
 
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
@@ -102,7 +107,11 @@ class RecorderProcess:
 
 def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
            mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
-    """The recorder process: build the writers, feed them each batch, finish on request."""
+    """The recorder process: build the writers, feed them each batch, finish on request.
+
+    A writer that fails stops the recording there (what was written is kept, unfinalized, as after a
+    crash); the process then waits for the close request and answers it with the failure, so the
+    twin reports it as one line instead of losing the run's remaining output."""
     parent_end.close()  # the fork's copy of the twin's end: with it open, the twin's death would go unseen
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the twin's to handle; it then closes us
     from twin.record.mcap_writer import McapRecorder  # already loaded by the parent
@@ -117,39 +126,61 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
 
             sinks.append(RerunRecorder(rrd_path, config, urdf))
     except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
-        for sink in sinks:
-            sink.close()
+        _close_all(sinks, mcap, "error", "recording could not start")
         conn.send_bytes(str(err).encode())
         os._exit(0)
     conn.send_bytes(b"OK")
-    frame_sinks = [s.on_frame for s in sinks]
+    failure = ""
     while True:
         try:
             message = conn.recv_bytes()
         except (EOFError, OSError):  # the twin's process died: keep what arrived, unfinalized
-            if mcap is not None:
-                mcap.abandon()
-            for sink in sinks:
-                if sink is not mcap:
-                    sink.close()
+            if not failure:
+                _abandon(sinks, mcap)
             os._exit(0)
         tag, body = message[:1], message[1:]
         if tag == _CLOSE:
-            outcome, error = marshal.loads(body)
-            failure = ""
-            for sink in sinks:
-                try:
-                    sink.close(outcome=outcome, error=error) if sink is mcap else sink.close()
-                except Exception as err:  # noqa: BLE001 - keep closing the others, report the first
-                    failure = failure or str(err)
+            if not failure:
+                failure = _close_all(sinks, mcap, *marshal.loads(body))
             conn.send_bytes(failure.encode() if failure else b"OK")
             os._exit(0)
-        for item in marshal.loads(body):
-            if len(item) == 2:
-                message = pickle.loads(item[1])
-                for sink in sinks:
-                    (sink.on_command if item[0] == _COMMAND else sink.on_event)(message)
-            else:
-                frame = Frame._make(item)
-                for on_frame in frame_sinks:
-                    on_frame(frame)
+        if failure:
+            continue  # drain until the twin closes: it learns of the failure then
+        try:
+            _feed(marshal.loads(body), sinks)
+        except Exception as err:  # noqa: BLE001 - e.g. a full disk
+            failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
+            _abandon(sinks, mcap)
+
+
+def _feed(items: list[tuple], sinks: list) -> None:
+    for item in items:
+        if len(item) == 2:
+            message = pickle.loads(item[1])
+            for sink in sinks:
+                (sink.on_command if item[0] == _COMMAND else sink.on_event)(message)
+        else:
+            frame = Frame._make(item)
+            for sink in sinks:
+                sink.on_frame(frame)
+
+
+def _close_all(sinks: list, mcap, outcome: str, error: str) -> str:
+    """Finish every writer (the MCAP one with the run's outcome); the first failure, or ''."""
+    failure = ""
+    for sink in sinks:
+        try:
+            sink.close(outcome=outcome, error=error) if sink is mcap else sink.close()
+        except Exception as err:  # noqa: BLE001 - keep closing the others, report the first
+            failure = failure or str(err)
+    return failure
+
+
+def _abandon(sinks: list, mcap) -> None:
+    """Leave the MCAP file as a crash would (recoverable, unfinalized); close the views."""
+    for sink in sinks:
+        try:
+            sink.abandon() if sink is mcap else sink.close()
+        except Exception:  # noqa: BLE001, S110 - already failing: keep what can be kept
+            pass
+

@@ -179,3 +179,12 @@ def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
             assert twin.pad_position() == pytest.approx((fk.x_m, fk.y_m, fk.z_m), abs=1e-12)
     finally:
         twin.close()
+
+
+def test_a_profiles_own_joint_names_win_over_other_variants_aliases():
+    from dataclasses import replace
+
+    # a user robot whose Z joint is called joint4 and its wrist joint3 (seed000's names for wrist and Z)
+    swapped = replace(PROFILES["mtb"], name="user", joint_names=("s", "e", "joint4", "joint3"))
+    assert swapped.joint_index("joint3") == 3 and swapped.joint_index("/joint4") == 2
+    assert swapped.joint_index("MTB_axis1") == 0  # other variants' aliases still resolve

@@ -150,3 +150,17 @@ def test_realtime_follows_the_wall_clock_until_a_client_steps():
         # back on the wall clock from where the stepping left it: no jump over the stepped time
         assert frozen + dt_s < t_now <= frozen + dt_s + 2 * (time.monotonic() - t_resume) + dt_s
         sim.stopSimulation()
+
+
+def test_a_speed_the_machine_cannot_keep_lets_time_slip_and_keeps_answering():
+    with ServerProcess("--realtime", "--speed", "1000") as server:
+        sim = server.client().require("sim")
+        sim.startSimulation()
+        times = []
+        for _ in range(10):
+            time.sleep(0.05)
+            times.append(sim.getSimulationTime())  # each answered: no catch-up that grows without end
+        server.wait_for(r"cannot keep up with 1000x real time here; simulated time slips")
+        assert times == sorted(times) and times[-1] > times[0]
+        # 0.5 s of wall time at 1000x would be 500 simulated s; capped catch-ups give far less
+        assert times[-1] - times[0] < 100.0

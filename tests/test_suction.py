@@ -96,13 +96,6 @@ def test_an_empty_pad_switched_off_reports_suction_empty():
     assert twin.object_pose("box")[:2] == pytest.approx(BOX_XY_M, abs=1e-3)
 
 
-def test_stopping_the_simulation_releases_what_is_held():
-    twin, sink = _twin()
-    _pick(twin)
-    twin.stop()
-    assert sink.events[-1].kind == "release" and sink.events[-1].message == "simulation stopped"
-
-
 def test_a_heavy_box_breaks_a_finite_hold_on_pull():
     twin, sink = _twin(mass_kg=0.5, infinite_strength=False, max_shear_force_n=HIGH, max_peel_torque_nm=HIGH)
     _pick(twin)

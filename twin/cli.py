@@ -49,9 +49,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             wall_s = time.perf_counter() - wall0
             _print_summary(twin, summary, wall_s)
             twin.close()
-            for path in (mcap_path, rrd_path):
-                if path is not None:
-                    print(f"recorded {path}")
+    for path in (mcap_path, rrd_path):  # the files are finished only now
+        if path is not None:
+            print(f"recorded {path}")
     return 0
 
 

@@ -103,6 +103,9 @@ def quit_keys(keymap: dict) -> tuple[str, ...]:
     return (() if "q" in keymap else ("q",)) + ALWAYS_QUIT
 
 
+MAX_REPEAT = 100_000  # presses per token: ample for any session, and no runaway list
+
+
 def parse_keys(text: str) -> list[str]:
     """A --keys script: whitespace-separated tokens, each a key name or `wait` (no key for one interval),
     optionally `*N` to repeat it N times ("d*30 e 8 wait*4 s"). Quit keys end the session there."""
@@ -112,8 +115,9 @@ def parse_keys(text: str) -> list[str]:
         head, star, tail = token.rpartition("*")
         if star and head and tail.isdigit():
             name, count = head, int(tail)
-            if count < 1:
-                raise ConfigError(f"--keys token {token!r}: repeat count {count} is invalid; expected *1 or more")
+            if not 1 <= count <= MAX_REPEAT:
+                raise ConfigError(f"--keys token {token!r}: repeat count {count} is invalid; "
+                                  f"expected *1 to *{MAX_REPEAT}")
         if not (is_key_name(name) or name in ALWAYS_QUIT or name == WAIT):
             raise ConfigError(f"--keys token {token!r} is not a key; expected a single character or one of "
                               f"{', '.join(NAMED_KEYS[:8])}, ..., esc, or wait, optionally followed by *N")

@@ -1,4 +1,4 @@
-"""Forward and inverse kinematics of the SCARA arm (pure numpy/math, no pybullet).
+"""Forward and inverse kinematics of the SCARA arm (pure math, no pybullet).
 
 Conventions: shoulder angle q1 and elbow angle q2 about +z, zero along +x; the Z joint q3 lowers
 the pad (positive down); the wrist q4 about +z. The pad's heading is q1 + q2 + q4.

@@ -73,8 +73,10 @@ class RobotProfile:
     def joint_index(self, name: str) -> int:
         """Resolve any variant's joint name (with or without a leading '/') to a role index."""
         bare = name.lstrip("/")
+        if bare in self.joint_names:  # the profile's own names first: a user's "joint3" may be its wrist
+            return self.joint_names.index(bare)
         for index, role in enumerate(ROLES):
-            if bare == self.joint_names[index] or bare in JOINT_ALIASES[role]:
+            if bare in JOINT_ALIASES[role]:
                 return index
         known = ", ".join(self.joint_names)
         raise UnknownName(f"unknown joint {name!r} for robot {self.name!r}; expected one of {known}")
@@ -136,6 +138,16 @@ def get_profile(name_or_path: str) -> RobotProfile:
     )
 
 
+def _length_m(value: object, path: Path) -> float:
+    try:
+        length = float(value)
+    except (TypeError, ValueError):
+        length = math.nan
+    if not 0.0 < length < 1.0:
+        raise ConfigError(f"robot profile {str(path)!r}: pad_length_m {value!r} is invalid; expected metres, 0..1")
+    return length
+
+
 def load_profile_file(path: Path) -> RobotProfile:
     """Read a user's profile file: `urdf`, `joints` (role -> URDF joint name), `pad_link`, optional
     `name`, `suction_signal`, `pad_length_m`. Geometry and limits come from the URDF itself."""
@@ -161,7 +173,7 @@ def load_profile_file(path: Path) -> RobotProfile:
         name=data.get("name", path.stem),
         joint_names=tuple(joints[r] for r in ROLES),
         pad_link=data["pad_link"],
-        pad_length_m=float(data.get("pad_length_m", 0.012)),
+        pad_length_m=_length_m(data.get("pad_length_m", 0.012), path),
     )
     signal = data.get("suction_signal")
     if signal:

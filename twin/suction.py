@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 
 from twin.config import SuctionParams
-from twin.types import NO_BODY
+from twin.types import NO_BODY, Frame
 from twin.world import World
 
 
@@ -20,9 +20,6 @@ class SuctionEvent:
     body: int
     message: str
     data: dict
-
-
-_NOTHING: tuple = ()
 
 
 class Suction:
@@ -36,14 +33,14 @@ class Suction:
         self._held_this_period = False
         self._broken_this_period = False  # a broken hold stays broken until the pad is switched off
 
-    def update(self, on: bool, tip_m: tuple[float, float, float], heading_rad: float) -> list[SuctionEvent]:
-        """Advance the pad's state for the coming step; returns what happened. The sensor ray is
-        cast only while the pad is on and empty (what it sees otherwise cannot matter)."""
+    def update(self, on: bool, frame: Frame, heading_rad: float) -> list[SuctionEvent]:
+        """Advance the pad's state for the coming step from the latest Frame; returns what happened.
+        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter)."""
         if not on and not self.on:
-            return _NOTHING  # the common case, kept cheap: an idle pad senses nothing
+            return []
         events: list[SuctionEvent] = []
         p = self.params
-        x, y, z_tip = tip_m
+        x, y, z_tip = frame.pad_pose[:3]
         root_z = z_tip + self.pad_length_m
         if on and self.held == NO_BODY:
             self.sensed, _ = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
@@ -58,7 +55,7 @@ class Suction:
         if self.held != NO_BODY and not on:
             events.append(self._drop("release", "suction off"))
         elif self.held != NO_BODY and not p.infinite_strength:
-            reason = self._overload((x, y, z_tip))
+            reason = self._overload(frame)
             if reason:
                 events.append(self._drop("break", reason))
                 self._broken_this_period = True
@@ -75,16 +72,17 @@ class Suction:
         self.held = NO_BODY
         return SuctionEvent(kind, body, why, {})
 
-    def _overload(self, tip_m: tuple[float, float, float]) -> str:
+    def _overload(self, frame: Frame) -> str:
         """Why the hold must break now (pull, shear or peel over its limit), or ''.
 
         The pad points down (-z, a SCARA never tilts it). Pull is the force drawing the object away
         from the cup (the pad's upward force on it; pressing the object down is not pull), shear the
         sideways force, peel the torque about x and y taken at the cup's face (the pad tip)."""
         p = self.params
-        (fx, fy, fz), (tx, ty, _tz) = self.world.hold_wrench()
-        cx, cy, cz = self.world.object_poses()[self.held][:3]
-        rx, ry, rz = cx - tip_m[0], cy - tip_m[1], cz - tip_m[2]  # tip -> object's centre of mass
+        (fx, fy, fz), (tx, ty, _tz) = frame.hold_force_n, frame.hold_torque_nm  # nothing stepped since
+        cx, cy, cz = frame.object_poses[self.held][:3]
+        tip = frame.pad_pose
+        rx, ry, rz = cx - tip[0], cy - tip[1], cz - tip[2]  # tip -> object's centre of mass
         peel_x, peel_y = tx + ry * fz - rz * fy, ty + rz * fx - rx * fz
         pull_n, shear_n, peel_nm = fz, math.hypot(fx, fy), math.hypot(peel_x, peel_y)
         if pull_n > p.max_pull_force_n:
@@ -94,7 +92,3 @@ class Suction:
         if peel_nm > p.max_peel_torque_nm:
             return f"peel torque {peel_nm:.4f} N·m > max_peel_torque {p.max_peel_torque_nm} N·m"
         return ""
-
-    def release_all(self) -> list[SuctionEvent]:
-        """Stopping the simulation releases what is held."""
-        return [self._drop("release", "simulation stopped")] if self.held != NO_BODY else []

@@ -62,8 +62,7 @@ class Twin:
         for _ in range(n):
             if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
                 f = self.frame
-                pad = f.pad_pose
-                for ev in pad_model.update(self._suction_wanted, (pad[0], pad[1], pad[2]), self._heading(f)):
+                for ev in pad_model.update(self._suction_wanted, f, self._heading(f)):
                     self.event(ev.kind, self._body_name(ev.body), ev.message, **ev.data)
             world.step()
             self.step_index += 1
@@ -144,9 +143,16 @@ class Twin:
         handler = _HANDLERS.get(command.kind)
         if handler is None:
             raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(_HANDLERS)}")
+        expected = _ARGS[command.kind]
+        if not isinstance(command.args, dict) or sorted(command.args) != sorted(expected):
+            raise ConfigError(f"{command.kind} command at step {command.step} has arguments {command.args!r:.80}; "
+                              f"expected {', '.join(expected)}")
         for s in self.sinks:
             s.on_command(command)
-        handler(self, command.args)
+        try:
+            handler(self, command.args)
+        except (TypeError, ValueError, OverflowError) as err:  # a hand-edited or corrupt recording
+            raise ConfigError(f"{command.kind} command at step {command.step} is malformed: {err}") from err
 
     def _command(self, kind: str, **args: Any) -> None:
         self.apply(Command(self.step_index, kind, args))
@@ -247,11 +253,6 @@ class Twin:
         self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
         return False
 
-    def stop(self) -> None:
-        """End of simulation: the pad lets go of what it holds."""
-        for ev in self.suction_pad.release_all():
-            self.event(ev.kind, self._body_name(ev.body), ev.message)
-
     def close(self) -> None:
         self.world.close()
 
@@ -275,8 +276,12 @@ def _json_data(kind: str, data: dict) -> dict:
 
 
 def _number(value: Any, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{what} {value!r} is invalid; expected a finite number")
+    try:
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    except OverflowError:  # an int too large for a float
+        ok = False
+    if not ok:
+        raise ConfigError(f"{what} {value!r:.40} is invalid; expected a finite number")
     return float(value)
 
 
@@ -353,6 +358,13 @@ def _do_key(twin: Twin, args: dict) -> None:
             raise ConfigError(f"key {key!r}: unknown action {op!r}")
 
 
+_ARGS = {
+    "joint_target": ("joint", "q"),
+    "joint_position": ("joint", "q"),
+    "joint_max_velocity": ("joint", "v"),
+    "signal": ("name", "value"),
+    "key": ("key",),
+}
 _HANDLERS = {
     "joint_target": _do_joint_target,
     "joint_position": _do_joint_position,

@@ -173,7 +173,10 @@ def mesh_paths(profile: RobotProfile) -> list[Path]:
 def _xyz(elem: ET.Element | None, attr: str = "xyz") -> tuple[float, float, float]:
     if elem is None or elem.get(attr) is None:
         return (0.0, 0.0, 0.0)
-    vals = [float(v) for v in elem.get(attr, "").split()]
+    try:
+        vals = [float(v) for v in elem.get(attr, "").split()]
+    except ValueError:
+        vals = []
     if len(vals) != 3:
         raise ConfigError(f"URDF {attr}={elem.get(attr)!r}: expected three numbers")
     return (vals[0], vals[1], vals[2])
@@ -220,7 +223,10 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
         lim = j.find("limit")
         if lim is None:
             raise ConfigError(f"URDF joint {j.get('name')!r} has no <limit>")
-        return tuple(float(lim.get(k, d)) for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1)))
+        try:
+            return tuple(float(lim.get(k, d)) for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1)))
+        except ValueError as err:
+            raise ConfigError(f"URDF joint {j.get('name')!r} <limit> has a value that is not a number: {err}") from err
 
     s_lim, e_lim, z_lim, w_lim = (limit(j) for j in (shoulder, elbow, zj, _wrist))
     return RobotProfile(

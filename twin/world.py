@@ -69,7 +69,11 @@ class World:
         try:
             self.build()
         except pb.error as err:  # e.g. the window was closed (Esc) while the scene was loading
-            raise ConfigError(f"PyBullet stopped while building the scene: {err}") from err
+            self.close()
+            raise ConfigError(f"PyBullet failed while building the scene: {err}") from err
+        except BaseException:
+            self.close()  # a half-built world must not keep its PyBullet client (or window)
+            raise
 
     # -- building ---------------------------------------------------------------------------
     def build(self) -> None:
@@ -98,7 +102,12 @@ class World:
         flags = pb.URDF_USE_INERTIA_FROM_FILE
         self.urdf_text = urdf_text(profile)
         if profile.urdf_path:
-            self.robot = pb.loadURDF(profile.urdf_path, useFixedBase=True, flags=flags, physicsClientId=self.client)
+            try:
+                self.robot = pb.loadURDF(profile.urdf_path, useFixedBase=True, flags=flags,
+                                         physicsClientId=self.client)
+            except pb.error as err:
+                raise ConfigError(f"PyBullet cannot load the URDF {profile.urdf_path!r} of robot "
+                                  f"{profile.name!r} (a mesh missing or unreadable?): {err}") from err
         else:
             fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"twin_{profile.name}_")
             try:
@@ -107,8 +116,6 @@ class World:
                 self.robot = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=self.client)
             finally:
                 os.unlink(path)
-        if self.robot < 0:
-            raise ConfigError(f"PyBullet could not load the URDF of robot {profile.name!r}")
         by_name: dict[str, int] = {}
         link_by_name: dict[str, int] = {}
         for j in range(pb.getNumJoints(self.robot, physicsClientId=self.client)):

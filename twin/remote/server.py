@@ -40,6 +40,7 @@ from twin.remote.sim_api import SimApi
 
 MODES = ("realtime", "stepped")
 IDLE_POLL_S = 0.1
+MAX_LAG_S = 0.25  # simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
 DEFAULT_CLIENT_TIMEOUT_S = 600.0
 STEP_GRACE_S = 10.0  # a stepping client silent this long no longer holds the others back
 WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
@@ -74,6 +75,7 @@ class Server:
         self.clients: dict[str, _Client] = {}
         self._n_clients = 0
         self._anchor: tuple[float, int] | None = None  # (wall s, step) where realtime pacing started
+        self._slipping = False  # said once: the machine cannot step at --speed
         self._stop = False
         self._next_reap_s = 0.0
         self._info_reply = encode_ret([self.api.info()])
@@ -159,6 +161,13 @@ class Server:
             return
         wall0, step0 = self._anchor
         due = step0 + int((now - wall0) * self.speed * 1e9 / scene.config.dt_ns) - scene.twin.step_index
+        max_due = max(1, round(MAX_LAG_S * 1e9 / scene.config.dt_ns))
+        if due > max_due:  # the machine cannot step that fast: let simulated time slip, keep serving
+            if not self._slipping:
+                self.log(f"the twin cannot keep up with {self.speed:g}x real time here; simulated time slips")
+                self._slipping = True
+            self._anchor = (now, scene.twin.step_index + max_due)
+            due = max_due
         if due > 0:  # all of it: a request must see the simulated time its wall-clock moment is due
             try:
                 scene.advance(due)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import inspect
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -25,9 +26,11 @@ def resolve(name_or_path: str) -> TaskFn:
         raise ConfigError(f"task file {name_or_path!r} does not exist")
     spec = importlib.util.spec_from_file_location(f"twin_user_task_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses and pickling look a module up by its name
     try:
         spec.loader.exec_module(module)
     except Exception as err:  # a user's file: report, do not crash
+        sys.modules.pop(spec.name, None)
         raise ConfigError(f"task file {name_or_path!r} failed to import: {type(err).__name__}: {err}") from err
     fn = getattr(module, "run", None)
     if not callable(fn):

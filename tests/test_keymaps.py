@@ -74,7 +74,7 @@ def test_quit_keys_never_steal_a_bound_key():
 def test_parse_keys_tokens_and_repeats():
     assert parse_keys("d*3 up  x * **2 wait*2 esc") == ["d", "d", "d", "up", "x", "*", "*", "*", "wait", "wait", "esc"]
     assert parse_keys("") == []
-    for bad, shown in (("dd", "'dd'"), ("up*0", "*1 or more"), ("Up", "'Up'")):
+    for bad, shown in (("dd", "'dd'"), ("up*0", "*1 to *100000"), ("d*100001", "*1 to *100000"), ("Up", "'Up'")):
         with pytest.raises(ConfigError, match=r".*" + shown.replace("*", r"\*")):
             parse_keys(bad)
 

@@ -93,8 +93,8 @@ def test_replayed_events_are_the_twins_own(recs):
 
 def test_replay_uses_the_recorded_commands(recs, capsys, tmp_path):
     rec = load(recs / "remote.mcap")
-    changed = [dataclasses.replace(c, args={**c.args, "q": 0.81}) if c.args.get("joint") == "MTB_axis2" else c
-               for c in rec.commands]
+    changed = [dataclasses.replace(c, args={**c.args, "q": 0.81})
+               if c.kind == "joint_target" and c.args["joint"] == "MTB_axis2" else c for c in rec.commands]
     rec.commands = changed
     save(rec, tmp_path / "edited.mcap")
     code, _out, _ = twin(capsys, "replay", tmp_path / "edited.mcap", "--report", tmp_path / "r.json")

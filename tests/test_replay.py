@@ -148,3 +148,17 @@ def test_replay_refuses_to_record_over_the_recording_it_replays(tmp_path, capsys
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is the recording being replayed" in err
     assert golden.read_bytes() == before
+
+
+def test_a_user_robot_replays_from_the_recording_alone_after_its_files_are_gone(tmp_path, capsys):
+    import shutil
+
+    from test_urdf import write_user_robot  # the STL-mesh SCARA the URDF tests build
+
+    profile_file = write_user_robot(tmp_path / "robot")
+    recording = tmp_path / "user.mcap"
+    assert main(["run", "pick_place", "--cycles", "1", "--robot", str(profile_file), "--record", str(recording)]) == 0
+    shutil.rmtree(tmp_path / "robot")  # the URDF and its STL meshes: replay must not need them
+    capsys.readouterr()
+    assert main(["replay", str(recording)]) == 0
+    assert capsys.readouterr().out.startswith("MATCH")

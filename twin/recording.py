@@ -26,3 +26,4 @@ class Recording:
     finalized: bool = False
     urdf: str = ""
     path: str = ""
+    assets: dict[str, bytes] = field(default_factory=dict)  # attachments: robot.urdf and meshes, by name

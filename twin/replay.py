@@ -8,10 +8,15 @@ commands, so a replay regenerates only the events in REPLAYED_EVENT_KINDS and co
 
 from __future__ import annotations
 
+import dataclasses
 import os
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
 
 from twin.columns import FrameCollector
+from twin.config import TwinConfig
 from twin.errors import RecordingError
 from twin.recording import Recording
 from twin.twin import Sink, Twin
@@ -38,7 +43,8 @@ def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
         raise RecordingError(f"recording {rec.path or '<memory>'} has a command at step {commands[-1].step}, "
                              f"after its last frame (step {last})")
     collector = FrameCollector()
-    twin = Twin(rec.config, sinks=[collector, *sinks])
+    with _robot_files(rec) as config:
+        twin = Twin(config, sinks=[collector, *sinks])
     try:
         i = 0
         while True:
@@ -52,6 +58,26 @@ def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
     finally:
         twin.close()
     return collected(collector, rec.config, rec.run, path="<replay>")
+
+
+@contextmanager
+def _robot_files(rec: Recording) -> Iterator[TwinConfig]:
+    """The recording's config; for a user's URDF robot, pointed at the URDF and meshes the recording
+    carries (written to a temporary folder), so replay needs nothing outside the file."""
+    profile = rec.config.profile
+    if not profile.urdf_path or "robot.urdf" not in rec.assets:
+        yield rec.config
+        return
+    with tempfile.TemporaryDirectory(prefix="twin_replay_robot_") as folder:
+        root = Path(folder).resolve()
+        for name, data in rec.assets.items():
+            target = (root / name).resolve()
+            if root not in target.parents:  # an attachment name must not escape the folder
+                raise RecordingError(f"recording {rec.path or '<memory>'} has an attachment named {name!r}; "
+                                     "expected a path inside the robot's folder")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(data)
+        yield dataclasses.replace(rec.config, profile=dataclasses.replace(profile, urdf_path=str(root / "robot.urdf")))
 
 
 def feed(rec: Recording, sinks: Sequence[Sink]) -> None:

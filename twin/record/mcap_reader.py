@@ -134,7 +134,8 @@ def recording_from_scan(s: Scan) -> Recording:
     meta = {name: dict(record) for name, record in sorted(s.metadata.items())
             if name not in (S.META_CONFIG, S.META_RUN)}
     return Recording(config=config, frames=frames, commands=commands, events=events, run=parse_run(s.metadata),
-                     meta=meta, finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path)
+                     meta=meta, finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
+                     assets={a.name: a.data for a in s.attachments})
 
 
 def _json_message(data: bytes, what: str, where: str) -> dict:

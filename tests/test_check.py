@@ -118,7 +118,7 @@ def test_another_profile_is_not_comparable(files, capsys):
     ("golden", ["--tol", "joints.angle=1e-3"], "unknown field 'joints.angle'"),
     ("golden", ["--tol", "pad.position=-1"], "expected a number >= 0 or inf"),
     ("golden", ["--tolerance", "loose"], "unknown tolerance preset 'loose'"),
-    ("golden", ["--event-window", "-3"], "event window '-3' is invalid"),
+    ("golden", ["--event-window", "-3"], "--event-window: '-3' is not a whole number >= 0"),
     ("golden", ["--report", "out.pdf"], "unknown extension '.pdf'"),
 ])
 def test_bad_input_gives_one_line_and_exit_2(files, capsys, tmp_path, make, args, expected):
@@ -186,4 +186,4 @@ def test_check_bad_input(capsys, tmp_path):
     code, _, err = twin(capsys, "check", tmp_path)
     assert code == 2 and "holds no .mcap recordings" in err
     code, _, err = twin(capsys, "check", tmp_path, "--jobs", "0")
-    assert code == 2 and "jobs '0' is invalid" in err
+    assert code == 2 and "--jobs/-j: '0' is not a whole number >= 1" in err

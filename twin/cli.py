@@ -7,26 +7,14 @@ import os
 import sys
 import time
 
-from twin.cli_args import whole_number
+from twin.cli_args import add_twin_options, twin_config, whole_number
 from twin.cli_compare import add_compare_commands
 from twin.cli_record import add_record_commands, add_record_options, record_paths
 from twin.cli_view import add_view_command
-from twin.config import TwinConfig, dt_ns_from_hz
 from twin.errors import TwinError
-from twin.profiles import get_profile
 from twin.remote.command import add_serve_command
 from twin.tasks import accepted_params, resolve, run_task
 from twin.twin import Twin
-
-
-def _add_twin_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
-    p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
-    p.add_argument("--gui", action="store_true", help="open the PyBullet window")
-
-
-def _config(args: argparse.Namespace) -> TwinConfig:
-    return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -35,7 +23,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from twin.record import open_recorders  # only record/ touches mcap and rerun
 
     fn = resolve(args.task)
-    config = _config(args)
+    config = twin_config(args)
     params = accepted_params(fn, {"cycles": args.cycles})
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
     run = {"source": "task", "task": args.task, "params": params}
@@ -110,7 +98,7 @@ def _add_teleop_parser(sub) -> None:
     p = sub.add_parser("teleop", help="drive the robot from the keyboard (terminal screen, window, or --keys)",
                        description="Keyboard teleoperation. Quit: Esc, Ctrl-C, Ctrl-D, and q unless the key map "
                                    "binds q (seed000's elbow). Every key press is recorded and replayable.")
-    _add_twin_options(p)
+    add_twin_options(p)
     add_record_options(p, record_by_default=False)
     p.add_argument("--keymap", metavar="FILE", help="your own key map (.toml or .json); default: the robot's map")
     p.add_argument("--keys", metavar="KEYS", help='scripted keys, e.g. "d*30 e 8 wait*2 s" (a character or a '
@@ -132,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a task (built-in name or path/to/task.py)")
     p.add_argument("task")
-    _add_twin_options(p)
+    add_twin_options(p)
     p.add_argument("--cycles", type=whole_number(1), default=2, help="pick-and-place cycles (default 2)")
     add_record_options(p)
     p.set_defaults(func=cmd_run)
@@ -145,8 +133,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one `twin` command; returns its exit code (usage errors and --help included)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help (0) or a usage error (2), already printed
+        return done.code if isinstance(done.code, int) else 2
     try:
         return args.func(args)
     except TwinError as err:

@@ -5,6 +5,22 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
+from twin.config import TwinConfig, dt_ns_from_hz
+from twin.profiles import get_profile
+
+
+def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
+    """--robot and --rate-hz (and --gui where a window makes sense): what builds the twin."""
+    p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
+    p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
+    if gui:
+        p.add_argument("--gui", action="store_true", help="open the PyBullet window")
+
+
+def twin_config(args: argparse.Namespace) -> TwinConfig:
+    """The twin configuration the --robot and --rate-hz options ask for."""
+    return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
+
 
 def whole_number(minimum: int = 1) -> Callable[[str], int]:
     """An argparse type: an integer >= minimum."""

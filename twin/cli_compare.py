@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from twin.cli_args import whole_number
 from twin.errors import ConfigError, RecordingError
 from twin.tolerances import FIELDS, PRESETS, Tolerances
 
@@ -15,29 +16,17 @@ _TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a nu
     f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
 
 
-def _whole(text: str | None, what: str, minimum: int) -> int | None:
-    if text is None:
-        return None
-    try:
-        value = int(text)
-    except ValueError:
-        value = minimum - 1
-    if value < minimum:
-        raise ConfigError(f"{what} {text!r} is invalid; expected a whole number >= {minimum}")
-    return value
-
-
 def _add_tolerance_options(p: argparse.ArgumentParser, default: str) -> None:
     p.add_argument("--tolerance", default=default, metavar="PRESET",
                    help=f"preset: {', '.join(PRESETS)} (default {default}); see recordings/README.md")
     p.add_argument("--tol", action="append", default=[], metavar="CHANNEL.FIELD=VALUE", help=_TOL_HELP)
-    p.add_argument("--event-window", default=None, metavar="STEPS",
+    p.add_argument("--event-window", type=whole_number(0), default=None, metavar="STEPS",
                    help="events match when within this many steps (default: the preset's)")
 
 
 def _tolerances(args: argparse.Namespace) -> Tolerances:
     tol = Tolerances.from_preset(args.tolerance).with_overrides(args.tol)
-    return tol.with_event_window(_whole(args.event_window, "event window", 0))
+    return tol.with_event_window(args.event_window)
 
 
 def _add_report_options(p: argparse.ArgumentParser) -> None:
@@ -103,7 +92,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     from twin.check import Progress, check_all, exit_code, golden_paths, summary_table
 
     tol = _tolerances(args)
-    jobs = _whole(args.jobs, "jobs", 1)
+    jobs = args.jobs
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
     paths = golden_paths(args.paths)
@@ -149,7 +138,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap)")
     p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/)")
     p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which)")
-    p.add_argument("--jobs", "-j", default="1", metavar="N", help="parallel processes (default 1)")
+    p.add_argument("--jobs", "-j", type=whole_number(1), default=1, metavar="N", help="parallel processes (default 1)")
     p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
     p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")
     _add_tolerance_options(p, "exact")

@@ -21,7 +21,8 @@ def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = 
         group.add_argument("--no-record", action="store_true", help="do not write an MCAP recording")
     p.add_argument("--rrd", metavar="FILE.rrd", help="also write a Rerun recording (a view, regenerable from MCAP)")
     p.add_argument("--rate", type=whole_number(1), default=1, metavar="N",
-                   help="record every Nth physics step (default 1: every step; the last step is always kept)")
+                   help="MCAP: keep every Nth physics step (default 1: every step; the last step is always kept); "
+                        "the .rrd view keeps every step")
     p.set_defaults(record_by_default=record_by_default)
 
 

@@ -37,7 +37,7 @@ class GoldenChecker:
 
     def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = "exact",
               tol: Sequence[str] = (), event_window_steps: int | None = None,
-              event_kinds: frozenset[str] | None = None) -> DiffResult | None:
+              event_kinds: frozenset[str] | None = None) -> DiffResult:
         """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff."""
         from twin.record.mcap_reader import load
         from twin.replay import save
@@ -67,7 +67,6 @@ class GoldenChecker:
         write_report(result, report)
         pytest.fail(f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
                     f"{report.name}; rerun with --update-goldens to accept)\n{render_text(result)}", pytrace=False)
-        return None
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

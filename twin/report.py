@@ -148,7 +148,7 @@ def render_json(result: DiffResult) -> str:
 
 
 def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
-    """One testcase per field, one for the events, one per final pose; failures carry the details."""
+    """One testcase per field (the final poses among them), one for the events; failures carry the details."""
     cases = []
     for f in result.fields:
         msg = None if f.ok else f"{first_line(f.first)}: {first_detail(f.first)}"

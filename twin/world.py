@@ -77,7 +77,7 @@ class World:
 
     # -- building ---------------------------------------------------------------------------
     def build(self) -> None:
-        """(Re)build the scene from scratch: reset, engine parameters, plane, robot, objects."""
+        """Build the scene in its fixed order: reset, engine parameters, plane, robot, objects (once, at start)."""
         c = self.client
         pb.resetSimulation(physicsClientId=c)
         self._constraint = NO_CONSTRAINT

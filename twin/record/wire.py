@@ -42,10 +42,6 @@ def str_field(field_number: int, text: str) -> bytes:
     return len_field(field_number, text.encode())
 
 
-def uint_field(field_number: int, value: int) -> bytes:
-    return tag(field_number, VARINT) + varint(value)
-
-
 def packed(field_number: int, array: np.ndarray, dtype: str) -> bytes:
     """A packed repeated field from a numpy array ('<f8' double, '<i8' sfixed64, '<i4' sfixed32, '|u1' bool)."""
     return len_field(field_number, np.ascontiguousarray(array, dtype=dtype).tobytes())
@@ -122,7 +118,3 @@ def array_of(fields: dict, number: int, dtype: str) -> np.ndarray:
         else:
             chunks.append(bytes(value))
     return np.frombuffer(b"".join(chunks), dtype=dtype)
-
-
-def strings_of(fields: dict, number: int) -> list[str]:
-    return [bytes(v).decode() for _, v in fields.get(number, [])]

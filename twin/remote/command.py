@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from twin.cli_args import port
+from twin.cli_args import add_twin_options, port, twin_config
 from twin.cli_record import add_record_options, record_paths
-from twin.config import TwinConfig, dt_ns_from_hz
-from twin.profiles import get_profile
 
 SERVE_HELP = """\
 Serve CoppeliaSim's ZeroMQ remote API (protocol v2) so its official Python client
@@ -26,8 +24,7 @@ ends the run and resets the scene. Each run is recorded (default runs/remote_<ro
 def add_serve_command(sub) -> None:
     p = sub.add_parser("serve", help="serve CoppeliaSim's ZeroMQ remote API (drive the twin from its clients)",
                        description=SERVE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
-    p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
+    add_twin_options(p, gui=False)
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1, loopback only)")
     p.add_argument("--port", type=port(allow_any=True), default=23000, help="port (default 23000, CoppeliaSim's; 0: any free port)")
     mode = p.add_mutually_exclusive_group()
@@ -45,7 +42,7 @@ def add_serve_command(sub) -> None:
 def cmd_serve(args: argparse.Namespace) -> int:
     from twin.remote.server import serve
 
-    config = TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
+    config = twin_config(args)
     mcap_path, rrd_path = record_paths(args, f"remote_{config.profile.name}")
     return serve(config, host=args.host, port=args.port, mode=args.mode, speed=args.speed,
                  mcap_path=str(mcap_path) if mcap_path else None, rrd_path=str(rrd_path) if rrd_path else None,

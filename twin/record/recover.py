@@ -18,6 +18,7 @@ from twin.errors import RecordingError
 from twin.record import schemas as S
 from twin.record import wire
 from twin.record.mcap_reader import Scan, recording_from_scan, scan
+from twin.record.metadata import parse_config
 
 BLOCK_TOPICS = (S.JOINTS.topic, S.SUCTION.topic, S.POSES.topic)
 
@@ -80,7 +81,7 @@ def recover(source: str | Path, output: str | Path) -> RecoverReport:
     if S.META_CONFIG not in s.metadata:
         raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
                              " nothing to recover")
-    dt_ns = int(json.loads(s.metadata[S.META_CONFIG]["json"])["dt_ns"])
+    dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns  # a damaged config is a RecordingError
     last_step = _last_common_step(s)
     kept = [m for m in s.messages if _keep(s, m, last_step, dt_ns)]
     try:

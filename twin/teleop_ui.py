@@ -6,6 +6,7 @@ terminal runs in raw mode so Ctrl-C and Ctrl-D arrive as keys and end the sessio
 
 from __future__ import annotations
 
+import contextlib
 import curses
 import math
 from typing import Self
@@ -92,10 +93,8 @@ class CursesScreen:
             curses.noecho()
             curses.raw()
             self.window.keypad(True)
-            try:
+            with contextlib.suppress(curses.error):  # a terminal without cursor control
                 curses.curs_set(0)
-            except curses.error:
-                pass  # a terminal without cursor control
         except BaseException:
             curses.endwin()
             raise
@@ -127,8 +126,6 @@ class CursesScreen:
         if len(lines) > height:  # a small terminal: keep the state, cut the help
             lines = lines[: height - 1] + ["(enlarge the terminal for the full key help)"]
         for row, text in enumerate(lines[:height]):
-            try:
+            with contextlib.suppress(curses.error):  # the bottom-right cell raises in curses; the text is there
                 self.window.addnstr(row, 0, text, width - 1)
-            except curses.error:
-                pass  # writing the bottom-right cell raises in curses; the text is there
         self.window.refresh()

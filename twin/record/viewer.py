@@ -6,6 +6,7 @@ An .mcap recording is drawn into a temporary .rrd first (twin.load + write_rrd);
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -138,10 +139,8 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
 def _stop(proc: subprocess.Popen) -> None:
     """End the viewer started here, and anything it started (its own process group)."""
     for sig, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, None)):
-        try:
+        with contextlib.suppress(ProcessLookupError):  # already gone
             os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            pass  # already gone
         try:
             proc.wait(timeout=wait_s)
             return

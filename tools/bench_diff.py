@@ -2,13 +2,15 @@
 
 Records a long pick_place run (about 10 simulated minutes) twice to MCAP, then times `twin diff`'s
 work on the two files — load both + compare + render the report — as a ratio to the wall time it
-took to record one. Target: diffing takes at most a quarter of the recording time.
+took to record one. Target: diffing takes at most a quarter of the recording time. It also runs
+`twin replay` on the long recording in a process of its own: wall time and peak memory (RSS).
 tools/bench.py calls bench(ctx); `python tools/bench_diff.py` runs it alone.
 """
 
 from __future__ import annotations
 
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -48,6 +50,27 @@ def diff_once(golden: Path, candidate: Path, tolerance: str) -> tuple[float, flo
     return t1 - t0, t2 - t1, t2 - t0, result.match
 
 
+_REPLAY_AND_REPORT_RSS = (
+    "import resource, sys\n"
+    "from twin.cli import main\n"
+    "code = main(['replay', sys.argv[1]])\n"
+    "print('peak_rss_kib', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+    "sys.exit(code)\n"
+)
+
+
+def replay_in_child(path: Path) -> tuple[float, float]:
+    """`twin replay PATH` in a fresh process: (wall seconds, that process's peak resident memory in MB)."""
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", _REPLAY_AND_REPORT_RSS, str(path)], capture_output=True, text=True,
+                          check=False)
+    wall_s = time.perf_counter() - t0
+    peak = [line.split()[1] for line in done.stderr.splitlines() if line.startswith("peak_rss_kib ")]
+    if done.returncode != 0 or not peak:
+        raise RuntimeError(f"twin replay failed ({done.returncode}): {done.stdout[-300:]}{done.stderr[-300:]}")
+    return wall_s, int(peak[0]) / 1024  # Linux reports KiB
+
+
 def bench(ctx) -> list[tuple[str, str]]:
     cycles = int(SIM_MINUTES * 60 / CYCLE_S) + 1
     with tempfile.TemporaryDirectory(prefix="twin_bench_diff_") as tmp:
@@ -60,6 +83,7 @@ def bench(ctx) -> list[tuple[str, str]]:
         record_s = statistics.median([rec_s, rec2_s])
         size_mb = (folder / "golden.mcap").stat().st_size / 1e6
         same = [diff_once(folder / "golden.mcap", folder / "again.mcap", "exact") for _ in range(ctx.repeats)]
+        replay_s, replay_mb = replay_in_child(folder / "golden.mcap")
         other = [diff_once(folder / "golden.mcap", folder / "shifted.mcap", "physical") for _ in range(ctx.repeats)]
     assert all(s[3] for s in same) and not any(o[3] for o in other), "bench runs did not diff as expected"
     load_s = statistics.median(s[0] for s in same)
@@ -78,6 +102,7 @@ def bench(ctx) -> list[tuple[str, str]]:
         ("diff, identical runs (exact)", f"{diff_s:.3f} s"),
         ("diff, box 1 mm away (physical)", f"{diff_other_s:.3f} s"),
         ("diff time / record time", f"{ratio:.3f} ({verdict} the target of {TARGET_RATIO})"),
+        ("twin replay of the long run: wall time, peak RSS", f"{replay_s:.2f} s, {replay_mb:.0f} MB"),
     ]
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from twin.columns import FrameCollector
+from twin.columns import ColumnCollector
 from twin.compare import compare
 from twin.config import TwinConfig
 from twin.errors import ConfigError, TwinError
@@ -35,7 +35,7 @@ def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[
                 task_dir: str | os.PathLike | None = None) -> Recording:
     """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised)."""
     fn = resolve(_task_path(task, task_dir))
-    collector = FrameCollector()
+    collector = ColumnCollector()
     twin = Twin(config, sinks=[collector, *sinks])
     try:
         with contextlib.suppress(TwinError):  # recorded, not raised: the task_error event is part of the run

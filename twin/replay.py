@@ -15,7 +15,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.columns import FrameCollector
+from twin.columns import ColumnCollector, FrameCollector
 from twin.config import TwinConfig
 from twin.errors import RecordingError
 from twin.recording import Recording
@@ -25,8 +25,8 @@ from twin.twin import Sink, Twin
 REPLAYED_EVENT_KINDS = frozenset({"attach", "release", "break", "suction_empty", "joint_limit", "key_unknown"})
 
 
-def collected(collector: FrameCollector, rec_config, run: dict, *, path: str = "") -> Recording:
-    """An in-memory Recording of what a FrameCollector saw."""
+def collected(collector: FrameCollector | ColumnCollector, rec_config, run: dict, *, path: str = "") -> Recording:
+    """An in-memory Recording of what a collector saw."""
     return Recording(config=rec_config, frames=collector.columns(), commands=list(collector.commands),
                      events=list(collector.events), run=dict(run), meta={}, finalized=True, path=path)
 
@@ -42,7 +42,7 @@ def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
     if commands and commands[-1].step > last:
         raise RecordingError(f"recording {rec.path or '<memory>'} has a command at step {commands[-1].step}, "
                              f"after its last frame (step {last})")
-    collector = FrameCollector()
+    collector = ColumnCollector()
     with _robot_files(rec) as config:
         twin = Twin(config, sinks=[collector, *sinks])
     try:

@@ -82,14 +82,15 @@ class Twin:
         q, qd, effort = self.world.joint_states()
         pad = kinematics.fk(self.profile, q)
         half = 0.5 * pad.heading_rad
-        force, torque = self.world.hold_wrench()
+        poses = self.world.object_poses()
+        force, torque = self.world.hold_wrench(poses)
         sp = self.suction_pad
         step = self.step_index
         return Frame(
             step, step * self.config.dt_ns, q, qd, effort, tuple(self.targets),
             sp.on, sp.sensed, sp.held, force, torque,
             (pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
-            self.world.object_poses(),
+            poses,
         )
 
     def _heading(self, f: Frame) -> float:

@@ -244,9 +244,11 @@ class World:
         for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client)):
             pb.setCollisionFilterPair(self.robot, body, link, -1, int(enable), physicsClientId=self.client)
 
-    def hold_wrench(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    def hold_wrench(self, object_poses: tuple[tuple[float, ...], ...]
+                    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
         object in the last step, world frame; zeros if nothing is held. A box hanging still gets +m·g in z.
+        object_poses: this step's object_poses() (the held object's orientation turns the torque).
 
         getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
         along world axes, the torque along the constraint frame's axes, which are rigid with the object.
@@ -254,7 +256,7 @@ class World:
         if self._constraint == NO_CONSTRAINT:
             return _NO_WRENCH
         s = pb.getConstraintState(self._constraint, physicsClientId=self.client)
-        _pos, orn = pb.getBasePositionAndOrientation(self._held_body, physicsClientId=self.client)
+        orn = object_poses[self.object_ids.index(self._held_body)][3:7]
         r = pb.getMatrixFromQuaternion(orn)  # row-major: world = r @ constraint frame
         tx, ty, tz = -s[3], -s[4], -s[5]
         torque = (r[0] * tx + r[1] * ty + r[2] * tz, r[3] * tx + r[4] * ty + r[5] * tz,

@@ -103,7 +103,7 @@ def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
         elif e.kind in ("release", "break"):
             actions.setdefault(e.step, []).append(("detach",))
     world = World(TwinConfig())
-    v_max = world._max_velocities()
+    v_max = world.max_velocities()
     try:
         t0 = time.perf_counter()
         for step in range(n_steps):

@@ -92,14 +92,11 @@ def cmd_check(args: argparse.Namespace) -> int:
     from twin.check import Progress, check_all, exit_code, golden_paths, summary_table
 
     tol = _tolerances(args)
-    jobs = args.jobs
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
     paths = golden_paths(args.paths)
-    outcomes = check_all(paths, tol, update=args.update, jobs=jobs, progress=Progress(len(paths)))
+    outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=Progress(len(paths)))
     if args.junit:
-        from pathlib import Path
-
         from twin.report import render_check_junit
 
         try:

@@ -177,7 +177,7 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
     gi, ci = align(g.step, c.step)
     common, g_obj, c_obj = _common_objects(golden, candidate)
     fields = [_field_stat(name, a, b, metric, tol[name], elements, g.step[gi], g.t_ns[gi])
-              for name, a, b, metric, elements in _field_arrays(golden, candidate, gi, ci)]
+              for name, a, b, metric, elements in _field_arrays(golden, candidate, gi, ci, common, g_obj, c_obj)]
 
     length = (int(g.step[-1]), int(c.step[-1]))
     fields.append(_length_stat(length, tol["run.length"], golden.config.dt_ns))
@@ -206,12 +206,13 @@ def _common_objects(golden: Recording, candidate: Recording) -> tuple[list[str],
             np.array([c_names.index(n) for n in common], dtype=np.int64))
 
 
-def _field_arrays(golden: Recording, candidate: Recording, gi: np.ndarray, ci: np.ndarray):
-    """Per field: (name, golden (n, k, c), candidate (n, k, c), metric, element names) on aligned steps."""
+def _field_arrays(golden: Recording, candidate: Recording, gi: np.ndarray, ci: np.ndarray, common: list[str],
+                  g_obj: np.ndarray, c_obj: np.ndarray):
+    """Per field: (name, golden (n, k, c), candidate (n, k, c), metric, element names) on aligned steps;
+    common, g_obj, c_obj as _common_objects gives them."""
     g, c = golden.frames, candidate.frames
     g_names = [o.name for o in golden.config.objects]
     c_names = [o.name for o in candidate.config.objects]
-    common, g_obj, c_obj = _common_objects(golden, candidate)
     joint_names = list(golden.config.profile.joint_names)
     for name, (column, comp, metric, kind) in _SPECS.items():
         a, b = getattr(g, column)[gi], getattr(c, column)[ci]
@@ -227,7 +228,7 @@ def error_series(golden: Recording, candidate: Recording) -> tuple[np.ndarray, n
     """On the steps both runs have: (steps, t_ns, {field: largest error over its elements}), FIELDS units."""
     gi, ci = align(golden.frames.step, candidate.frames.step)
     out = {}
-    for name, a, b, metric, _elements in _field_arrays(golden, candidate, gi, ci):
+    for name, a, b, metric, _elements in _field_arrays(golden, candidate, gi, ci, *_common_objects(golden, candidate)):
         err = metric(a, b)
         out[name] = err.max(axis=1) if err.shape[1] else np.zeros(err.shape[0])
     return golden.frames.step[gi], golden.frames.t_ns[gi], out

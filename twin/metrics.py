@@ -10,7 +10,9 @@ import math
 
 import numpy as np
 
-REVOLUTE = np.array([True, True, False, True])  # shoulder, elbow, Z (prismatic), wrist
+from twin.profiles import ROLES
+
+REVOLUTE = np.array([role != "z" for role in ROLES])  # every joint but the prismatic Z
 
 
 def abs_error(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -163,15 +163,13 @@ def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
     ET.SubElement(props, "property", name="first_divergence",
                   value="none" if result.first is None else first_line(result.first))
     classname = Path(result.golden.get("path") or "golden").stem
+    text = render_text(result) if not result.match else ""
     for name, msg, info in cases:
         case = ET.SubElement(suite_el, "testcase", classname=classname, name=name)
         if msg is not None:
-            ET.SubElement(case, "failure", message=msg).text = render_text(result)
+            ET.SubElement(case, "failure", message=msg).text = text
         ET.SubElement(case, "system-out").text = info
-    root = ET.Element("testsuites")
-    root.append(suite_el)
-    ET.indent(root)
-    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return _junit_document(suite_el)
 
 
 def render_check_junit(outcomes: list, suite: str = "twin check") -> str:
@@ -188,8 +186,13 @@ def render_check_junit(outcomes: list, suite: str = "twin check") -> str:
             ET.SubElement(case, "error", message=o.summary)
         elif o.status == "updated":
             ET.SubElement(case, "system-out").text = o.summary
+    return _junit_document(suite_el)
+
+
+def _junit_document(suite: ET.Element) -> str:
+    """One test suite as a JUnit XML document."""
     root = ET.Element("testsuites")
-    root.append(suite_el)
+    root.append(suite)
     ET.indent(root)
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 

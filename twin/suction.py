@@ -19,7 +19,6 @@ class SuctionEvent:
     kind: str
     body: int
     message: str
-    data: dict
 
 
 class Suction:
@@ -43,14 +42,14 @@ class Suction:
         x, y, z_tip = frame.pad_pose[:3]
         root_z = z_tip + self.pad_length_m
         if on and self.held == NO_BODY:
-            self.sensed, _ = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
+            self.sensed = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
         else:
             self.sensed = self.held if on else NO_BODY
         if on and not self.on:
             self._held_this_period = False
             self._broken_this_period = False
         if not on and self.on and self.held == NO_BODY and not self._held_this_period:
-            events.append(SuctionEvent("suction_empty", NO_BODY, "suction on, nothing sensed", {}))
+            events.append(SuctionEvent("suction_empty", NO_BODY, "suction on, nothing sensed"))
         self.on = on
         if self.held != NO_BODY and not on:
             events.append(self._drop("release", "suction off"))
@@ -63,14 +62,14 @@ class Suction:
             self.world.attach(self.sensed, (x, y, root_z), heading_rad)
             self.held = self.sensed
             self._held_this_period = True
-            events.append(SuctionEvent("attach", self.held, "suction attached", {}))
+            events.append(SuctionEvent("attach", self.held, "suction attached"))
         return events
 
     def _drop(self, kind: str, why: str) -> SuctionEvent:
         body = self.held
         self.world.detach()
         self.held = NO_BODY
-        return SuctionEvent(kind, body, why, {})
+        return SuctionEvent(kind, body, why)
 
     def _overload(self, frame: Frame) -> str:
         """Why the hold must break now (pull, shear or peel over its limit), or ''.

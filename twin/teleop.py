@@ -13,8 +13,7 @@ import math
 import sys
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -200,8 +199,11 @@ def run_teleop(options: TeleopOptions) -> Session:
     mode = "scripted" if keys is not None else ("gui" if options.gui else "terminal")
     run = {"source": "teleop", "task": "", "params": {
         "mode": mode, "keys": options.keys or "", "key_interval_s": interval, "keymap_file": options.keymap_path}}
+    from twin.record import open_recorders  # only record/ touches mcap and rerun
+
     log = EventLog()
-    with _recorders(config, run, options) as sinks:
+    with open_recorders(config, run, mcap_path=options.record_path, rrd_path=options.rrd_path,
+                        rate=options.record_rate) as sinks:
         twin = Twin(config, gui=options.gui, sinks=[log, *sinks, *options.extra_sinks])
         session = Session(twin, log, mode=mode, record_path=options.record_path or "")
         try:
@@ -212,18 +214,6 @@ def run_teleop(options: TeleopOptions) -> Session:
         finally:
             twin.close()
     return session
-
-
-@contextmanager
-def _recorders(config: TwinConfig, run: dict, options: TeleopOptions) -> Iterator[list]:
-    if not options.record_path and not options.rrd_path:
-        yield []
-        return
-    from twin.record import open_recorders  # only record/ touches mcap and rerun
-
-    with open_recorders(config, run, mcap_path=options.record_path, rrd_path=options.rrd_path,
-                        rate=options.record_rate) as sinks:
-        yield list(sinks)
 
 
 def _run_interactive(session: Session, gui: bool) -> None:

@@ -41,7 +41,7 @@ class Twin:
         self.step_index = 0
         self.signals: dict[str, int] = {}
         self.targets = [0.0, 0.0, 0.0, 0.0]
-        self.max_velocities = list(self.world._max_velocities())
+        self.max_velocities = list(self.world.max_velocities())
         self.limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
         self.frame = self._read_frame()
@@ -63,7 +63,7 @@ class Twin:
             if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
                 f = self.frame
                 for ev in pad_model.update(self._suction_wanted, f, self._heading(f)):
-                    self.event(ev.kind, self._body_name(ev.body), ev.message, **ev.data)
+                    self.event(ev.kind, self._body_name(ev.body), ev.message)
             world.step()
             self.step_index += 1
             f = self.frame = self._read_frame()
@@ -73,7 +73,7 @@ class Twin:
 
     def wait(self, seconds: float) -> Frame:
         """Let simulated time pass (the seeds' sim.wait)."""
-        if not math.isfinite(seconds) or seconds < 0:
+        if _number(seconds, "wait") < 0:
             raise ConfigError(f"wait of {seconds} s is invalid; expected a finite number >= 0")
         return self.step(round(seconds * 1e9 / self.config.dt_ns))
 

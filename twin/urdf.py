@@ -170,9 +170,12 @@ def mesh_paths(profile: RobotProfile) -> list[Path]:
     return sorted((base / n.removeprefix("file://")).resolve() for n in names if n)
 
 
-def _xyz(elem: ET.Element | None, attr: str = "xyz") -> tuple[float, float, float]:
+def vector3(elem: ET.Element | None, attr: str = "xyz",
+            default: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[float, float, float]:
+    """A URDF element's three-number attribute (xyz, rpy); the default when the element or attribute
+    is absent; ConfigError when it is not three numbers."""
     if elem is None or elem.get(attr) is None:
-        return (0.0, 0.0, 0.0)
+        return default
     try:
         vals = [float(v) for v in elem.get(attr, "").split()]
     except ValueError:
@@ -200,9 +203,9 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
         while link in by_child:
             j = by_child[link]
             origin = j.find("origin")
-            if origin is not None and any(abs(v) > 1e-12 for v in _xyz(origin, "rpy")):
+            if origin is not None and any(abs(v) > 1e-12 for v in vector3(origin, "rpy")):
                 raise ConfigError(f"URDF joint {j.get('name')!r} has a rotated origin; expected rpy 0 0 0")
-            dx, dy, dz = _xyz(origin)
+            dx, dy, dz = vector3(origin)
             x, y, z = x + dx, y + dy, z + dz
             link = j.find("parent").get("link")
         return (x, y, z)
@@ -213,7 +216,7 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
     if pad_link not in {lk.get("name") for lk in root.findall("link")}:
         raise ConfigError(f"URDF {str(urdf_path)!r} has no link named {pad_link!r}")
     shoulder, elbow, zj, _wrist = (joints[n] for n in joint_names)
-    if _xyz(zj.find("axis")) != (0.0, 0.0, -1.0):
+    if vector3(zj.find("axis")) != (0.0, 0.0, -1.0):
         raise ConfigError(f"URDF joint {zj.get('name')!r}: expected axis '0 0 -1' (positive lowers the pad)")
     s_world = world_origin(shoulder.find("child").get("link"))
     e_world = world_origin(elbow.find("child").get("link"))

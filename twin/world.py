@@ -8,8 +8,8 @@ never calls getLinkState with computeForwardKinematics (that changes later physi
 from __future__ import annotations
 
 import ctypes
-import math
 import os
+import sys
 import tempfile
 
 from twin.config import TwinConfig
@@ -23,8 +23,6 @@ _NO_WRENCH = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 def _import_pybullet_quietly():
     """pybullet prints its build time from C at import; keep our stdout/stderr clean of it."""
-    import sys
-
     sys.stdout.flush()
     sys.stderr.flush()
     saved = {fd: os.dup(fd) for fd in (1, 2)}
@@ -128,18 +126,20 @@ class World:
             raise ConfigError(f"robot {profile.name!r} URDF lacks joint {err.args[0]!r}") from err
         self.pad_link = link_by_name.get(profile.pad_link or "suctionPad", self.joints[3])
         e = self.config.engine
-        for j, v_max, f_max in zip(self.joints, self._max_velocities(), self._max_forces(), strict=True):
+        for j, v_max, f_max in zip(self.joints, self.max_velocities(), self.max_forces(), strict=True):
             pb.changeDynamics(self.robot, j, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client)
             pb.setJointMotorControl2(
                 self.robot, j, pb.POSITION_CONTROL, targetPosition=0.0, force=f_max, maxVelocity=v_max,
                 positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
             )
 
-    def _max_velocities(self) -> tuple[float, ...]:
+    def max_velocities(self) -> tuple[float, ...]:
+        """Each joint's motor speed limit from the profile: rad/s, rad/s, m/s, rad/s."""
         p = self.config.profile
         return (p.revolute_max_velocity_rad_s,) * 2 + (p.prismatic_max_velocity_m_s, p.revolute_max_velocity_rad_s)
 
-    def _max_forces(self) -> tuple[float, ...]:
+    def max_forces(self) -> tuple[float, ...]:
+        """Each joint's motor force limit from the profile: N·m, N·m, N, N·m."""
         p = self.config.profile
         return (p.revolute_max_torque_nm,) * 2 + (p.prismatic_max_force_n, p.revolute_max_torque_nm)
 
@@ -158,7 +158,7 @@ class World:
         e = self.config.engine
         pb.setJointMotorControl2(
             self.robot, self.joints[joint], pb.POSITION_CONTROL, targetPosition=target,
-            force=self._max_forces()[joint], maxVelocity=max_velocity,
+            force=self.max_forces()[joint], maxVelocity=max_velocity,
             positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
         )
 
@@ -184,13 +184,10 @@ class World:
             out.append(pos + orn)
         return tuple(out)
 
-    def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> tuple[int, float]:
-        """The scene object hit by a vertical ray going down from z_from_m, and the hit distance."""
-        hit = pb.rayTest((x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client)[0]
-        body = hit[0]
-        if body < 0 or body not in self.object_ids:
-            return NO_BODY, math.inf
-        return self.object_ids.index(body), hit[2] * length_m
+    def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> int:
+        """The scene object (index) a vertical ray going down from z_from_m hits first, or NO_BODY."""
+        body = pb.rayTest((x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client)[0][0]
+        return self.object_ids.index(body) if body in self.object_ids else NO_BODY
 
     # -- holding ----------------------------------------------------------------------------
     def attach(self, obj: int, pad_root_pos_m: tuple[float, float, float], pad_yaw_rad: float) -> None:
@@ -223,14 +220,12 @@ class World:
     def _restore_collisions(self, body: int) -> None:
         """A released object collides with the robot again, except with links it overlaps now (a box
         lifted into the arm's volume would be shot out); those pairs wait until they are apart."""
-        c = self.client
-        for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=c)):
-            if pb.getClosestPoints(self.robot, body, 0.0, linkIndexA=link, physicsClientId=c):
-                self._overlapping.append((link, body))
-            else:
-                pb.setCollisionFilterPair(self.robot, body, link, -1, 1, physicsClientId=c)
+        links = range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client))
+        self._overlapping.extend((link, body) for link in links)
+        self._collide_once_apart()
 
     def _collide_once_apart(self) -> None:
+        """Turn collisions back on for the pairs in _overlapping that no longer overlap."""
         c = self.client
         still = []
         for link, body in self._overlapping:
@@ -281,8 +276,6 @@ class World:
 
 def _require_display() -> None:
     """PyBullet's GUI calls exit() when it cannot reach an X server: check for one first (Linux)."""
-    import sys
-
     if not sys.platform.startswith("linux"):
         return
     display = os.environ.get("DISPLAY", "")

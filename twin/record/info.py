@@ -10,8 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.record import schemas as S
-from twin.record import wire
-from twin.record.mcap_reader import scan
+from twin.record.mcap_reader import block_steps, scan
 from twin.record.metadata import parse_run
 
 
@@ -39,7 +38,7 @@ class Info:
 
 
 def _steps(messages: list) -> np.ndarray:
-    parts = [wire.array_of(wire.split_fields(m.data), S.STEP, "<i8") for m in messages]
+    parts = [block_steps(m) for m in messages]
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 

@@ -51,6 +51,11 @@ class Scan:
         return out
 
 
+def block_steps(message: Message) -> np.ndarray:
+    """The steps a block message (/twin/joints, /twin/suction, /twin/poses) holds."""
+    return wire.array_of(wire.split_fields(message.data), S.STEP, "<i8")
+
+
 def open_checked(path: str | Path) -> tuple[str, int]:
     """The path as text and its size; RecordingError for a missing, empty, non-file or non-MCAP path."""
     where = str(path)

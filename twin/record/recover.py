@@ -16,8 +16,7 @@ from mcap.writer import CompressionType, Writer
 
 from twin.errors import RecordingError
 from twin.record import schemas as S
-from twin.record import wire
-from twin.record.mcap_reader import Scan, recording_from_scan, scan
+from twin.record.mcap_reader import Scan, block_steps, recording_from_scan, scan
 from twin.record.metadata import parse_config
 
 BLOCK_TOPICS = (S.JOINTS.topic, S.SUCTION.topic, S.POSES.topic)
@@ -45,23 +44,22 @@ class RecoverReport:
         ]
 
 
-def _last_common_step(s: Scan) -> int:
+def _last_common_step(s: Scan, steps: dict[int, np.ndarray]) -> int:
     """The last step every block channel holds (blocks hold whole runs of frames)."""
     topics = s.by_topic()
     last = None
     for topic in BLOCK_TOPICS:
-        steps = [wire.array_of(wire.split_fields(m.data), S.STEP, "<i8") for m in topics.get(topic, [])]
-        ends = [int(a.max()) for a in steps if a.size]
+        ends = [int(steps[id(m)].max()) for m in topics.get(topic, []) if steps[id(m)].size]
         end = max(ends) if ends else -1
         last = end if last is None else min(last, end)
     return -1 if last is None else last
 
 
-def _keep(s: Scan, message, last_step: int, dt_ns: int) -> bool:
+def _keep(s: Scan, message, steps: dict[int, np.ndarray], last_step: int, dt_ns: int) -> bool:
     topic = s.topic_of(message)
     if topic in BLOCK_TOPICS:
-        steps = wire.array_of(wire.split_fields(message.data), S.STEP, "<i8")
-        return bool(steps.size) and int(np.max(steps)) <= last_step
+        block = steps[id(message)]
+        return bool(block.size) and int(np.max(block)) <= last_step
     if topic in (S.COMMANDS.topic, S.EVENTS.topic):
         try:
             return int(json.loads(message.data)["step"]) <= last_step
@@ -82,8 +80,9 @@ def recover(source: str | Path, output: str | Path) -> RecoverReport:
         raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
                              " nothing to recover")
     dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns  # a damaged config is a RecordingError
-    last_step = _last_common_step(s)
-    kept = [m for m in s.messages if _keep(s, m, last_step, dt_ns)]
+    steps = {id(m): block_steps(m) for m in s.messages if s.topic_of(m) in BLOCK_TOPICS}  # decoded once
+    last_step = _last_common_step(s, steps)
+    kept = [m for m in s.messages if _keep(s, m, steps, last_step, dt_ns)]
     try:
         out_path.parent.mkdir(parents=True, exist_ok=True)
         with open(out_path, "wb") as f:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.errors import RecordingError
+from twin.quat import quat_from_rpy, rotate
 
 if TYPE_CHECKING:
     from rerun.urdf import UrdfJoint
@@ -19,21 +20,8 @@ if TYPE_CHECKING:
 MOVING_TYPES = ("revolute", "continuous", "prismatic")
 
 
-def quat_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """URDF rpy (fixed axes x, then y, then z) as a quaternion (x, y, z, w)."""
-    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
-    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
-    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
-    return np.array([
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-        cr * cp * cy + sr * sp * sy,
-    ])
-
-
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (x, y, z, w); broadcasts over leading axes."""
+    """Hamilton product of quaternions (x, y, z, w), broadcast over leading axes (twin.quat's, vectorized)."""
     ax, ay, az, aw = np.moveaxis(a, -1, 0)
     bx, by, bz, bw = np.moveaxis(b, -1, 0)
     return np.stack([
@@ -42,12 +30,6 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         aw * bz + ax * by - ay * bx + az * bw,
         aw * bw - ax * bx - ay * by - az * bz,
     ], axis=-1)
-
-
-def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Vector v rotated by the unit quaternion q (x, y, z, w)."""
-    u, w = q[:3], q[3]
-    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
 
 
 @dataclass(frozen=True)
@@ -75,7 +57,7 @@ class JointMotion:
             name=joint.name, joint_type=joint.joint_type,
             parent_frame=joint.parent_link, child_frame=joint.child_link,
             origin_xyz=np.asarray(joint.origin_xyz, dtype=np.float64),
-            origin_quat=quat_from_rpy(*joint.origin_rpy), axis=axis / norm,
+            origin_quat=np.asarray(quat_from_rpy(*joint.origin_rpy)), axis=axis / norm,
         )
 
     def transforms(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -83,7 +65,7 @@ class JointMotion:
         values = np.asarray(values, dtype=np.float64)
         n = values.shape[0]
         if self.joint_type == "prismatic":
-            translations = self.origin_xyz + values[:, None] * rotate(self.origin_quat, self.axis)
+            translations = self.origin_xyz + values[:, None] * np.asarray(rotate(self.origin_quat, self.axis))
             quaternions = np.broadcast_to(self.origin_quat, (n, 4))
             return translations, quaternions
         half = 0.5 * values[:, None]

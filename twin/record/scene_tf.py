@@ -12,6 +12,7 @@ from twin.errors import ConfigError
 from twin.quat import quat_from_rpy, quat_mul, rotate
 from twin.record.wire import len_field, tag, varint
 from twin.types import Frame
+from twin.urdf import vector3
 
 WORLD = "world"
 PAD_TIP = "pad_tip"
@@ -22,15 +23,6 @@ _TAIL = struct.Struct("<BBBdBdBdBBBdBdBdBd")
 _VEC_LEN, _QUAT_LEN = 27, 36
 
 
-def _floats(text: str | None, default: tuple[float, float, float]) -> tuple[float, float, float]:
-    if not text:
-        return default
-    values = tuple(float(v) for v in text.split())
-    if len(values) != 3:
-        raise ConfigError(f"URDF vector {text!r} should have 3 numbers")
-    return values
-
-
 class _Joint:
     """One URDF joint, pre-digested so a transform costs a sine, a cosine and a pack."""
 
@@ -39,12 +31,11 @@ class _Joint:
         self.child = elem.find("child").get("link")
         self.kind = elem.get("type", "fixed")
         origin = elem.find("origin")
-        self.xyz = _floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0))
-        rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
+        self.xyz = vector3(origin, "xyz")
+        rpy = vector3(origin, "rpy")
         self.q_origin = quat_from_rpy(*rpy)
         self.rotated = any(abs(v) > 0.0 for v in rpy)
-        axis_elem = elem.find("axis")
-        axis = _floats(axis_elem.get("xyz") if axis_elem is not None else None, (1.0, 0.0, 0.0))
+        axis = vector3(elem.find("axis"), "xyz", (1.0, 0.0, 0.0))  # URDF's default axis
         norm = math.sqrt(sum(a * a for a in axis)) or 1.0
         self.axis = tuple(a / norm for a in axis)
         self.axis_in_parent = rotate(self.q_origin, self.axis)

@@ -133,8 +133,9 @@ class Scene:
             self.state = SIMULATION_PAUSED
             self.log(f"simulation paused at t={self.twin.t_s:.3f} s")
 
-    def stop(self) -> None:
-        """End the run: finalize its recording, then reset the scene (which releases what the pad held).
+    def stop(self, *, reset: bool = True) -> None:
+        """End the run: finalize its recording, then reset the scene (which releases what the pad held);
+        reset=False at shutdown, where no next run needs a fresh twin.
 
         The recording ends with the run's last step as simulated; the release is the reset's doing, not
         an event of the run, so `twin replay` (which feeds the Commands back) reproduces the file exactly.
@@ -149,8 +150,9 @@ class Scene:
             self._close_recorders()
         finally:
             self.relay.targets = []
-            twin.close()
-            self.twin = self._fresh_twin()
+            if reset:
+                twin.close()
+                self.twin = self._fresh_twin()
         where = f"; recorded {', '.join(self._files)}" if self._files else ""
         holding = f", released {twin.config.objects[held].name}" if held >= 0 else ""
         self.log(f"simulation stopped: run {self.run_index} lasted {steps} steps ({t_s:.3f} s){holding}{where}")
@@ -173,6 +175,6 @@ class Scene:
     def close(self) -> None:
         """Server shutdown: end a running run cleanly, then release the twin."""
         try:
-            self.stop()
+            self.stop(reset=False)
         finally:
             self.twin.close()

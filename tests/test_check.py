@@ -102,12 +102,11 @@ def test_reports_for_ci(files, capsys, tmp_path):
     assert int(suite.get("failures")) >= 1 and int(suite.get("tests")) > 10
 
 
-def test_another_profile_is_not_comparable(files, capsys):
+def test_another_profile_is_a_mismatch_naming_the_profile(files, capsys):
     d, _ = files
     code, out, err = twin(capsys, "diff", d / "golden.mcap", d / "seed003.mcap")
-    assert code == 3 and out == ""
-    assert err.count("\n") == 1 and err.startswith("twin: error: the runs are not comparable: robot profile")
-    assert twin(capsys, "diff", d / "golden.mcap", d / "seed003.mcap", "--force")[0] == 1
+    assert code == 1 and err == "" and out.startswith("MISMATCH")
+    assert "profile.name 'mtb' -> 'seed003'" in out
 
 
 @pytest.mark.parametrize(("make", "args", "expected"), [

@@ -82,7 +82,8 @@ def test_a_far_move_raises_out_of_reach_and_emits_an_event():
     assert "(2.0000, 0.0000)" in str(err.value) and "reach annulus 0.2335..0.8675 m" in str(err.value)
     ev = sink.events[-1]
     assert ev.kind == "out_of_reach" and ev.data == {"x_m": 2.0, "y_m": 0.0} and ev.message == str(err.value)
-    assert sink.commands == [] and twin.step_index == 0  # nothing was commanded
+    # nothing moved: the only Command is the event itself, recorded so that a replay says it again
+    assert [c.kind for c in sink.commands] == ["event"] and twin.step_index == 0
     twin.move_to(0.4, 0.4)  # and the twin carries on
     assert math.hypot(twin.pad_position()[0] - 0.4, twin.pad_position()[1] - 0.4) < 1e-3
 

@@ -8,6 +8,7 @@ parallel processes; `update` rewrites the ones that differ.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sys
 import time
@@ -18,11 +19,11 @@ from pathlib import Path
 from typing import TextIO
 
 from twin.columns import ColumnCollector
-from twin.compare import compare
+from twin.compare import compare, task_outcome
 from twin.config import TwinConfig
 from twin.errors import ConfigError, TwinError
 from twin.recording import Recording
-from twin.replay import REPLAYED_EVENT_KINDS, collected, replay
+from twin.replay import collected, replay, replayed_event_kinds
 from twin.report import first_line, render_text
 from twin.tasks import resolve, run_task
 from twin.tolerances import Tolerances
@@ -45,9 +46,23 @@ def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[
     return collected(collector, config, {"source": "task", "task": task, "params": dict(params)})
 
 
+def task_run(task: str, params: dict, recording: str | os.PathLike | None) -> dict:
+    """The run description a recording of `task` stores: a built-in task by name; a task file by its
+    path relative to the recording's folder (resolved from there by `twin check`, from any working
+    directory or clone) and the sha256 of its source."""
+    run = {"source": "task", "task": task, "params": dict(params)}
+    if task.endswith(".py") and Path(task).is_file():
+        if recording is not None:
+            folder = Path(os.path.abspath(recording)).parent
+            run["task"] = Path(os.path.relpath(os.path.abspath(task), folder)).as_posix()
+        run["task_sha256"] = hashlib.sha256(Path(task).read_bytes()).hexdigest()
+    return run
+
+
 def _task_path(task: str, task_dir: str | os.PathLike | None) -> str:
-    """A task file named relative to where it was recorded: try the working directory, then task_dir."""
-    if task.endswith(".py") and not Path(task).is_file() and task_dir is not None:
+    """A task file as a recording names it: relative to the recording's folder (task_dir); a file
+    recorded before paths were stored that way, relative to the working directory."""
+    if task.endswith(".py") and task_dir is not None and not Path(task).is_absolute():
         beside = Path(task_dir) / task
         if beside.is_file():
             return str(beside)
@@ -65,7 +80,7 @@ def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, 
         new = record_task(golden.config, run["task"], run.get("params") or {}, sinks=sinks, task_dir=task_dir)
         new.run = dict(run)
         return new, None
-    return replay(golden, sinks=sinks), REPLAYED_EVENT_KINDS
+    return replay(golden, sinks=sinks), replayed_event_kinds(golden)
 
 
 @dataclass
@@ -73,7 +88,7 @@ class Outcome:
     """What checking one golden gave."""
 
     path: str
-    status: str  # "match", "differ", "updated", "error"
+    status: str  # "match", "differ", "updated", "refused" (differs; the re-run failed, not written), "error"
     exit_code: int
     summary: str  # the first divergence or the error, one line
     report: str  # the full text report ("" on error)
@@ -81,8 +96,9 @@ class Outcome:
     seconds: float = 0.0
 
 
-def check_one(path: str, tolerances: Tolerances, update: bool = False) -> Outcome:
-    """Load one golden, re-run it, diff; with update, rewrite it when it differs."""
+def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False) -> Outcome:
+    """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a run
+    whose task failed unless allow_error (a crash is not a new golden)."""
     from twin.record import open_recorders
     from twin.record.mcap_reader import load
 
@@ -100,6 +116,11 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False) -> Outcom
         if result.match:
             return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
         summary = first_line(result.first)
+        if update and task_outcome(new) != "ok" and not allow_error:
+            why = next((e.message for e in new.events if e.kind == "task_error"), task_outcome(new))
+            return Outcome(path, "refused", 1, f"not rewritten: the re-run's task failed ({why}); the golden is "
+                           "left as it was (--allow-error writes it anyway)", report, len(golden.frames),
+                           time.perf_counter() - t0)
         if update:
             os.replace(tmp, path)
             return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, len(golden.frames),
@@ -119,7 +140,9 @@ def _rate(rec: Recording) -> int:
 
 
 def golden_paths(paths: Sequence[str]) -> list[str]:
-    """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped)."""
+    """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped), each file
+    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden would
+    race on its temporary file."""
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
             raise ConfigError(f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap files or folders")
@@ -136,6 +159,18 @@ def golden_paths(paths: Sequence[str]) -> list[str]:
             out.append(str(path))
         else:
             raise ConfigError(f"golden {p!r} does not exist; expected an .mcap file or a folder of them")
+    return _each_file_once(out)
+
+
+def _each_file_once(paths: list[str]) -> list[str]:
+    """paths without a second name of a file already listed (same device and inode), in their order."""
+    seen: set[tuple[int, int]] = set()
+    out = []
+    for p in paths:
+        st = os.stat(p)
+        if (st.st_dev, st.st_ino) not in seen:
+            seen.add((st.st_dev, st.st_ino))
+            out.append(p)
     return out
 
 
@@ -161,19 +196,19 @@ class Progress:
 
 
 def check_all(paths: Sequence[str], tolerances: Tolerances, *, update: bool = False, jobs: int = 1,
-              progress: Callable[[Outcome], None] | None = None) -> list[Outcome]:
+              progress: Callable[[Outcome], None] | None = None, allow_error: bool = False) -> list[Outcome]:
     """Check every golden, in `jobs` processes; outcomes in the order of paths."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     results: dict[str, Outcome] = {}
     if jobs == 1 or len(paths) <= 1:
         for p in paths:
-            results[p] = check_one(p, tolerances, update)
+            results[p] = check_one(p, tolerances, update, allow_error)
             if progress:
                 progress(results[p])
     else:
         with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
-            futures = {pool.submit(check_one, p, tolerances, update): p for p in paths}
+            futures = {pool.submit(check_one, p, tolerances, update, allow_error): p for p in paths}
             for fut in as_completed(futures):
                 outcome = fut.result()
                 results[futures[fut]] = outcome
@@ -187,7 +222,7 @@ def summary_table(outcomes: list[Outcome]) -> str:
         (o.path, o.status, str(o.frames), f"{o.seconds:.2f} s", o.summary) for o in outcomes]
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4] for r in rows]
-    counts = {s: sum(o.status == s for o in outcomes) for s in ("match", "differ", "updated", "error")}
+    counts = {s: sum(o.status == s for o in outcomes) for s in ("match", "differ", "updated", "refused", "error")}
     lines.append(", ".join(f"{n} {s}" for s, n in counts.items() if n) or "nothing checked")
     return "\n".join(lines) + "\n"
 

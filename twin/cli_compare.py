@@ -69,7 +69,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     from twin.compare import compare
     from twin.record.mcap_reader import load
-    from twin.replay import REPLAYED_EVENT_KINDS, replay
+    from twin.replay import REPLAYED_EVENT_KINDS, replay, replay_run, replayed_event_kinds
 
     tol = _tolerances(args)
     if args.record and Path(args.record).resolve() == Path(args.recording).resolve():
@@ -78,13 +78,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.record:
         from twin.record import open_recorders
 
-        with open_recorders(rec.config, rec.run, mcap_path=args.record) as sinks:
+        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record) as sinks:
             new = replay(rec, sinks=sinks)
         new.path = args.record
     else:
         new = replay(rec)
-    result = compare(rec, new, tol, event_kinds=REPLAYED_EVENT_KINDS)
-    result.notes.append("replay compares the events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS)))
+    kinds = replayed_event_kinds(rec)
+    result = compare(rec, new, tol, event_kinds=kinds)
+    if kinds is not None:
+        result.notes.append("this recording predates recorded task and client events: replay compares only the "
+                            "events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS)))
     return _emit(result, rec, new, args)
 
 
@@ -95,7 +98,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
     paths = golden_paths(args.paths)
-    outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=Progress(len(paths)))
+    outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=Progress(len(paths)),
+                         allow_error=args.allow_error)
     if args.junit:
         from twin.report import render_check_junit
 
@@ -134,7 +138,10 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap)")
     p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/)")
-    p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which)")
+    p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which); "
+                   "never with a run whose task failed")
+    p.add_argument("--allow-error", action="store_true",
+                   help="with --update: also write a run whose task failed (its outcome stays error)")
     p.add_argument("--jobs", "-j", type=whole_number(1), default=1, metavar="N", help="parallel processes (default 1)")
     p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
     p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")

@@ -2,7 +2,10 @@
 
 Frames are aligned by step number (so a decimated golden compares with a full candidate); angles
 are wrapped; orientations compare by the angle between quaternions; events pair by kind and body,
-in order, within a window of steps. Everything is numpy over whole columns: no per-frame Python.
+in order, within a window of steps. Commands (every input, kept at every step whatever the frame
+rate) compare exactly, so a divergence between the kept frames of a decimated file still shows.
+The outcome fields judge the result alone: the task ended ok, and how often the pad took and let go.
+Everything is numpy over whole columns: no per-frame Python.
 """
 
 from __future__ import annotations
@@ -16,14 +19,15 @@ from twin.errors import RecordingError, TwinError
 from twin.event_match import EventDiff, match_events
 from twin.metrics import REVOLUTE, abs_error, differs, discrete_error, joint_error, norm_error, quat_angle
 from twin.recording import Recording
-from twin.tolerances import FIELDS, INF, Tolerances
+from twin.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
+from twin.types import Command
 
 JOINT_UNITS = {"position": ("rad", "m"), "target": ("rad", "m"), "velocity": ("rad/s", "m/s"),
                "effort": ("N·m", "N")}
 
 
 class NotComparable(TwinError):
-    """The two runs differ in structure (robot profile, time step, scene objects)."""
+    """The two runs differ in structure (joints by role, time step, scene objects)."""
 
     exit_code = 3
 
@@ -90,6 +94,9 @@ class DiffResult:
     config_differences: list[tuple[str, str, str]]
     notes: list[str] = field(default_factory=list)
     first: Divergence | None = None
+    first_command: Divergence | None = None  # the first difference in the command sequences
+    likely_cause: str = ""  # the command nearest before the first divergence, in the golden
+    events_compared: bool = True  # False: the tolerances pair no events (outcome); counts still compare
 
     @property
     def match(self) -> bool:
@@ -146,11 +153,14 @@ def _shaped(values: np.ndarray, components: slice | None, kind: str) -> np.ndarr
 
 # -- the engine --------------------------------------------------------------------------------
 def comparable(golden: Recording, candidate: Recording) -> list[str]:
-    """Why the two runs cannot be compared (empty when they can)."""
+    """Why the two runs cannot be compared (empty when they can): structure, not names. Two robots
+    with the same joints by role compare (a renamed profile or a longer link is a difference to
+    report); another time step or another set of scene objects does not."""
     g, c = golden.config, candidate.config
     why = []
-    if g.profile.name != c.profile.name:
-        why.append(f"robot profile {c.profile.name!r} differs from the golden's {g.profile.name!r}")
+    if len(g.profile.joint_names) != len(c.profile.joint_names):
+        why.append(f"the candidate's robot has {len(c.profile.joint_names)} joints, the golden's "
+                   f"{len(g.profile.joint_names)}")
     if g.dt_ns != c.dt_ns:
         why.append(f"time step {c.dt_ns} ns differs from the golden's {g.dt_ns} ns")
     gn, cn = [o.name for o in g.objects], [o.name for o in c.objects]
@@ -163,7 +173,7 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
             force: bool = False, event_kinds: frozenset[str] | None = None) -> DiffResult:
     """Compare candidate with golden; raises NotComparable for structurally different runs unless force.
 
-    event_kinds: the event kinds to compare (None: all).
+    event_kinds: the event kinds to pair one by one (None: all).
     """
     tol = tolerances or Tolerances()
     why = comparable(golden, candidate)
@@ -179,11 +189,20 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
     fields = [_field_stat(name, a, b, metric, tol[name], elements, g.step[gi], g.t_ns[gi])
               for name, a, b, metric, elements in _field_arrays(golden, candidate, gi, ci, common, g_obj, c_obj)]
 
+    dt_ns = golden.config.dt_ns
     length = (int(g.step[-1]), int(c.step[-1]))
-    fields.append(_length_stat(length, tol["run.length"], golden.config.dt_ns))
+    fields.append(_length_stat(length, tol["run.length"], dt_ns))
     finals = _final_poses(g.object_poses[-1][g_obj], c.object_poses[-1][c_obj], common, tol)
-    fields.extend(_final_stats(finals, tol, max(length), golden.config.dt_ns))
-    matched, shifted, event_diffs = match_events(golden.events, candidate.events, tol.event_window_steps, event_kinds)
+    fields.extend(_final_stats(finals, tol, max(length), dt_ns))
+    fields.append(_command_stat(golden.commands, candidate.commands, tol["commands.sequence"], dt_ns))
+    fields.append(_task_stat(golden, candidate, tol["outcome.task"], max(length), dt_ns))
+    fields.extend(_count_stats(golden.events, candidate.events, tol, max(length), dt_ns))
+    if tol.event_window_steps is None:
+        matched, shifted, event_diffs = 0, 0, []
+    else:
+        matched, shifted, event_diffs = match_events(golden.events, candidate.events, tol.event_window_steps,
+                                                     event_kinds)
+    notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
 
     result = DiffResult(
         golden=describe(golden), candidate=describe(candidate), tolerances=tol, fields=fields,
@@ -191,9 +210,12 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
         length=length, steps_compared=int(gi.shape[0]),
         config_differences=config_differences({**golden.config.to_dict(), "run": golden.run or {}},
                                               {**candidate.config.to_dict(), "run": candidate.run or {}}),
-        notes=notes,
+        notes=notes, events_compared=tol.event_window_steps is not None,
     )
-    result.first = _first(fields, event_diffs, golden.config.dt_ns)
+    result.first = _first(fields, event_diffs, dt_ns, tol.event_window_steps)
+    result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
+    if result.first is not None:
+        result.likely_cause = likely_cause(golden.commands, result.first.step)
     return result
 
 
@@ -328,14 +350,101 @@ def _final_stats(finals: list[FinalPose], tol: Tolerances, last_step: int, dt_ns
     return stats
 
 
-def _first(fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int) -> Divergence | None:
+def _command_text(c: Command) -> str:
+    args = ", ".join(f"{k}={v!r}" for k, v in sorted(c.args.items()))
+    return f"step {c.step} {c.kind}({args})"
+
+
+def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: int) -> FieldStat:
+    """The two command sequences, entry by entry: step, kind and arguments (exact, or off with inf)."""
+    n = max(len(g), len(c))
+    differing = [i for i in range(n) if i >= len(g) or i >= len(c) or g[i] != c[i]]
+    first_i = differing[0] if differing else -1
+    step = -1 if first_i < 0 else min(x[first_i].step for x in (g, c) if first_i < len(x))
+    stat = FieldStat("commands.sequence", "", tolerance, float(len(differing)), step, "", float(len(differing)),
+                     len(differing) if tolerance != INF else 0)
+    if differing and tolerance != INF:
+        expected = [_command_text(g[first_i]) if first_i < len(g) else None]
+        actual = [_command_text(c[first_i]) if first_i < len(c) else None]
+        kind = (g[first_i] if first_i < len(g) else c[first_i]).kind
+        stat.first = Divergence(step, step * dt_ns * 1e-9, "commands", "sequence", f"#{first_i} {kind}",
+                                expected, actual, float(len(differing)), tolerance, "")
+    return stat
+
+
+def likely_cause(commands: list[Command], step: int) -> str:
+    """The golden's command nearest at or before step (the input most likely to explain a divergence there)."""
+    before = [c for c in commands if c.step <= step]
+    return _command_text(max(before, key=lambda c: c.step)) if before else ""
+
+
+def task_outcome(rec: Recording) -> str:
+    """How the run's task ended: the finalized outcome in its file (ok, error, interrupted), and error
+    whenever a task_error event says so (a run kept in memory has only its events)."""
+    from twin.record.schemas import META_FINALIZED
+
+    outcome = str((rec.meta.get(META_FINALIZED) or {}).get("outcome", "ok"))
+    if any(e.kind == "task_error" for e in rec.events) and outcome == "ok":
+        outcome = "error"
+    return outcome
+
+
+def _task_stat(golden: Recording, candidate: Recording, tolerance: float, last_step: int, dt_ns: int) -> FieldStat:
+    a, b = task_outcome(golden), task_outcome(candidate)
+    stat = FieldStat("outcome.task", "", tolerance, float(a != b), last_step, "", float(a != b),
+                     int(a != b and tolerance != INF))
+    if a != b and tolerance != INF:
+        stat.first = Divergence(last_step, last_step * dt_ns * 1e-9, "outcome", "task", "", [a], [b], 1.0,
+                                tolerance, "")
+    return stat
+
+
+def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) -> list[FieldStat]:
+    stats = []
+    for kind in COUNTED_EVENTS:
+        name = f"counts.{kind}"
+        a, b = sum(e.kind == kind for e in g), sum(e.kind == kind for e in c)
+        t = tol[name]
+        over = not abs(a - b) <= t
+        stat = FieldStat(name, "events", t, float(abs(a - b)), last_step, "", float(abs(a - b)), int(over))
+        if over:
+            stat.first = Divergence(last_step, last_step * dt_ns * 1e-9, "counts", kind, "", [a], [b],
+                                    float(abs(a - b)), t, "events")
+        stats.append(stat)
+    return stats
+
+
+def recorded_rate(rec: Recording) -> int:
+    """Every how many physics steps the file keeps a frame (1: every step)."""
+    try:
+        rate = int((rec.meta.get("twin.recording") or {}).get("rate_steps", 1))
+    except (TypeError, ValueError):
+        rate = 1
+    steps = rec.frames.step
+    if rate <= 1 and len(steps) > 2:
+        rate = int(np.min(np.diff(steps[:-1]))) if len(steps) > 2 else 1
+    return max(1, rate)
+
+
+def _decimation_notes(golden: Recording, candidate: Recording, compared: int) -> list[str]:
+    notes = []
+    for name, rec in (("golden", golden), ("candidate", candidate)):
+        rate = recorded_rate(rec)
+        if rate > 1:
+            notes.append(f"the {name} is decimated (a frame every {rate} steps): frames compare on the {compared} "
+                         "steps both files keep; commands, events and final poses compare at every step")
+    return notes
+
+
+def _first(fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int,
+           window_steps: int | None) -> Divergence | None:
     candidates = [f.first for f in fields if f.first is not None]
     for d in event_diffs[:1]:
         element = f"{d.event_kind} {d.body}".strip()
         candidates.append(Divergence(d.step, d.step * dt_ns * 1e-9, "events", d.kind, element,
                                      [d.expected_step], [d.actual_step],
                                      float(abs(d.expected_step - d.actual_step)) if d.kind == "moved" else INF,
-                                     0.0, "steps"))
+                                     float(window_steps or 0), "steps"))
     return min(candidates, key=lambda d: d.step) if candidates else None
 
 

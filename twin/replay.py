@@ -1,9 +1,10 @@
 """Replay: rebuild a twin from a recording's metadata alone and feed its Commands back.
 
 A run is a pure function of (configuration, commands): replaying the commands of step s before
-the physics step that starts at s reproduces the frames bit for bit on the same machine. Task-level
-annotations (phases, placement reports, task start/end) come from the task's code, not from
-commands, so a replay regenerates only the events in REPLAYED_EVENT_KINDS and compares those.
+the physics step that starts at s reproduces the frames bit for bit on the same machine. What a task
+or client says (phases, placement reports, task start/end, log lines) is an `event` Command like any
+other input, so a replay says it again at the same step and every event compares. Recordings made
+before that was so carry only the twin's own events (REPLAYED_EVENT_KINDS) in replayable form.
 """
 
 from __future__ import annotations
@@ -23,6 +24,26 @@ from twin.twin import Sink, Twin
 
 # Events the twin itself emits while applying commands and stepping (not the task's annotations).
 REPLAYED_EVENT_KINDS = frozenset({"attach", "release", "break", "suction_empty", "joint_limit", "key_unknown"})
+
+
+def replayed_event_kinds(rec: Recording) -> frozenset[str] | None:
+    """The event kinds a replay of rec reproduces: all (None) when what its task or clients said is
+    recorded as `event` Commands, or when it holds only the twin's own events; else (a recording
+    from before annotations were Commands) just the twin's own."""
+    if any(c.kind == "event" for c in rec.commands) or all(e.kind in REPLAYED_EVENT_KINDS for e in rec.events):
+        return None
+    return REPLAYED_EVENT_KINDS
+
+
+def replay_run(rec: Recording) -> dict:
+    """The run description of a replay of rec: rec's own, plus which file it replays (name and hash)."""
+    import hashlib
+
+    run = {k: v for k, v in (rec.run or {}).items() if k != "replay_of"}
+    source = {"file": Path(rec.path).name if rec.path else "<memory>"}
+    if rec.path and Path(rec.path).is_file():
+        source["sha256"] = hashlib.sha256(Path(rec.path).read_bytes()).hexdigest()
+    return {**run, "replay_of": source}
 
 
 def collected(collector: FrameCollector | ColumnCollector, rec_config, run: dict, *, path: str = "") -> Recording:

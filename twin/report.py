@@ -49,6 +49,9 @@ def first_line(d: Divergence) -> str:
 
 
 def first_detail(d: Divergence) -> str:
+    if d.channel == "commands":
+        return (f"the golden's command #{d.element.split()[0][1:]} is {d.expected[0] or 'absent'}; "
+                f"the candidate's is {d.actual[0] or 'absent'}")
     if d.channel == "events":
         if d.field == "missing":
             return f"the golden has it at step {d.expected[0]}; the candidate has no such event"
@@ -77,15 +80,35 @@ def _field_row(f: FieldStat) -> list[str]:
 _FIELD_HEAD = ["field", "unit", "tolerance", "worst", "at step", "rms", "steps over", "status"]
 
 
+def _window_text(result: DiffResult) -> str:
+    w = result.tolerances.event_window_steps
+    return "events not paired" if w is None else f"event window {w} steps"
+
+
 def _event_lines(result: DiffResult, dt_s: float) -> list[str]:
+    counts = "; counts: " + ", ".join(
+        f"{f.name.split('.')[1]} {'ok' if f.ok else 'FAIL'}" for f in result.fields if f.name.startswith("counts."))
+    if not result.events_compared:
+        return ["events: not paired one by one under these tolerances" + counts]
     lines = [f"events: {result.events_matched} matched ({result.events_shifted} shifted within "
              f"{result.tolerances.event_window_steps} steps), "
              + ", ".join(f"{sum(d.kind == k for d in result.event_diffs)} {k}" for k in ("missing", "extra", "moved"))]
     for d in result.event_diffs:
-        where = (f"expected step {d.expected_step}" if d.expected_step is not None else "") + (
-            ", " if d.expected_step is not None and d.actual_step is not None else "") + (
-            f"actual step {d.actual_step}" if d.actual_step is not None else "")
-        lines.append(f"  {d.kind:<8} {d.event_kind} {d.body}".rstrip() + f": {where} (t = {d.step * dt_s:.3f} s)")
+        where = ", ".join(f"{side} step {s} (t = {s * dt_s:.3f} s)" for side, s in
+                          (("expected", d.expected_step), ("actual", d.actual_step)) if s is not None)
+        lines.append(f"  {d.kind:<8} {d.event_kind} {d.body}".rstrip() + f": {where}")
+    return lines
+
+
+def _cause_lines(result: DiffResult) -> list[str]:
+    """The first command difference (when it is not itself the first divergence) and the likely cause."""
+    lines = []
+    fc = result.first_command
+    if fc is not None and fc is not result.first:
+        lines.append(f"first command difference: {first_line(fc)}: {first_detail(fc)}")
+    if result.likely_cause and (fc is None or fc is not result.first):
+        lines.append(f"likely cause: the golden's last command at or before step {result.first.step}: "
+                     f"{result.likely_cause}")
     return lines
 
 
@@ -103,7 +126,7 @@ def render_text(result: DiffResult) -> str:
     dt_s = result.golden["dt_ns"] * 1e-9
     t = result.tolerances
     lines = [f"{verdict(result)} (tolerance {t.preset}" + (f", {' '.join(t.overrides)}" if t.overrides else "")
-             + f", event window {t.event_window_steps} steps)",
+             + f", {_window_text(result)})",
              f"  golden:    {_run_line(result.golden)}", f"  candidate: {_run_line(result.candidate)}"]
     lines += [f"  note: {n}" for n in result.notes]
     if result.config_differences:
@@ -115,6 +138,7 @@ def render_text(result: DiffResult) -> str:
         lines.append(f"no divergence over {result.steps_compared} common steps")
     else:
         lines += [f"first divergence: {first_line(result.first)}", f"  {first_detail(result.first)}"]
+        lines += [f"  {line}" for line in _cause_lines(result)]
     rows = [_FIELD_HEAD] + [_field_row(f) for f in result.fields]
     widths = [max(len(r[i]) for r in rows) for i in range(len(_FIELD_HEAD))]
     lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
@@ -127,7 +151,7 @@ def render_markdown(result: DiffResult) -> str:
     t = result.tolerances
     out = [f"# twin diff: {verdict(result)}", "",
            f"- tolerance: `{t.preset}`" + (f" with `{' '.join(t.overrides)}`" if t.overrides else "")
-           + f", event window {t.event_window_steps} steps",
+           + f", {_window_text(result)}",
            f"- golden: `{_run_line(result.golden)}`", f"- candidate: `{_run_line(result.candidate)}`"]
     out += [f"- note: {n}" for n in result.notes]
     out += [f"- configuration differs: `{k}` {a} → {b}" for k, a, b in result.config_differences]
@@ -136,6 +160,7 @@ def render_markdown(result: DiffResult) -> str:
         out.append(f"No divergence over {result.steps_compared} common steps.")
     else:
         out += ["## First divergence", "", f"**{first_line(result.first)}**", "", first_detail(result.first)]
+        out += ["", *(f"- {line}" for line in _cause_lines(result))] if _cause_lines(result) else []
     out += ["", "## Fields", "", "| " + " | ".join(_FIELD_HEAD) + " |", "|" + "---|" * len(_FIELD_HEAD)]
     out += ["| " + " | ".join(c.replace("|", "\\|") for c in _field_row(f)) + " |" for f in result.fields]
     out += ["", "## Events", ""] + [f"- {line.strip()}" for line in _event_lines(result, dt_s)]
@@ -163,24 +188,25 @@ def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
     ET.SubElement(props, "property", name="first_divergence",
                   value="none" if result.first is None else first_line(result.first))
     classname = Path(result.golden.get("path") or "golden").stem
-    text = render_text(result) if not result.match else ""
     for name, msg, info in cases:
         case = ET.SubElement(suite_el, "testcase", classname=classname, name=name)
         if msg is not None:
-            ET.SubElement(case, "failure", message=msg).text = text
+            ET.SubElement(case, "failure", message=msg).text = msg
         ET.SubElement(case, "system-out").text = info
+    if not result.match:  # the whole report once, for the suite, not once per failing case
+        ET.SubElement(suite_el, "system-out").text = render_text(result)
     return _junit_document(suite_el)
 
 
 def render_check_junit(outcomes: list, suite: str = "twin check") -> str:
     """JUnit XML for `twin check`: one testcase per golden (check.Outcome), the text report on failure."""
     suite_el = ET.Element("testsuite", name=suite, tests=str(len(outcomes)),
-                          failures=str(sum(o.status == "differ" for o in outcomes)),
+                          failures=str(sum(o.status in ("differ", "refused") for o in outcomes)),
                           errors=str(sum(o.status == "error" for o in outcomes)),
                           time=f"{sum(o.seconds for o in outcomes):.3f}")
     for o in outcomes:
         case = ET.SubElement(suite_el, "testcase", classname="goldens", name=Path(o.path).name, time=f"{o.seconds:.3f}")
-        if o.status == "differ":
+        if o.status in ("differ", "refused"):
             ET.SubElement(case, "failure", message=o.summary).text = o.report
         elif o.status == "error":
             ET.SubElement(case, "error", message=o.summary)

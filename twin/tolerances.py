@@ -1,8 +1,10 @@
 """Tolerances for comparing two runs: per channel and field, in physical units, with presets.
 
 Names are `channel.field`. Joint values are rad for the revolute joints and m for the prismatic Z
-joint (one number covers both: 1e-3 means 1 mrad or 1 mm). A tolerance of 0 means bit-identical;
-`inf` switches a field off. Discrete fields (suction state, run length) compare exactly unless off.
+joint (one number covers both: 2.5e-4 means 0.25 mrad or 0.25 mm). A tolerance of 0 means
+bit-identical; `inf` switches a field off. Discrete fields (suction state, run length, the command
+sequence, the task outcome) compare exactly unless off; event counts allow that many events more or
+fewer. Events pair within a window of steps; a window of None (the `outcome` preset) leaves them out.
 """
 
 from __future__ import annotations
@@ -32,46 +34,58 @@ FIELDS: dict[str, tuple[str, str]] = {
     "final.position": ("m", "distance between final object positions"),
     "final.orientation": ("rad", "angle between final object orientations"),
     "run.length": ("steps", "difference in the last step"),
+    "commands.sequence": ("", "every Command's step, kind and arguments, in order (exact or off)"),
+    "outcome.task": ("", "whether the task ended ok: no task_error, finalized ok (exact or off)"),
+    "counts.attach": ("events", "number of attach events"),
+    "counts.release": ("events", "number of release events"),
+    "counts.break": ("events", "number of break events"),
 }
-DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held"})
+DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.sequence", "outcome.task"})
+COUNTED_EVENTS = ("attach", "release", "break")
+_ALWAYS = {"outcome.task": 0.0, "counts.attach": 0.0, "counts.release": 0.0, "counts.break": 0.0}
+POSITION_M = 2.5e-4  # physical: a clear margin below 1 mm, so a 1 mm change always shows
 
 _ALL_ZERO = {name: 0.0 for name in FIELDS}
-_PHYSICAL = {
-    "joints.position": 1e-3,  # 1 mrad, 1 mm
+_PHYSICAL = _ALWAYS | {
+    "joints.position": POSITION_M,  # 0.25 mrad, 0.25 mm
     "joints.velocity": 1e-2,  # 10 mrad/s, 10 mm/s
     "joints.effort": 0.5,  # N·m | N: under 1 % of the motors' 60 N·m / 60 N
-    "joints.target": 1e-3,
+    "joints.target": POSITION_M,
     "suction.on": 0.0,
     "suction.sensed": 0.0,
     "suction.held": 0.0,
     "hold.force": 0.1,  # N: a tenth of the stock pad's 1 N shear limit
     "hold.torque": 0.01,  # N·m: a tenth of its 0.1 N·m peel limit
-    "pad.position": 1e-3,
+    "pad.position": POSITION_M,
     "pad.orientation": 1e-3,
-    "objects.position": 1e-3,
+    "objects.position": POSITION_M,
     "objects.orientation": 1e-3,
-    "final.position": 1e-3,
+    "final.position": POSITION_M,
     "final.orientation": 1e-3,
     "run.length": 0.0,
+    "commands.sequence": INF,  # physically equal runs may be driven by other but equivalent commands
 }
-_OUTCOME = {name: INF for name in FIELDS} | {"final.position": 5e-3, "final.orientation": 0.05}
+# outcome: where the objects ended, whether the task ended ok, how often the pad took and let go
+_OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
 
-# preset -> (field tolerances, event window in steps)
-PRESETS: dict[str, tuple[dict[str, float], int]] = {
+# preset -> (field tolerances, event window in steps; None: events are not paired)
+PRESETS: dict[str, tuple[dict[str, float], int | None]] = {
     "exact": (_ALL_ZERO, 0),
-    "tight": ({name: 0.0 if name in DISCRETE or name == "run.length" else 1e-9 for name in FIELDS}, 0),
+    "tight": ({name: 0.0 if name in DISCRETE or name == "run.length" or name in _ALWAYS else 1e-9
+               for name in FIELDS}, 0),
     "physical": (_PHYSICAL, 12),
-    "outcome": (_OUTCOME, 2400),
+    "outcome": (_OUTCOME, None),
 }
 
 
 @dataclass(frozen=True)
 class Tolerances:
-    """Per-field tolerances (FIELDS units) and the event time window in physics steps."""
+    """Per-field tolerances (FIELDS units) and the event time window in physics steps (None: events
+    are not paired one by one; the counts of attach, release and break still compare)."""
 
     preset: str = "exact"
     values: dict[str, float] = field(default_factory=lambda: dict(_ALL_ZERO))
-    event_window_steps: int = 0
+    event_window_steps: int | None = 0
     overrides: tuple[str, ...] = ()
 
     @staticmethod

@@ -44,6 +44,8 @@ class Twin:
         self.max_velocities = list(self.world.max_velocities())
         self.limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
+        self.key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
+        self._said: Event | None = None  # the Event the last `event` Command emitted
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
 
@@ -63,7 +65,7 @@ class Twin:
             if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
                 f = self.frame
                 for ev in pad_model.update(self._suction_wanted, f, self._heading(f)):
-                    self.event(ev.kind, self._body_name(ev.body), ev.message)
+                    self._emit(ev.kind, self._body_name(ev.body), ev.message)
             world.step()
             self.step_index += 1
             f = self.frame = self._read_frame()
@@ -94,8 +96,7 @@ class Twin:
         )
 
     def _heading(self, f: Frame) -> float:
-        q = f.joint_q
-        return q[SHOULDER] + q[ELBOW] + q[WRIST]
+        return kinematics.heading(self.profile, f.joint_q)
 
     def _emit_frame(self, frame: Frame) -> None:
         for s in self.sinks:
@@ -126,8 +127,19 @@ class Twin:
 
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
-        """Emit an Event now; data must be JSON data (numpy values are turned into numbers and lists)."""
-        ev = Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data))
+        """Say something now (a task's phase, a placement report, a client's log line): an `event`
+        Command, so a replay says it again at the same step. Data must be JSON data (numpy values are
+        turned into numbers and lists)."""
+        if not isinstance(kind, str) or not kind:
+            raise ConfigError(f"event kind {kind!r:.40} is invalid; expected a non-empty string")
+        args = {"kind": kind, "body": str(body), "message": str(message), "data": _json_data(kind, data)}
+        self.apply(Command(self.step_index, "event", args))
+        return self._said
+
+    def _emit(self, kind: str, body: str = "", message: str = "", data: dict | None = None) -> Event:
+        """An Event the twin itself raises while stepping or applying a Command (attach, release,
+        joint_limit, ...): replay regenerates these, so they are not Commands."""
+        ev = Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {}))
         for s in self.sinks:
             s.on_event(ev)
         return ev
@@ -229,13 +241,13 @@ class Twin:
             self.settle()
 
     def lower(self) -> None:
-        """Lower the pad to the end of the Z stroke."""
-        self.set_joint_target(Z, self.profile.z_stroke_m)
+        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z stroke)."""
+        self.set_joint_target(Z, self.profile.z_down())
         self.settle()
 
     def raise_(self) -> None:
-        """Raise the pad to the top of the Z stroke."""
-        self.set_joint_target(Z, 0.0)
+        """Raise the pad to the scene's "up" (mtb: the top of the Z stroke)."""
+        self.set_joint_target(Z, self.profile.z_up())
         self.settle()
 
     def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
@@ -287,12 +299,15 @@ def _number(value: Any, what: str) -> float:
 
 
 def _clamped(twin: Twin, joint: int, q: float) -> float:
+    if twin.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
+        now = twin.frame.joint_q[joint]
+        return now + kinematics.wrap_rad(q - now)
     lo, hi = twin.limits[joint]
     if lo <= q <= hi:
         return q
     clamped = min(hi, max(lo, q))
-    twin.event("joint_limit", message=f"{twin.profile.joint_names[joint]} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; "
-               f"stopped at {clamped:.6g}", joint=twin.profile.joint_names[joint], requested=q, limit=clamped)
+    twin._emit("joint_limit", message=f"{twin.profile.joint_names[joint]} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; "
+               f"stopped at {clamped:.6g}", data={"joint": twin.profile.joint_names[joint], "requested": q, "limit": clamped})
     return clamped
 
 
@@ -326,17 +341,30 @@ def _do_signal(twin: Twin, args: dict) -> None:
     twin._suction_wanted = any(twin.signals.get(s, 0) for s in twin.profile.suction_signals)
 
 
+def _do_event(twin: Twin, args: dict) -> None:
+    """What a task or client said (an `event` Command): emitted as the Event it describes."""
+    kind, body, message, data = args["kind"], args["body"], args["message"], args["data"]
+    if not isinstance(kind, str) or not kind or not isinstance(body, str) or not isinstance(message, str):
+        raise TypeError("kind, body and message must be strings (kind non-empty)")
+    if not isinstance(data, dict):
+        raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
+    twin._said = twin._emit(kind, body, message, data)
+
+
 def _do_key(twin: Twin, args: dict) -> None:
     """Interpret a key through the key map: a list of actions per key.
 
     Actions: ["jog", joint, delta] (target += delta), ["jog_keep_heading", joint, delta] (and the
-    wrist turns back by delta so the pad keeps its heading), ["target", joint, value|"min"|"max"],
+    wrist turns back by delta so the pad keeps its heading), ["target", joint, value|"min"|"max"|"down"|"up"],
+    ["position", joint, value] (set at once, like sim.setJointPosition), ["add", joint, delta, "target"|"position"]
+    (the map's own variable for the joint, from 0, moves by delta; the joint is sent there),
+    ["diff", joint, a, b] (the joint's variable becomes a's minus b's; its target goes there),
     ["signal", name, value], ["suction", 0|1].
     """
     key = args["key"]
     actions = twin.config.keymap.get(key)
     if actions is None:
-        twin.event("key_unknown", message=f"key {key!r} is not in the key map; ignored", key=key)
+        twin._emit("key_unknown", message=f"key {key!r} is not in the key map; ignored", data={"key": key})
         return
     for action in actions:
         op = action[0]
@@ -349,8 +377,19 @@ def _do_key(twin: Twin, args: dict) -> None:
         elif op == "target":
             j = twin._joint(action[1])
             lo, hi = twin.limits[j]
-            value = {"min": lo, "max": hi}.get(action[2], action[2])
+            value = {"min": lo, "max": hi, "down": twin.profile.z_down(), "up": twin.profile.z_up()}.get(action[2], action[2])
             _do_joint_target(twin, {"joint": j, "q": float(value)})
+        elif op == "position":
+            _do_joint_position(twin, {"joint": twin._joint(action[1]), "q": float(action[2])})
+        elif op == "add":
+            j = twin._joint(action[1])
+            twin.key_values[j] = twin.key_values.get(j, 0.0) + float(action[2])
+            send = _do_joint_position if action[3] == "position" else _do_joint_target
+            send(twin, {"joint": j, "q": twin.key_values[j]})
+        elif op == "diff":
+            j, a, b = (twin._joint(name) for name in action[1:4])
+            twin.key_values[j] = twin.key_values.get(a, 0.0) - twin.key_values.get(b, 0.0)
+            _do_joint_target(twin, {"joint": j, "q": twin.key_values[j]})
         elif op == "signal":
             _do_signal(twin, {"name": action[1], "value": action[2]})
         elif op == "suction":
@@ -365,6 +404,7 @@ _ARGS = {
     "joint_max_velocity": ("joint", "v"),
     "signal": ("name", "value"),
     "key": ("key",),
+    "event": ("kind", "body", "message", "data"),
 }
 _HANDLERS = {
     "joint_target": _do_joint_target,
@@ -372,4 +412,5 @@ _HANDLERS = {
     "joint_max_velocity": _do_joint_max_velocity,
     "signal": _do_signal,
     "key": _do_key,
+    "event": _do_event,
 }

@@ -3,14 +3,18 @@ versions — strings only, sorted, and no wall-clock time (identical runs give i
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import os
 import platform
 import sys
 from importlib import metadata as importlib_metadata
+from pathlib import Path
 
 from twin.config import TwinConfig
 from twin.errors import ConfigError, RecordingError
 from twin.record import schemas as S
+from twin.record import strict_json
 
 RUN_SOURCES = ("task", "teleop", "remote")
 
@@ -36,16 +40,43 @@ def versions() -> dict[str, str]:
     }
 
 
+def portable_config(config: TwinConfig, recording: str | Path | None) -> TwinConfig:
+    """config as a recording at `recording` stores it: a user URDF by its path relative to the
+    recording's folder (no absolute path in the file: the same run recorded in two checkouts gives
+    the same bytes, and a golden checks from any working directory or clone)."""
+    urdf = config.profile.urdf_path
+    if not urdf or recording is None or not Path(urdf).is_absolute():
+        return config
+    folder = Path(os.path.abspath(recording)).parent
+    relative = Path(os.path.relpath(urdf, folder)).as_posix()
+    return dataclasses.replace(config, profile=dataclasses.replace(config.profile, urdf_path=relative))
+
+
+def located_config(config: TwinConfig, recording: str | Path) -> TwinConfig:
+    """The inverse of portable_config on reading: a relative URDF path resolved from the recording's folder."""
+    urdf = config.profile.urdf_path
+    if not urdf or Path(urdf).is_absolute():
+        return config
+    absolute = os.path.normpath(Path(os.path.abspath(recording)).parent / urdf)
+    return dataclasses.replace(config, profile=dataclasses.replace(config.profile, urdf_path=absolute))
+
+
 def check_run(run: dict) -> dict:
-    """The run description, validated: source, task name or path, JSON-safe parameters."""
+    """The run description, validated: source, task name or path, JSON-safe parameters, and when
+    present the task file's sha256 and which recording this run replays ({"file", "sha256"})."""
     if not isinstance(run, dict) or run.get("source") not in RUN_SOURCES:
-        raise ConfigError(f"run description {run!r} is invalid; expected source one of {RUN_SOURCES}")
+        raise ConfigError(f"run description {run!r:.200} is invalid; expected source one of {RUN_SOURCES}")
     params = run.get("params", {})
     try:
         _dumps(params)
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"run parameters {params!r} are not JSON data: {err}") from err
-    return {"source": run["source"], "task": str(run.get("task", "")), "params": params}
+        raise ConfigError(f"run parameters {params!r:.200} are not JSON data: {err}") from err
+    out = {"source": run["source"], "task": str(run.get("task", "")), "params": params}
+    if run.get("task_sha256"):
+        out["task_sha256"] = str(run["task_sha256"])
+    if isinstance(run.get("replay_of"), dict):
+        out["replay_of"] = {str(k): str(v) for k, v in run["replay_of"].items()}
+    return out
 
 
 def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str]) -> dict[str, dict[str, str]]:
@@ -60,7 +91,9 @@ def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str]) -> di
     }
     return {
         S.META_CONFIG: {"json": _dumps(config.to_dict())},
-        S.META_RUN: {"source": run["source"], "task": run["task"], "params": _dumps(run["params"])},
+        S.META_RUN: {"source": run["source"], "task": run["task"], "params": _dumps(run["params"]),
+                     **({"task_sha256": run["task_sha256"]} if "task_sha256" in run else {}),
+                     **({"replay_of": _dumps(run["replay_of"])} if "replay_of" in run else {})},
         "twin.engine": engine,
         S.META_RECORDING: dict(sorted(layout.items())),
         S.META_VERSIONS: dict(sorted(versions().items())),
@@ -73,15 +106,32 @@ def parse_config(records: dict[str, dict[str, str]], where: str) -> TwinConfig:
     if record is None or "json" not in record:
         raise RecordingError(f"{where} has no {S.META_CONFIG} metadata; it was not written by twin")
     try:
-        return TwinConfig.from_dict(json.loads(record["json"]))
+        return TwinConfig.from_dict(strict_json.loads(record["json"]))
     except (ValueError, ConfigError) as err:
         raise RecordingError(f"{where}: its twin configuration is unreadable: {err}") from err
 
 
-def parse_run(records: dict[str, dict[str, str]]) -> dict:
+def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") -> dict:
+    """The run description of a file's metadata (empty fields if it has none); RecordingError naming the
+    field if its source or parameters are malformed (a task is re-run with them)."""
     record = records.get(S.META_RUN, {})
     try:
-        params = json.loads(record.get("params", "{}"))
-    except ValueError:
-        params = {}
-    return {"source": record.get("source", ""), "task": record.get("task", ""), "params": params}
+        params = strict_json.loads(record.get("params", "{}"))
+    except ValueError as err:
+        raise RecordingError(f"{where}: {S.META_RUN} field params is not JSON: {err}") from err
+    if not isinstance(params, dict):
+        raise RecordingError(f"{where}: {S.META_RUN} field params = {params!r:.60} is invalid; expected a JSON object")
+    if S.META_RUN in records and record.get("source") not in RUN_SOURCES:
+        raise RecordingError(f"{where}: {S.META_RUN} field source = {record.get('source')!r:.60} is invalid; "
+                             f"expected one of {', '.join(RUN_SOURCES)}")
+    run = {"source": record.get("source", ""), "task": record.get("task", ""), "params": params}
+    if record.get("task_sha256"):
+        run["task_sha256"] = record["task_sha256"]
+    if record.get("replay_of"):
+        try:
+            replay_of = json.loads(record["replay_of"])
+        except ValueError:
+            replay_of = None
+        if isinstance(replay_of, dict):
+            run["replay_of"] = replay_of
+    return run

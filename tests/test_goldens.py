@@ -6,6 +6,8 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import pytest
+
 from twin.check import check_all
 from twin.profiles import PROFILES
 from twin.record.mcap_reader import load
@@ -32,6 +34,19 @@ def test_every_golden_rerun_matches_exactly():
     bad = {Path(o.path).name: o.summary for o in outcomes if o.status != "match"}
     assert not bad, "\n".join(f"{name}: {why}" for name, why in bad.items()) + (
         "\n(if the change is intended: python tools/regen_goldens.py, then review `twin diff` old vs new)")
+
+
+@pytest.mark.parametrize("path", GOLDENS, ids=lambda p: p.stem)
+def test_every_golden_replays_to_an_exact_match_with_every_event(path, tmp_path):
+    """Replay feeds the file's commands (what the task said included) back: nothing may differ."""
+    from twin.compare import compare
+    from twin.replay import replay, replayed_event_kinds
+
+    golden = load(path)
+    assert replayed_event_kinds(golden) is None  # annotations are Commands: every event compares
+    result = compare(golden, replay(golden), Tolerances.from_preset("exact"))
+    assert result.match, result.first
+    assert result.events_matched == len(golden.events)
 
 
 def test_the_goldens_are_the_documented_set():

@@ -157,11 +157,17 @@ def run(twin, cycles=1):
 """
 
 
-def test_runs_differing_only_in_annotations_pass_outcome_not_exact(tmp_path, capsys):
-    (tmp_path / "quiet.py").write_text(QUIET_TASK)
-    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+def pick_place_and(task_text: str, folder: Path, exit_code: int) -> tuple[Path, Path]:
+    """One pick_place cycle recorded as a.mcap, and the task file task_text recorded as b.mcap."""
+    (folder / "other.py").write_text(task_text)
+    a, b = folder / "a.mcap", folder / "b.mcap"
     assert main(["run", "pick_place", "--cycles", "1", "--record", str(a)]) == 0
-    assert main(["run", str(tmp_path / "quiet.py"), "--cycles", "1", "--record", str(b)]) == 0
+    assert main(["run", str(folder / "other.py"), "--cycles", "1", "--record", str(b)]) == exit_code
+    return a, b
+
+
+def test_runs_differing_only_in_annotations_pass_outcome_not_exact(tmp_path, capsys):
+    a, b = pick_place_and(QUIET_TASK, tmp_path, 0)
     capsys.readouterr()
     assert load(a).frames.object_poses[-1].tobytes() == load(b).frames.object_poses[-1].tobytes()
     code, out, _ = twin(capsys, "diff", "--tolerance", "outcome", a, b)
@@ -170,10 +176,7 @@ def test_runs_differing_only_in_annotations_pass_outcome_not_exact(tmp_path, cap
 
 
 def test_outcome_fails_a_task_that_now_raises_with_the_same_poses(tmp_path, capsys):
-    (tmp_path / "crash.py").write_text(CRASHING_TASK)
-    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
-    assert main(["run", "pick_place", "--cycles", "1", "--record", str(a)]) == 0
-    assert main(["run", str(tmp_path / "crash.py"), "--cycles", "1", "--record", str(b)]) == 1
+    a, b = pick_place_and(CRASHING_TASK, tmp_path, 1)
     capsys.readouterr()
     code, out, _ = twin(capsys, "diff", "--tolerance", "outcome", a, b)
     assert code == 1 and "first divergence" in out and "outcome.task" in out
@@ -189,8 +192,9 @@ def test_check_update_leaves_a_golden_untouched_when_its_task_now_raises(tmp_pat
     before = golden.read_bytes()
     task.write_text(CRASHING_TASK)
     capsys.readouterr()
-    code, out, _ = twin(capsys, "check", "--update", golden)
+    code, out, _ = twin(capsys, "check", "--update", "-v", golden)
     assert code == 1 and "refused" in out and "not rewritten: the re-run's task failed" in out
+    assert "note: the task file 'my_task.py' changed since the golden was recorded" in out
     assert "RuntimeError: the gripper report failed" in out
     assert golden.read_bytes() == before and not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob("*partial*"))
     code, out, _ = twin(capsys, "check", "--update", "--allow-error", golden)

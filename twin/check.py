@@ -112,6 +112,7 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
         else:
             new, kinds = rerun(golden)
         result = compare(golden, new, tolerances, event_kinds=kinds)
+        result.notes += _task_changed(golden)
         report = render_text(result)
         if result.match:
             return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
@@ -130,6 +131,20 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
         return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
     finally:
         tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+
+
+def _task_changed(golden: Recording) -> list[str]:
+    """A note when the golden's task file is no longer the source it was recorded with."""
+    run = golden.run or {}
+    recorded = run.get("task_sha256")
+    if not recorded or not golden.path:
+        return []
+    path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
+    now = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "missing"
+    if now == recorded:
+        return []
+    return [f"the task file {run.get('task')!r} changed since the golden was recorded "
+            f"(sha256 {recorded[:12]}... then, {now[:12]}... now)"]
 
 
 def _rate(rec: Recording) -> int:

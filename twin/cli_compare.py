@@ -108,7 +108,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         except OSError as err:
             raise ConfigError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
     for o in outcomes:
-        if o.status == "differ" and args.verbose:
+        if o.status in ("differ", "refused") and args.verbose:
             print(f"== {o.path}\n{o.report}")
     print(summary_table(outcomes), end="")
     updated = [o.path for o in outcomes if o.status == "updated"]

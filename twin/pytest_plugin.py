@@ -7,7 +7,7 @@
 
 Goldens live in the `twin_goldens_dir` ini folder (default `recordings/`, relative to the rootdir).
 A missing golden is written and the test fails (review it, then commit it); `--update-goldens`
-rewrites goldens that differ. On a mismatch NAME.obtained.mcap and NAME.report.md are left beside
+rewrites goldens that differ, but never with a run whose task failed (`allow_error=True` says so). On a mismatch NAME.obtained.mcap and NAME.report.md are left beside
 the golden, and the failure message is the diff's text report.
 """
 
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from twin.compare import DiffResult, compare
+from twin.compare import DiffResult, compare, task_outcome
 from twin.recording import Recording
 from twin.report import render_text, write_report
 from twin.tolerances import Tolerances
@@ -37,7 +37,7 @@ class GoldenChecker:
 
     def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = "exact",
               tol: Sequence[str] = (), event_window_steps: int | None = None,
-              event_kinds: frozenset[str] | None = None) -> DiffResult:
+              event_kinds: frozenset[str] | None = None, allow_error: bool = False) -> DiffResult:
         """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff."""
         from twin.record.mcap_reader import load
         from twin.replay import save
@@ -58,7 +58,7 @@ class GoldenChecker:
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)
             return result
-        if self.update:
+        if self.update and (allow_error or task_outcome(candidate) == "ok"):
             save(candidate, golden_path)
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)

@@ -139,10 +139,18 @@ def test_urdf_joints_carry_the_profile_names_limits_and_link_lengths(profile_nam
     root = ET.fromstring(urdf_from_profile(profile))
     joints = root.findall("joint")
     assert tuple(j.get("name") for j in joints) == profile.joint_names
-    assert [j.get("type") for j in joints] == ["revolute", "revolute", "prismatic", "revolute"]
+    revolute = "continuous" if profile.revolute_cyclic else "revolute"  # CoppeliaSim's cyclic joint
+    assert [j.get("type") for j in joints] == [revolute, revolute, "prismatic", revolute]
     for joint, (lo, hi) in zip(joints, profile.joint_limits(), strict=True):
         limit = joint.find("limit")
-        assert (float(limit.get("lower")), float(limit.get("upper"))) == (lo, hi)
+        if joint.get("type") == "continuous":
+            assert limit.get("lower") is None and limit.get("upper") is None
+        else:
+            assert (float(limit.get("lower")), float(limit.get("upper"))) == (lo, hi)
+    axes = [joint.find("axis").get("xyz") for joint in joints]
+    signs = profile.axis_signs
+    assert axes == [f"0 0 {'1' if signs[0] > 0 else '-1'}", f"0 0 {'1' if signs[1] > 0 else '-1'}",
+                    f"0 0 {'-1' if signs[2] > 0 else '1'}", f"0 0 {'1' if signs[3] > 0 else '-1'}"]
     elbow_xyz = [float(v) for v in joints[1].find("origin").get("xyz").split()]
     z_xyz = [float(v) for v in joints[2].find("origin").get("xyz").split()]
     assert math.hypot(*elbow_xyz[:2]) == profile.link1_m
@@ -168,7 +176,8 @@ def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
     twin = Twin(TwinConfig(profile=PROFILES[profile_name]))
     try:
         w = twin.world
-        for q in [(0.3, -1.1, 0.05, 0.7), (-2.5, 2.0, 0.2, -3.0), (1.9, 0.4, 0.0, 2.2)]:
+        z_lo, z_hi = twin.profile.joint_limits()[2]
+        for q in [(0.3, -1.1, z_lo + 0.25 * (z_hi - z_lo), 0.7), (-2.5, 2.0, z_hi, -3.0), (1.9, 0.4, z_lo, 2.2)]:
             for joint, value in enumerate(q):
                 twin.set_joint_position(joint, value)
             fk = kinematics.fk(twin.profile, q)

@@ -80,13 +80,21 @@ def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, 
 
 
 def _joint(name: str, kind: str, parent: str, child: str, xyz: tuple[float, float, float], axis: str,
-           lower: float, upper: float, effort: float, velocity: float) -> str:
+           lower: float, upper: float, effort: float, velocity: float, yaw_rad: float = 0.0) -> str:
+    """A joint; a "continuous" one (cyclic) has no position limits, only effort and velocity."""
     x, y, z = (_f(v) for v in xyz)
+    rpy = f' rpy="0 0 {_f(yaw_rad)}"' if yaw_rad else ""
+    bounds = "" if kind == "continuous" else f'lower="{_f(lower)}" upper="{_f(upper)}" '
     return f"""  <joint name="{name}" type="{kind}">
-    <parent link="{parent}"/><child link="{child}"/><origin xyz="{x} {y} {z}"/><axis xyz="{axis}"/>
-    <limit lower="{_f(lower)}" upper="{_f(upper)}" effort="{_f(effort)}" velocity="{_f(velocity)}"/>
+    <parent link="{parent}"/><child link="{child}"/><origin xyz="{x} {y} {z}"{rpy}/><axis xyz="{axis}"/>
+    <limit {bounds}effort="{_f(effort)}" velocity="{_f(velocity)}"/>
   </joint>
 """
+
+
+def _axis(sign: int) -> str:
+    """A vertical joint axis: +z for sign +1, -z for -1."""
+    return "0 0 1" if sign > 0 else "0 0 -1"
 
 
 def pad_root_height_m(profile: RobotProfile) -> float:
@@ -94,8 +102,12 @@ def pad_root_height_m(profile: RobotProfile) -> float:
 
 
 def urdf_from_profile(profile: RobotProfile) -> str:
-    """A URDF of the profile's SCARA built from boxes and cylinders (aluminium links)."""
+    """A URDF of the profile's SCARA built from boxes and cylinders (aluminium links), in the
+    profile's joint conventions: link 1 along shoulder_zero_rad at zero, each axis turned by its
+    sign, cyclic revolute joints continuous."""
     p = profile
+    s1, s2, s3, s4 = p.axis_signs
+    revolute = "continuous" if p.revolute_cyclic else "revolute"
     l1, l2 = p.link1_m, p.link2_m
     h1 = p.elbow_height_m - p.shoulder_height_m
     h2 = 0.04
@@ -121,23 +133,23 @@ def urdf_from_profile(profile: RobotProfile) -> str:
         _link("MTB_base", f'<cylinder radius="{_f(BASE_RADIUS_M)}" length="{_f(p.shoulder_height_m)}"/>',
               (0.0, 0.0, p.shoulder_height_m / 2), m_base, _cyl_inertia(m_base, BASE_RADIUS_M, p.shoulder_height_m),
               (0.0, 0.0, p.shoulder_height_m / 2), "0.3 0.3 0.35 1"),
-        _joint(n1, "revolute", "MTB_base", "MTB_link1", (0.0, 0.0, p.shoulder_height_m), "0 0 1",
-               *limits[0], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
+        _joint(n1, revolute, "MTB_base", "MTB_link1", (0.0, 0.0, p.shoulder_height_m), _axis(s1),
+               *limits[0], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s, p.shoulder_zero_rad),
         _link("MTB_link1", f'<box size="{_f(l1 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h1)}"/>',
               (l1 / 2, 0.0, h1 / 2), m1, _box_inertia(m1, l1 + LINK_WIDTH_M, LINK_WIDTH_M, h1),
               (l1 / 2, 0.0, h1 / 2), "0.9 0.5 0.1 1"),
-        _joint(n2, "revolute", "MTB_link1", "MTB_link2", (l1, 0.0, h1), "0 0 1",
+        _joint(n2, revolute, "MTB_link1", "MTB_link2", (l1, 0.0, h1), _axis(s2),
                *limits[1], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
         _link("MTB_link2", f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
               arm2_centre, link2_mass, link2_inertia, link2_com, "0.9 0.6 0.2 1",
               extra_parts=((f'<cylinder radius="{_f(hub_r)}" length="{_f(LINK2_RISE_M)}"/>', hub_centre),),
               inertial_rpy=link2_rpy),
-        _joint(n3, "prismatic", "MTB_link2", "MTB_link3", (l2, 0.0, 0.0), "0 0 -1",
+        _joint(n3, "prismatic", "MTB_link2", "MTB_link3", (l2, 0.0, 0.0), _axis(-s3),
                *limits[2], p.prismatic_max_force_n, p.prismatic_max_velocity_m_s),
         _link("MTB_link3", f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',
               (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2), m3, _cyl_inertia(m3, QUILL_RADIUS_M, QUILL_LENGTH_M),
               (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2), "0.7 0.7 0.75 1"),
-        _joint(n4, "revolute", "MTB_link3", "suctionPad", (0.0, 0.0, pad_offset), "0 0 1",
+        _joint(n4, revolute, "MTB_link3", "suctionPad", (0.0, 0.0, pad_offset), _axis(s4),
                *limits[3], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
         # The pad's inertial frame sits at its root so a held object's constraint frame is simple.
         _link("suctionPad", f'<cylinder radius="{_f(PAD_RADIUS_M)}" length="{_f(pad_h)}"/>',

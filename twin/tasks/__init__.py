@@ -9,10 +9,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from twin.errors import ConfigError, TaskError, TwinError
-from twin.tasks import pick_place
+from twin.tasks import pick_place, seed000
 
 TaskFn = Callable[..., None]
-TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run}
+TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run, "seed000": seed000.run}
 
 
 def resolve(name_or_path: str) -> TaskFn:

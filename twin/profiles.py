@@ -29,7 +29,11 @@ DEFAULT_SUCTION_SIGNAL = "pad_switch"
 CYCLIC_RANGE_RAD = 2.0 * math.pi
 # CoppeliaSim 4.1's defaults for a new joint's position control: 360 deg/s for a revolute joint (the
 # seeds' own joints; their programs' sleeps assume it), 10 m/s for a prismatic one. The twin keeps
-# 0.5 m/s for Z: every seed's Z move (at most 0.18 m) still ends within its program's shortest sleep.
+# 0.5 m/s for Z: every seed's Z move (at most 0.12 m) still ends within its program's shortest sleep
+# (0.5 s). Motor torques are sized so each arm settles (1 mrad) within its program's 0.5 s sleeps
+# (measured: seed000's 0.8 m arm with the MTB's 60 N·m swings torque-saturated for 1.95 s after a
+# 47 deg move; 300 N·m settles it in 0.39 s, the 171 deg move in 0.54 s; seed001/002 at 150 N·m
+# settle in 0.15-0.54 s).
 COPPELIASIM_REVOLUTE_RAD_S = 2.0 * math.pi
 
 
@@ -151,21 +155,21 @@ PROFILES: dict[str, RobotProfile] = {
         joint_names=("joint1", "joint2", "joint3", "joint4"),
         description="report 000: 0.8 m / 0.8 m links; shoulder zero along +y; Z 0.06 on the box, -0.06 up",
         shoulder_zero_rad=math.pi / 2, revolute_cyclic=True, revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S,
-        tip_z0_m=0.115, z_lower_m=-0.116, z_stroke_m=0.2, z_down_m=0.06, z_up_m=-0.06,
+        revolute_max_torque_nm=300.0, tip_z0_m=0.115, z_lower_m=-0.116, z_stroke_m=0.2, z_down_m=0.06, z_up_m=-0.06,
     ),
     "seed001": RobotProfile(
         name="seed001", link1_m=0.467, link2_m=0.401,
         joint_names=("Revolute_joint", "Revolute_joint1", "Prismatic_joint", "Revolute_joint0"),
         description="report 001: MTB-like links, arrow-key control; zero along +y, clockwise; Z -0.055 down, 0 up",
         shoulder_zero_rad=math.pi / 2, axis_signs=(-1, -1, -1, -1), revolute_cyclic=True,
-        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S, tip_z0_m=0.11, z_lower_m=-0.055, z_stroke_m=0.055,
+        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S, revolute_max_torque_nm=150.0, tip_z0_m=0.11, z_lower_m=-0.055, z_stroke_m=0.055,
     ),
     "seed002": RobotProfile(
         name="seed002", link1_m=0.5, link2_m=0.5,
         joint_names=("AB", "BC", "Z", "CD"),
         description="report 002: 0.5 m / 0.5 m links; zero along +y, clockwise; Z -0.09 down, 0 up",
         shoulder_zero_rad=math.pi / 2, axis_signs=(-1, -1, -1, -1), revolute_cyclic=True,
-        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S, tip_z0_m=0.145, z_lower_m=-0.09, z_stroke_m=0.09,
+        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S, revolute_max_torque_nm=150.0, tip_z0_m=0.145, z_lower_m=-0.09, z_stroke_m=0.09,
     ),
     "seed003": RobotProfile(
         name="seed003", link1_m=0.468, link2_m=0.4,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import struct
 from pathlib import Path
@@ -34,7 +35,22 @@ _ERROR = {"task_error", "break"}
 
 
 def _json(value: object) -> bytes:
-    return json.dumps(value, sort_keys=True, separators=(",", ":"), default=_plain).encode()
+    """Standard JSON: a NaN or infinity (a diverged simulation's event data) is written as null, never as
+    the NaN/Infinity tokens Python would write and other JSON readers refuse."""
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"), default=_plain, allow_nan=False).encode()
+    except ValueError:
+        return json.dumps(_finite_or_null(value), sort_keys=True, separators=(",", ":"), default=_plain).encode()
+
+
+def _finite_or_null(value: object) -> object:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(v) for v in value]
+    return value
 
 
 def _plain(value: object) -> object:
@@ -133,6 +149,9 @@ class McapRecorder:
         self._add_id(self._channel[topic], t_ns, data)
 
     def _add_id(self, channel_id: int, t_ns: int, data: bytes) -> None:
+        if len(data) > S.MAX_MESSAGE_BYTES:  # the readers refuse larger messages (a bound on damaged files)
+            raise RecordingError(f"a message of {len(data):,} bytes exceeds the {S.MAX_MESSAGE_BYTES:,} a recording "
+                                 "may hold (a URDF or scene too large)")
         seq = self._sequence.get(channel_id, 0)
         self._sequence[channel_id] = seq + 1
         self._writer.add_message(channel_id, log_time=t_ns, data=data, publish_time=t_ns, sequence=seq)

@@ -9,10 +9,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from twin.errors import ConfigError, TaskError, TwinError
-from twin.tasks import pick_place, seed000
+from twin.tasks import pick_place, seed000, seed001, seed002
 
 TaskFn = Callable[..., None]
-TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run, "seed000": seed000.run}
+TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run, "seed000": seed000.run, "seed001": seed001.run,
+                             "seed002": seed002.run}
 
 
 def resolve(name_or_path: str) -> TaskFn:

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from twin.record import schemas as S
+from twin.record import strict_json
 from twin.record.mcap_reader import block_steps, scan
-from twin.record.metadata import parse_run
+from twin.record.metadata import parse_config, parse_run
 
 
 @dataclass
@@ -44,14 +45,15 @@ def _steps(messages: list) -> np.ndarray:
 
 def _kind(data: bytes) -> str:
     try:
-        value = json.loads(data)
+        value = strict_json.loads(data)
     except ValueError:
         return "(unreadable)"
-    return str(value.get("kind", "?")) if isinstance(value, dict) else "(unreadable)"
+    return str(value.get("kind", "?"))[:60] if isinstance(value, dict) else "(unreadable)"
 
 
 def describe(path: str | Path) -> Info:
-    """Read as much of the file as is readable and summarize it (RecordingError if nothing is)."""
+    """Read as much of the file as is readable and summarize it (RecordingError if nothing is, or if
+    its configuration or run description is malformed)."""
     s = scan(path, strict=False)
     topics = s.by_topic()
     steps = _steps(topics.get(S.JOINTS.topic, []))
@@ -61,18 +63,13 @@ def describe(path: str | Path) -> Info:
     for cid, channel in sorted(s.channels.items()):
         schema = s.schemas.get(channel.schema_id)
         channels.append((channel.topic, schema.name if schema else "", channel.message_encoding, counts[cid]))
-    config = {}
-    if S.META_CONFIG in s.metadata:
-        try:
-            config = json.loads(s.metadata[S.META_CONFIG].get("json", "{}"))
-        except ValueError:
-            config = {}
+    config = parse_config(s.metadata, repr(s.path)) if S.META_CONFIG in s.metadata else None
     return Info(
         path=s.path, size_bytes=s.size_bytes, intact=s.complete, problem=s.problem,
         finalized=s.complete and S.META_FINALIZED in s.metadata, finished=s.metadata.get(S.META_FINALIZED, {}),
-        recovered=s.metadata.get(S.META_RECOVERED, {}), run=parse_run(s.metadata),
-        robot=config.get("profile", {}).get("name", ""), objects=[o.get("name", "") for o in config.get("objects", [])],
-        dt_ns=int(config.get("dt_ns", 0)), frames=int(steps.size),
+        recovered=s.metadata.get(S.META_RECOVERED, {}), run=parse_run(s.metadata, repr(s.path)),
+        robot=config.profile.name if config else "", objects=[o.name for o in config.objects] if config else [],
+        dt_ns=config.dt_ns if config else 0, frames=int(steps.size),
         first_step=int(steps[0]) if steps.size else -1, last_step=int(steps[-1]) if steps.size else -1,
         channels=channels, events=dict(sorted(kinds.items())), commands=len(topics.get(S.COMMANDS.topic, [])),
         metadata={k: v for k, v in sorted(s.metadata.items()) if k != S.META_CONFIG},

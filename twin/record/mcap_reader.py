@@ -8,21 +8,24 @@ the first broken record instead of failing, which is what `twin recover` and `tw
 from __future__ import annotations
 
 import json
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Footer, Header, Metadata, Schema
 
 from twin.columns import FrameColumns
 from twin.errors import RecordingError
-from twin.record import mcap_scan, wire
+from twin.record import mcap_scan, strict_json, wire
 from twin.record import schemas as S
-from twin.record.metadata import parse_config, parse_run
+from twin.record.metadata import located_config, parse_config, parse_run
 from twin.recording import Recording
 from twin.types import Command, Event
 
 MAGIC = mcap_scan.MAGIC
+Message = mcap_scan.Message
 
 
 @dataclass
@@ -57,16 +60,23 @@ def block_steps(message: Message) -> np.ndarray:
 
 
 def open_checked(path: str | Path) -> tuple[str, int]:
-    """The path as text and its size; RecordingError for a missing, empty, non-file or non-MCAP path."""
+    """The path as text and its size; RecordingError for a missing, empty, non-file or non-MCAP path.
+    Only a regular file is opened: a FIFO, socket or device would block or never end."""
     where = str(path)
-    p = Path(path)
-    if not p.exists():
-        raise RecordingError(f"recording {where!r} does not exist")
-    if p.is_dir():
-        raise RecordingError(f"recording {where!r} is a directory; expected an MCAP file")
     try:
-        size = p.stat().st_size
-        with open(p, "rb") as f:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise RecordingError(f"recording {where!r} does not exist") from None
+    except (OSError, ValueError) as err:
+        raise RecordingError(f"cannot read recording {where!r}: {getattr(err, 'strerror', None) or err}") from err
+    if stat.S_ISDIR(mode):
+        raise RecordingError(f"recording {where!r} is a directory; expected an MCAP file")
+    if not stat.S_ISREG(mode):
+        raise RecordingError(f"recording {where!r} is not a regular file (a FIFO, socket or device); expected an "
+                             "MCAP file")
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
             head = f.read(len(MAGIC))
     except OSError as err:
         raise RecordingError(f"cannot read recording {where!r}: {err.strerror or err}") from err
@@ -84,6 +94,7 @@ def scan(path: str | Path, *, strict: bool = True) -> Scan:
     RecordingError; otherwise reading stops there and `problem` says why."""
     where, size = open_checked(path)
     out = Scan(where, size)
+    footer = False
     with open(where, "rb") as f:
         try:
             for record in mcap_scan.records(f, size):
@@ -99,9 +110,10 @@ def scan(path: str | Path, *, strict: bool = True) -> Scan:
                 elif kind is Attachment:
                     out.attachments.append(record)
                 elif kind is Footer:
-                    out.complete = True
+                    footer = True
                 elif kind is Header:
                     out.library, out.header = record.library, True
+            out.complete = footer  # the footer, its closing magic and nothing after them
         except (mcap_scan.Truncated, mcap_scan.Damaged) as err:
             out.problem = str(err)
         except OSError as err:
@@ -127,25 +139,28 @@ def load(path: str | Path) -> Recording:
 
 
 def recording_from_scan(s: Scan) -> Recording:
-    config = parse_config(s.metadata, repr(s.path))
+    config = located_config(parse_config(s.metadata, repr(s.path)), s.path)
     topics = s.by_topic()
     frames = decode_frames(topics.get(S.JOINTS.topic, []), topics.get(S.SUCTION.topic, []),
                            topics.get(S.POSES.topic, []), len(config.objects), s.path)
-    commands = [_command(m.data, s.path) for m in topics.get(S.COMMANDS.topic, [])]
-    events = [_event(m.data, s.path) for m in topics.get(S.EVENTS.topic, [])]
+    commands = [parse_command(m.data, s.path) for m in topics.get(S.COMMANDS.topic, [])]
+    events = [parse_event(m.data, s.path) for m in topics.get(S.EVENTS.topic, [])]
     urdf = ""
     for m in topics.get(S.ROBOT_DESCRIPTION.topic, [])[:1]:
-        urdf = json.loads(m.data)["data"]
+        urdf = _json_message(m.data, S.ROBOT_DESCRIPTION.topic, s.path).get("data")
+        if not isinstance(urdf, str):
+            raise RecordingError(f"recording {s.path!r}: the {S.ROBOT_DESCRIPTION.topic} message has no string "
+                                 "'data'; expected {\"data\": URDF text}")
     meta = {name: dict(record) for name, record in sorted(s.metadata.items())
             if name not in (S.META_CONFIG, S.META_RUN)}
-    return Recording(config=config, frames=frames, commands=commands, events=events, run=parse_run(s.metadata),
-                     meta=meta, finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
+    return Recording(config=config, frames=frames, commands=commands, events=events,
+                     run=parse_run(s.metadata, repr(s.path)), meta=meta, finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
                      assets={a.name: a.data for a in s.attachments})
 
 
 def _json_message(data: bytes, what: str, where: str) -> dict:
     try:
-        value = json.loads(data)
+        value = strict_json.loads(data)
     except ValueError as err:
         raise RecordingError(f"recording {where!r}: a {what} message is not JSON: {err}") from err
     if not isinstance(value, dict):
@@ -153,21 +168,45 @@ def _json_message(data: bytes, what: str, where: str) -> dict:
     return value
 
 
-def _command(data: bytes, where: str) -> Command:
+def _whole(v: dict, name: str, limit: int) -> int:
+    value = v.get(name)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= limit:
+        raise ValueError(f"{name} {value!r:.40} is not a whole number 0..{limit}")
+    return value
+
+
+def _text(v: dict, name: str) -> str:
+    value = v.get(name)
+    if not isinstance(value, str):
+        raise TypeError(f"{name} {value!r:.40} is not a string")
+    return value
+
+
+def _object(v: dict, name: str) -> dict:
+    value = v.get(name)
+    if not isinstance(value, dict):
+        raise TypeError(f"{name} {value!r:.40} is not a JSON object")
+    return value
+
+
+def parse_command(data: bytes, where: str) -> Command:
+    """A /commands message: step (0..MAX_STEP), kind, args; finite numbers only (the args themselves are
+    checked by Twin.apply when replayed). RecordingError naming the field otherwise."""
     v = _json_message(data, "command", where)
     try:
-        return Command(step=int(v["step"]), kind=str(v["kind"]), args=dict(v["args"]))
-    except (KeyError, TypeError, ValueError) as err:
-        raise RecordingError(f"recording {where!r}: malformed command {v!r}") from err
+        return Command(step=_whole(v, "step", S.MAX_STEP), kind=_text(v, "kind"), args=_object(v, "args"))
+    except (TypeError, ValueError) as err:
+        raise RecordingError(f"recording {where!r}: malformed command {json.dumps(v)[:120]}: {err}") from err
 
 
-def _event(data: bytes, where: str) -> Event:
+def parse_event(data: bytes, where: str) -> Event:
+    """A /twin/events message: step, t_ns, kind, body, message, data; RecordingError naming the field otherwise."""
     v = _json_message(data, "event", where)
     try:
-        return Event(step=int(v["step"]), t_ns=int(v["t_ns"]), kind=str(v["kind"]), body=str(v["body"]),
-                     message=str(v["message"]), data=dict(v["data"]))
-    except (KeyError, TypeError, ValueError) as err:
-        raise RecordingError(f"recording {where!r}: malformed event {v!r}") from err
+        return Event(step=_whole(v, "step", S.MAX_STEP), t_ns=_whole(v, "t_ns", S.MAX_T_NS), kind=_text(v, "kind"),
+                     body=_text(v, "body"), message=_text(v, "message"), data=_object(v, "data"))
+    except (TypeError, ValueError) as err:
+        raise RecordingError(f"recording {where!r}: malformed event {json.dumps(v)[:120]}: {err}") from err
 
 
 def _columns(messages: list[Message], spec: list[tuple[int, str]], where: str, topic: str) -> list[np.ndarray]:
@@ -214,6 +253,9 @@ def decode_frames(joints: list[Message], suction: list[Message], poses: list[Mes
         if array.size != size:
             raise RecordingError(f"recording {where!r}: field {name} holds {array.size} values for {n} frames; "
                                  f"expected {size}")
+    if n and not (0 <= step[0] and step[-1] <= S.MAX_STEP and 0 <= t_ns.min() and t_ns.max() <= S.MAX_T_NS):
+        raise RecordingError(f"recording {where!r}: frame steps or times out of range (steps {step[0]}..{step[-1]}); "
+                             f"expected steps 0..{S.MAX_STEP} and times 0..{S.MAX_T_NS} ns")
     return FrameColumns(
         step=step, t_ns=t_ns, joint_q=q.reshape(n, 4), joint_qd=qd.reshape(n, 4),
         joint_effort=effort.reshape(n, 4), joint_target=target.reshape(n, 4),

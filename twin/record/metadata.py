@@ -106,7 +106,7 @@ def parse_config(records: dict[str, dict[str, str]], where: str) -> TwinConfig:
     if record is None or "json" not in record:
         raise RecordingError(f"{where} has no {S.META_CONFIG} metadata; it was not written by twin")
     try:
-        return TwinConfig.from_dict(strict_json.loads(record["json"]))
+        return TwinConfig.from_dict(strict_json.loads(record["json"], constants=True))  # the schema names a NaN
     except (ValueError, ConfigError) as err:
         raise RecordingError(f"{where}: its twin configuration is unreadable: {err}") from err
 

@@ -7,7 +7,6 @@ everything else unchanged, plus a `twin.recovered` metadata record.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +15,7 @@ from mcap.writer import CompressionType, Writer
 
 from twin.errors import RecordingError
 from twin.record import schemas as S
-from twin.record.mcap_reader import Scan, block_steps, recording_from_scan, scan
+from twin.record.mcap_reader import Scan, block_steps, parse_command, parse_event, recording_from_scan, scan
 from twin.record.metadata import parse_config
 
 BLOCK_TOPICS = (S.JOINTS.topic, S.SUCTION.topic, S.POSES.topic)
@@ -60,11 +59,10 @@ def _keep(s: Scan, message, steps: dict[int, np.ndarray], last_step: int, dt_ns:
     if topic in BLOCK_TOPICS:
         block = steps[id(message)]
         return bool(block.size) and int(np.max(block)) <= last_step
-    if topic in (S.COMMANDS.topic, S.EVENTS.topic):
-        try:
-            return int(json.loads(message.data)["step"]) <= last_step
-        except (ValueError, KeyError, TypeError) as err:
-            raise RecordingError(f"{s.path!r}: a {topic} message is not a twin JSON record: {err}") from err
+    if topic == S.COMMANDS.topic:
+        return parse_command(message.data, s.path).step <= last_step  # RecordingError if malformed
+    if topic == S.EVENTS.topic:
+        return parse_event(message.data, s.path).step <= last_step
     return message.log_time <= max(0, last_step) * dt_ns
 
 

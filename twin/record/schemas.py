@@ -143,3 +143,10 @@ META_VERSIONS = "twin.versions"
 META_FINALIZED = "twin.finalized"
 META_RECOVERED = "twin.recovered"
 LIBRARY = "twin-record 1"  # fixed: identical runs give byte-identical files
+
+# The largest message twin writes (the writer refuses more, the readers refuse more): a 0.25 s block
+# at the finest time step (2,500 frames) of 100 objects' poses is 14 MB; a URDF is far smaller.
+MAX_MESSAGE_BYTES = 16 * 1024 * 1024
+# Steps and simulated nanoseconds stay below these, so step * dt_ns fits an int64 at any time step.
+MAX_STEP = 10**10
+MAX_T_NS = 2**62

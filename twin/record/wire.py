@@ -12,6 +12,9 @@ import numpy as np
 from twin.errors import RecordingError
 
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
+# Fields one message may hold: twin writes each block field once (packed), so a handful; other
+# writers' unpacked arrays are accepted up to this many values. A damaged message costs bounded time.
+MAX_FIELDS = 65_536
 _VARINT_CACHE = [bytes([i]) for i in range(128)]
 
 
@@ -67,7 +70,7 @@ def split_fields(buf: bytes) -> dict[int, list[tuple[int, bytes | int]]]:
     """Every field of a message, by number, in order: (wire_type, value) with value the raw bytes
     of a length-delimited or fixed-width field, or the integer of a varint."""
     out: dict[int, list[tuple[int, bytes | int]]] = {}
-    pos, end = 0, len(buf)
+    pos, end, count = 0, len(buf), 0
     while pos < end:
         key = buf[pos]  # one-byte keys and lengths are the common case: skip the general varint
         if key < 128:
@@ -75,6 +78,11 @@ def split_fields(buf: bytes) -> dict[int, list[tuple[int, bytes | int]]]:
         else:
             key, pos = read_varint(buf, pos)
         number, wire_type = key >> 3, key & 7
+        if number == 0:
+            raise RecordingError("protobuf field number 0 (zero bytes or garbage), not a field")
+        count += 1
+        if count > MAX_FIELDS:
+            raise RecordingError(f"protobuf message holds more than {MAX_FIELDS:,} fields; expected packed arrays")
         if wire_type == LEN:
             if pos < end and buf[pos] < 128:
                 size, pos = buf[pos], pos + 1

@@ -39,28 +39,71 @@ def test_every_builtin_map_is_valid_and_described(name):
     assert len(lines) == len(keymap) and all(line.strip() for line in lines)
 
 
-def test_seed000_keys_do_what_report_000_says():
-    t, _ = _targets_after("seed000", ["d", "d", "a"])
-    assert t[0] == pytest.approx(DEG) and t[1] == 0.0
-    t, _ = _targets_after("seed000", ["e", "q", "q"])
-    assert t[1] == pytest.approx(-DEG) and t[0] == 0.0
-    t, suction = _targets_after("seed000", ["5"])
-    assert t[2] == PROFILES["seed000"].z_stroke_m and suction is None
-    t, suction = _targets_after("seed000", ["5", "8"])  # 8 raises Z by 5 cm and switches suction on
-    assert t[2] == pytest.approx(PROFILES["seed000"].z_stroke_m - 0.05) and suction == 1
+def _positions_after(profile: str, keys: list[str]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(joint positions right after the keys, without stepping; targets)."""
+    p = PROFILES[profile]
+    twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))
+    try:
+        for key in keys:
+            twin.press_key(key)
+        return tuple(twin.frame.joint_q), tuple(twin.targets)
+    finally:
+        twin.close()
+
+
+def test_seed000_keys_do_what_report_000_s_lua_does():
+    """Its sysCall_actuation: angle1/angle2/d from 0, joints set at once (sim.setJointPosition)."""
+    q, t = _positions_after("seed000", ["d", "d", "a"])
+    assert q[0] == pytest.approx(DEG) and t[0] == pytest.approx(DEG) and q[1] == 0.0  # a jump, no motion
+    q, _ = _positions_after("seed000", ["e", "q", "q"])
+    assert q[1] == pytest.approx(-DEG) and q[0] == 0.0
+    q, _ = _positions_after("seed000", ["5"])
+    assert q[2] == pytest.approx(0.084)  # its lower stop
+    q, _ = _positions_after("seed000", ["5", "8"])  # d = d - 0.05 from 0: -0.05, wherever Z was
+    assert q[2] == pytest.approx(-0.05)
+    q, _ = _positions_after("seed000", ["8", "5", "8"])
+    assert q[2] == pytest.approx(-0.10)
+    t, suction = _targets_after("seed000", ["8"])
+    assert suction == 1
     _, suction = _targets_after("seed000", ["8", "s"])
     assert suction == 0
 
 
-def test_seed001_arrows_keep_the_pad_heading():
-    t, _ = _targets_after("seed001", ["left", "left", "up", "down", "down", "down"])
+def test_seed001_arrows_do_what_report_001_s_lua_does():
+    """deg3 = deg2 - deg1 after left/right, deg1 - deg2 after up/down: the pad does not keep its heading."""
+    t, _ = _targets_after("seed001", ["left", "left", "up"])
     shoulder, elbow, _z, wrist = t
-    assert shoulder == pytest.approx(2 * DEG) and elbow == pytest.approx(-2 * DEG)
-    assert shoulder + elbow + wrist == pytest.approx(0.0, abs=1e-12)
+    assert (shoulder, elbow, wrist) == pytest.approx((2 * DEG, DEG, DEG))  # deg3 = deg1 - deg2
+    t, _ = _targets_after("seed001", ["up", "right"])
+    assert (t[0], t[1], t[3]) == pytest.approx((-DEG, DEG, 2 * DEG))  # deg3 = deg2 - deg1
     t, suction = _targets_after("seed001", ["3"])
-    assert t[2] == PROFILES["seed001"].z_stroke_m and suction == 1
+    assert t[2] == -0.055 and suction == 1
     t, suction = _targets_after("seed001", ["3", "4", "5"])
     assert t[2] == 0.0 and suction == 0
+
+
+@pytest.mark.parametrize("name", ["mtb", "seed002", "seed003"])
+def test_mtb_map_lowers_and_raises_in_each_scene_s_own_z(name):
+    t, _ = _targets_after(name, ["k"])
+    assert t[2] == PROFILES[name].z_down()
+    t, _ = _targets_after(name, ["k", "i"])
+    assert t[2] == PROFILES[name].z_up()
+
+
+def test_seed000_keys_press_the_pad_onto_the_box_and_switch_on_only_when_lifted():
+    """Report 000's keys as its Lua does them: 5 sets joint3 to its stop (0.084, 2.4 cm below the loop's
+    0.06 on the box: the pad comes to rest on the box, its sensor inside it) and 8 switches suction on
+    only together with a lift; so these keys alone never make the pad hold the box (see the README)."""
+    p = PROFILES["seed000"]
+    twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))
+    try:
+        for key in parse_keys("d*47 q*126 8 5 8"):
+            twin.press_key(key)
+            twin.wait(0.1)
+        assert twin.suction_pad.held == -1
+        assert math.dist(twin.object_pose("box")[:2], (0.2, 0.7)) < 0.002
+    finally:
+        twin.close()
 
 
 def test_quit_keys_never_steal_a_bound_key():
@@ -87,7 +130,7 @@ def test_user_keymap_toml_with_degrees_and_extends(tmp_path):
     assert keymap["w"] == [["jog", "elbow", math.radians(2.5)]]
     assert keymap["x"] == [["target", "z", 0.1], ["signal", "lamp", 3]]
     assert keymap["d"] == [["jog", "shoulder", 0.1]]  # a single action without the outer list
-    assert keymap["a"] == [["jog", "shoulder", -DEG]]  # from seed000
+    assert keymap["a"] == [["add", "shoulder", -DEG, "position"]]  # from seed000
 
 
 def test_user_keymap_json(tmp_path):

@@ -4,7 +4,11 @@ A key map is plain data carried in TwinConfig.keymap (so a recording replays its
 way): key name -> list of actions, in SI units (rad for revolute joints, m for Z):
   ["jog", joint, delta]               the joint's target moves by delta
   ["jog_keep_heading", joint, delta]  shoulder/elbow jog; the wrist turns back so the pad keeps its heading
-  ["target", joint, value|"min"|"max"]
+  ["target", joint, value|"min"|"max"|"down"|"up"]   ("down"/"up": the scene's Z values, profile.z_down/z_up)
+  ["position", joint, value]          set at once (a jump, like sim.setJointPosition)
+  ["add", joint, delta, "target"|"position"]  the map's own variable for the joint (from 0, as the
+                                      reports' scripts keep one) moves by delta; the joint is sent there
+  ["diff", joint, a, b]               the joint's variable becomes a's minus b's; its target goes there
   ["signal", name, value]             an integer signal
   ["suction", 0|1]                    the profile's suction signal
 Joints are named by role (shoulder, elbow, z, wrist) or by the profile's own joint names.
@@ -28,8 +32,9 @@ NAMED_KEYS = ("up", "down", "left", "right", "space", "enter", "tab", "backspace
               "home", "end", "pageup", "pagedown", *(f"f{i}" for i in range(1, 13)))
 ALWAYS_QUIT = ("esc", "ctrl-c", "ctrl-d")
 WAIT = "wait"  # in a --keys script: no key for one interval
-OPS = ("jog", "jog_keep_heading", "target", "signal", "suction")
-_ARITY = {"jog": 3, "jog_keep_heading": 3, "target": 3, "signal": 3, "suction": 2}
+OPS = ("jog", "jog_keep_heading", "target", "position", "add", "diff", "signal", "suction")
+_ARITY = {"jog": 3, "jog_keep_heading": 3, "target": 3, "position": 3, "add": 4, "diff": 4, "signal": 3, "suction": 2}
+HOW = ("target", "position")
 
 
 def _deg(d: float) -> float:
@@ -44,27 +49,30 @@ def _jog_kh(role: str, delta: float) -> list:
     return ["jog_keep_heading", role, delta]
 
 
-# seed000: a/d shoulder -/+1 deg, q/e elbow -/+1 deg, 8 raise Z 5 cm + suction on, 5 lower Z to its stop,
-# s suction off.
+# seed000, as report 000's Lua does it: its variables angle1, angle2, d start at 0; a/d: angle1 -/+1 deg,
+# q/e: angle2 -/+1 deg, each set at once (sim.setJointPosition); 8: d = d - 0.05, joint3 set to d and
+# suction on (its first press sets -0.05, wherever Z is); 5: joint3 set to 0.084 (the lower stop; d
+# unchanged); s: suction off.
 SEED000 = {
-    "a": [_jog("shoulder", -_deg(1))],
-    "d": [_jog("shoulder", _deg(1))],
-    "q": [_jog("elbow", -_deg(1))],
-    "e": [_jog("elbow", _deg(1))],
-    "8": [_jog("z", -0.05), ["suction", 1]],
-    "5": [["target", "z", "max"]],
+    "a": [["add", "shoulder", -_deg(1), "position"]],
+    "d": [["add", "shoulder", _deg(1), "position"]],
+    "q": [["add", "elbow", -_deg(1), "position"]],
+    "e": [["add", "elbow", _deg(1), "position"]],
+    "8": [["add", "z", -0.05, "position"], ["suction", 1]],
+    "5": [["position", "z", 0.084]],
     "s": [["suction", 0]],
 }
 
-# seed001: CoppeliaSim keys 2009/2010 (left/right) shoulder +/-1 deg, 2007/2008 (up/down) elbow +/-1 deg,
-# the wrist following so the pad keeps its heading; 3 lower Z + suction on, 4 raise Z, 5 suction off.
+# seed001, as report 001's Lua does it: CoppeliaSim keys 2009/2010 (left/right) deg1 +/-1 and
+# deg3 = deg2 - deg1; 2007/2008 (up/down) deg2 +/-1 and deg3 = deg1 - deg2 (so the pad does not keep
+# its heading); targets, not jumps; 3: Z -0.055 (down) + suction on, 4: Z 0 (up), 5: suction off.
 SEED001 = {
-    "left": [_jog_kh("shoulder", _deg(1))],
-    "right": [_jog_kh("shoulder", -_deg(1))],
-    "up": [_jog_kh("elbow", _deg(1))],
-    "down": [_jog_kh("elbow", -_deg(1))],
-    "3": [["target", "z", "max"], ["suction", 1]],
-    "4": [["target", "z", "min"]],
+    "left": [["add", "shoulder", _deg(1), "target"], ["diff", "wrist", "elbow", "shoulder"]],
+    "right": [["add", "shoulder", -_deg(1), "target"], ["diff", "wrist", "elbow", "shoulder"]],
+    "up": [["add", "elbow", _deg(1), "target"], ["diff", "wrist", "shoulder", "elbow"]],
+    "down": [["add", "elbow", -_deg(1), "target"], ["diff", "wrist", "shoulder", "elbow"]],
+    "3": [["target", "z", -0.055], ["suction", 1]],
+    "4": [["target", "z", 0.0]],
     "5": [["suction", 0]],
 }
 
@@ -80,8 +88,8 @@ MTB = {
     "L": [_jog_kh("elbow", _deg(1))],
     "u": [_jog("wrist", -_deg(5))],
     "o": [_jog("wrist", _deg(5))],
-    "k": [["target", "z", "max"]],
-    "i": [["target", "z", "min"]],
+    "k": [["target", "z", "down"]],
+    "i": [["target", "z", "up"]],
     "g": [["suction", 1]],
     "r": [["suction", 0]],
 }
@@ -147,8 +155,9 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
         raise _bad(src, key, action, f"expected a list [op, ...] with op one of {', '.join(OPS)}")
     op = action[0]
     if len(action) != _ARITY[op]:
-        shapes = {"jog": "[op, joint, delta]", "target": "[op, joint, value|\"min\"|\"max\"]",
-                  "signal": "[op, name, integer]", "suction": "[op, 0|1]"}
+        shapes = {"jog": "[op, joint, delta]", "target": "[op, joint, value|\"min\"|\"max\"|\"down\"|\"up\"]",
+                  "position": "[op, joint, value]", "add": "[op, joint, delta, \"target\"|\"position\"]",
+                  "diff": "[op, joint, a, b]", "signal": "[op, name, integer]", "suction": "[op, 0|1]"}
         raise _bad(src, key, action, f"has {len(action)} items; expected {shapes.get(op, shapes['jog'])}")
     if op == "suction":
         if action[1] not in (0, 1) or isinstance(action[1], bool):
@@ -171,9 +180,25 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
                                      f"or {', '.join(profile.joint_names)}")
     if op == "jog_keep_heading" and ROLES[joint] not in ("shoulder", "elbow"):
         raise _bad(src, key, action, f"keeping the heading needs the shoulder or elbow, not {joint_name!r}")
-    if op == "target" and action[2] in ("min", "max"):
+    if op == "target" and (action[2] in ("min", "max") or action[2] in ("down", "up") and ROLES[joint] == "z"):
         return [op, ROLES[joint], action[2]]
+    if op == "diff":
+        return [op, ROLES[joint], *(_role(src, key, action, name, profile) for name in action[2:4])]
+    if op == "add":
+        if action[3] not in HOW:
+            raise _bad(src, key, action, f"how {action[3]!r} is invalid; expected one of {', '.join(HOW)}")
+        return [op, ROLES[joint], _value(src, key, action, action[2], joint), action[3]]
     return [op, ROLES[joint], _value(src, key, action, action[2], joint)]
+
+
+def _role(src: str, key: str, action: list, name: object, profile: RobotProfile) -> str:
+    """The role of a joint named in a "diff" action."""
+    try:
+        if isinstance(name, str):
+            return ROLES[profile.joint_index(name)]
+    except UnknownName:
+        pass
+    raise _bad(src, key, action, f"unknown joint {name!r}; expected one of {', '.join(ROLES)}")
 
 
 def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in)") -> dict:
@@ -238,9 +263,17 @@ def describe_action(action: list) -> str:
     if op == "signal":
         return f"signal {action[1]}={action[2]}"
     joint, value = action[1], action[2]
+    if op == "diff":
+        return f"{joint} target = {value} - {action[3]}"
+    if op == "position":
+        return f"set Z to {value:.3f} m" if joint == "z" else f"set {joint} to {math.degrees(value):+g} deg"
+    if op == "add":
+        how = "set" if action[3] == "position" else "target"
+        step = f"{value * 100:+g} cm" if joint == "z" else f"{math.degrees(value):+.4g} deg"
+        return f"{joint} {step} ({how}; the map's own count from 0)"
     if op == "target":
-        if joint == "z" and value in ("min", "max"):
-            return "lower Z to its stop" if value == "max" else "raise Z to the top"
+        if joint == "z" and value in ("down", "up"):
+            return "lower Z (down)" if value == "down" else "raise Z (up)"
         if value in ("min", "max"):
             return f"{joint} to its {value}"
         return f"Z to {value:.3f} m" if joint == "z" else f"{joint} to {math.degrees(value):+g} deg"
@@ -254,7 +287,7 @@ def help_lines(keymap: dict) -> list[str]:
     """One line per key: `key  what it does`, grouped by joint (shoulder, elbow, Z, wrist, then the rest)."""
     def order(key: str) -> tuple:
         first = keymap[key][0]
-        joint = first[1] if first[0] in ("jog", "jog_keep_heading", "target") else ""
+        joint = first[1] if first[0] in ("jog", "jog_keep_heading", "target", "position", "add", "diff") else ""
         return (ROLES.index(joint) if joint in ROLES else len(ROLES), key.lower(), key != key.lower())
 
     return [f"{key:>5}  " + " + ".join(describe_action(a) for a in keymap[key]) for key in sorted(keymap, key=order)]

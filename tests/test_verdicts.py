@@ -310,3 +310,18 @@ def test_a_task_that_calls_sys_exit_0_fails(tmp_path):
     assert done.returncode == 1 and "Traceback" not in done.stderr
     assert done.stderr.strip() == "twin: error: the task called sys.exit(0) instead of returning"
     assert load(tmp_path / "q.mcap").meta["twin.finalized"]["outcome"] == "error"
+
+
+def test_non_finite_event_data_is_null_in_memory_as_in_the_file(tmp_path):
+    from twin.config import TwinConfig
+    from twin.record import open_recorders
+    from twin.twin import Twin
+
+    path = tmp_path / "nan.mcap"
+    with open_recorders(TwinConfig(), {"source": "task", "task": "", "params": {}}, mcap_path=path) as sinks:
+        t = Twin(sinks=sinks)
+        said = t.event("placed", "box", "nan error", error_m=float("nan"), limits=[1.0, float("-inf")])
+        t.step(2)
+        t.close()
+    assert said.data == {"error_m": None, "limits": [1.0, None]}
+    assert next(e for e in load(path).events if e.kind == "placed").data == said.data

@@ -271,7 +271,8 @@ class Twin:
 
 
 def _json_data(kind: str, data: dict) -> dict:
-    """Event data as plain JSON values with sorted keys, exactly what a recording will give back."""
+    """Event data as plain JSON values with sorted keys, exactly what a recording will give back
+    (a non-finite number is null)."""
     if not data:
         return {}
 
@@ -282,7 +283,8 @@ def _json_data(kind: str, data: dict) -> dict:
         raise TypeError(f"a value of type {type(value).__name__!r}")
 
     try:
-        return json.loads(json.dumps(data, sort_keys=True, default=plain))
+        # NaN and infinities become null, as the recording writes them: memory and file agree
+        return json.loads(json.dumps(data, sort_keys=True, default=plain), parse_constant=lambda _: None)
     except (TypeError, ValueError) as err:
         raise ConfigError(f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
                           "expected numbers, strings, booleans, None, lists and dicts") from err

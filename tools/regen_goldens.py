@@ -43,6 +43,14 @@ def goldens() -> list[Golden]:
                   f"pick_place, 2 cycles, robot {name}, default scene (one 50 mm, 0.1 kg box at (0.2, 0.7))")
            for name, profile in sorted(PROFILES.items())]
     heavy = TwinConfig(objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False))
+    out += [  # each report's own step-4 Lua loop on its own scene (docs/seed-conventions.md)
+        Golden("seed000_seed000", TwinConfig(profile=PROFILES["seed000"]), "seed000", {"cycles": 1},
+               "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: box to (-0.3, -0.55) and back"),
+        Golden("seed001_seed001", TwinConfig(profile=PROFILES["seed001"]), "seed001", {"cycles": 1},
+               "task seed001 (report 001's Lua loop, its Heron IK as written), 1 cycle, robot seed001: the miss"),
+        Golden("seed002_seed002", TwinConfig(profile=PROFILES["seed002"]), "seed002", {},
+               "task seed002 (report 002's Lua, its Heron IK as written), robot seed002: the miss"),
+    ]
     out.append(Golden("pick_place_break_mtb", heavy, "pick_place", {"cycles": 1},
                       "pick_place, 1 cycle, robot mtb, a 0.5 kg box (4.9 N) on the stock finite-strength pad "
                       "(max pull 3 N, shear 1 N, peel 0.1 N·m): the hold breaks"))

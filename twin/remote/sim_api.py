@@ -159,14 +159,14 @@ class SimApi:
         if HANDLE_OBJECT0 <= handle < HANDLE_OBJECT0 + len(twin.config.objects):
             return frame.object_poses[handle - HANDLE_OBJECT0]
         j = self._joint(handle)
-        q1, q2 = frame.joint_q[0], frame.joint_q[1]
+        q1, q2 = kinematics.link_angles(p, frame.joint_q)  # link directions in the profile's frame
         pad = kinematics.fk(p, frame.joint_q)
         if j == 0:
             return (0.0, 0.0, p.shoulder_height_m, *yaw_quat(q1))
         if j == 1:
-            return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *yaw_quat(q1 + q2))
+            return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *yaw_quat(q2))
         if j == 2:
-            return (pad.x_m, pad.y_m, p.elbow_height_m, *yaw_quat(q1 + q2))
+            return (pad.x_m, pad.y_m, p.elbow_height_m, *yaw_quat(q2))
         return (pad.x_m, pad.y_m, pad.z_m + p.pad_length_m, *yaw_quat(pad.heading_rad))
 
     def _relative_pose(self, handle: int, rel: int) -> tuple[float, ...]:

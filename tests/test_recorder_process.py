@@ -14,6 +14,7 @@ import pytest
 
 from twin.config import TwinConfig
 from twin.errors import ConfigError, RecordingError
+from twin.outputs import partial_path
 from twin.record import open_recorders
 from twin.record import schemas as S
 from twin.record.mcap_reader import load, scan
@@ -71,8 +72,10 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
     """)
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == -signal.SIGKILL, done.stderr
-    _wait_until_settled(path)  # the orphaned recorder writes what it got once it sees the pipe close
-    kept = scan(path, strict=False)
+    partial = partial_path(path)  # the file is renamed to path only when finalized
+    _wait_until_settled(partial)  # the orphaned recorder writes what it got once it sees the pipe close
+    assert not path.exists()
+    kept = scan(partial, strict=False)
     assert not kept.complete and S.META_FINALIZED not in kept.metadata
     fixed = tmp_path / "fixed.mcap"
     recover(path, fixed)

@@ -68,18 +68,19 @@ def test_a_killed_run_is_recovered_but_for_at_most_the_last_second(tmp_path, cap
     assert proc.returncode == -signal.SIGKILL
     assert reported_s >= 4.0, proc.stderr.read()
 
-    assert main(["info", str(broken)]) == 2
+    assert not broken.exists()  # a recording is renamed into place only when finalized
+    assert main(["info", str(broken) + ".partial"]) == 2
     out, err = capsys.readouterr()
     assert "finalized: no" in out and "not finalized" in err
     fixed = tmp_path / "fixed.mcap"
-    assert main(["recover", str(broken), "-o", str(fixed)]) == 0
+    assert main(["recover", str(broken), "-o", str(fixed)]) == 0  # finds killed.mcap.partial
     rec = twin.load(fixed)
     kept_s = rec.frames.t_ns[-1] * 1e-9
     assert kept_s >= reported_s - 1.0, f"lost {reported_s - kept_s:.3f} s of simulated time"
-    assert not rec.finalized and rec.meta[S.META_RECOVERED]["source"] == "killed.mcap"
+    assert not rec.finalized and rec.meta[S.META_RECOVERED]["source"] == "killed.mcap.partial"
     capsys.readouterr()
     assert main(["info", str(fixed)]) == 0
-    assert "finalized: no - recovered from killed.mcap" in capsys.readouterr().out
+    assert "finalized: no - recovered from killed.mcap.partial" in capsys.readouterr().out
 
     # runs are deterministic: the recovered part equals the same run made again in memory
     again = _rerun(task, kept_s + 0.5)
@@ -169,7 +170,7 @@ def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_
         for event in [e for e in collector.events if e.step == frame.step]:
             recorder.on_event(event)
         if frame.step % 97 == 0:  # look at the file as a crash would leave it, now and then
-            s = scan(live, strict=False)
+            s = scan(str(live) + ".partial", strict=False)
             assert not s.complete
             by_topic = s.by_topic()
             newest_ns = max([m.log_time for m in by_topic[S.TF.topic]], default=0)

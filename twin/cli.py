@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -13,7 +14,8 @@ from twin.cli_record import add_record_commands, add_record_options, record_path
 from twin.cli_view import add_view_command
 from twin.errors import TwinError
 from twin.remote.command import add_serve_command
-from twin.tasks import accepted_params, resolve, run_task
+from twin.signals import Terminated, stop_signals_raise
+from twin.tasks import TimeLimit, accepted_params, resolve, run_task
 from twin.twin import Twin
 
 
@@ -28,8 +30,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
     run = {"source": "task", "task": args.task, "params": params}
     summary = _Summary()
+    limit = [TimeLimit(args.timeout)] if args.timeout is not None else []
     with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:
-        twin = Twin(config, gui=args.gui, sinks=[summary, *sinks])
+        twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])  # the limit last: recorders see its frame
         wall0 = time.perf_counter()
         try:
             run_task(twin, fn, params)
@@ -108,6 +111,16 @@ def _add_teleop_parser(sub) -> None:
     p.set_defaults(func=cmd_teleop)
 
 
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"--timeout {text!r} is invalid; expected seconds of simulated time > 0")
+    return value
+
+
 class _OneLineErrors(argparse.ArgumentParser):
     """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit it."""
 
@@ -122,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("task")
     add_twin_options(p)
     p.add_argument("--cycles", type=whole_number(1), default=2, help="pick-and-place cycles (default 2)")
+    p.add_argument("--timeout", type=_positive_seconds, metavar="SECONDS",
+                   help="end the task with an error (exit 1) once it passes this much simulated time")
     add_record_options(p)
     p.set_defaults(func=cmd_run)
     _add_teleop_parser(sub)
@@ -140,13 +155,17 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as done:  # --help (0) or a usage error (2), already printed
         return done.code if isinstance(done.code, int) else 2
     try:
-        return args.func(args)
+        with stop_signals_raise():  # SIGTERM and SIGHUP unwind like Ctrl-C: recordings are finalized
+            return args.func(args)
     except TwinError as err:
         print(f"twin: error: {err}", file=sys.stderr)
         return err.exit_code
     except KeyboardInterrupt:
         print("twin: interrupted", file=sys.stderr)
         return 130
+    except Terminated as stop:
+        print(f"twin: stopped by {stop.name}", file=sys.stderr)
+        return stop.exit_code
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1

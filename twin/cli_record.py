@@ -8,6 +8,7 @@ from pathlib import Path
 
 from twin.cli_args import whole_number
 from twin.errors import ConfigError, RecordingError
+from twin.outputs import check_output, partial_path
 
 DEFAULT_FOLDER = "runs"
 
@@ -27,22 +28,29 @@ def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = 
 
 
 def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | None, Path | None]:
-    """The MCAP and Rerun paths the options ask for (the MCAP default is runs/<default_stem>.mcap)."""
+    """The MCAP and Rerun paths the options ask for (the MCAP default is runs/<default_stem>.mcap),
+    checked before any work (suffix, not a folder, the folder exists). Only the default folder
+    runs/ is created; a folder the user names must exist."""
     mcap = args.record
     if mcap is None and getattr(args, "record_by_default", False) and not getattr(args, "no_record", False):
         mcap = str(Path(DEFAULT_FOLDER) / f"{default_stem}.mcap")
-    rrd = args.rrd
-    for path, suffix in ((mcap, ".mcap"), (rrd, ".rrd")):
-        if path is not None and Path(path).suffix != suffix:
-            raise ConfigError(f"recording path {path!r} should end in {suffix}")
-    if mcap is not None and rrd is not None and Path(mcap).resolve() == Path(rrd).resolve():
-        raise ConfigError(f"the MCAP and Rerun recordings cannot share the path {mcap!r}")
-    return (Path(mcap) if mcap is not None else None), (Path(rrd) if rrd is not None else None)
+        try:
+            Path(DEFAULT_FOLDER).mkdir(exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"cannot create the default folder {DEFAULT_FOLDER!r}: {err.strerror or err}; "
+                              "pass --record FILE.mcap or --no-record") from err
+    mcap_path = check_output(mcap, ".mcap", option="recording") if mcap is not None else None
+    rrd_path = check_output(args.rrd, ".rrd", option="recording") if args.rrd is not None else None
+    return mcap_path, rrd_path
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     from twin.record.info import describe, format_info
 
+    partial = partial_path(args.file)
+    if not Path(args.file).exists() and partial.is_file():
+        raise RecordingError(f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
+                             f"of a run that was killed (or is still running); `twin recover {args.file}` restores it")
     info = describe(args.file)
     for line in format_info(info):
         print(line)
@@ -67,7 +75,12 @@ def add_record_commands(sub) -> None:
     p.add_argument("file", metavar="FILE.mcap")
     p.set_defaults(func=cmd_info)
     p = sub.add_parser("recover", help="restore the readable part of a recording cut short (crash, kill -9)",
-                       description="Reads up to the first damaged record and writes a complete MCAP file.")
-    p.add_argument("file", metavar="BROKEN.mcap")
-    p.add_argument("-o", "--output", required=True, metavar="FIXED.mcap", help="where to write the restored file")
+                       description="Reads up to the first damaged record and writes a complete MCAP file. A run "
+                                   "writes NAME.mcap.partial and renames it to NAME.mcap when it ends; a killed run "
+                                   "leaves the .partial file: `twin recover NAME.mcap` finds it and writes NAME.mcap.")
+    p.add_argument("file", metavar="BROKEN.mcap",
+                   help="the cut-short file; for a killed run, its NAME.mcap (its NAME.mcap.partial is used)")
+    p.add_argument("-o", "--output", metavar="FIXED.mcap",
+                   help="where to write the restored file (default, for a killed run's .partial file: the NAME.mcap "
+                        "it was meant to become, if that does not exist)")
     p.set_defaults(func=cmd_recover)

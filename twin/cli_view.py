@@ -7,6 +7,7 @@ import math
 import tempfile
 
 from twin.cli_args import port
+from twin.outputs import check_output
 
 DEFAULT_WEB_PORT = 9090
 
@@ -41,6 +42,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     from twin.record import viewer
 
     if args.rrd:
+        check_output(args.rrd, ".rrd", inputs=[args.file], option="--rrd")  # before any work
         frames = viewer.mcap_to_rrd(args.file, args.rrd)
         print(f"wrote {args.rrd}: {frames} frames")
         return 0

@@ -31,3 +31,7 @@ class TaskError(TwinError):
     """A task raised; the run was closed cleanly and the exception recorded as an Event."""
 
     exit_code = 1
+
+
+class TaskTimeout(TaskError):
+    """A task ran past its bound of simulated time (`twin run --timeout`)."""

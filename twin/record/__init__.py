@@ -8,6 +8,7 @@ from pathlib import Path
 
 from twin.config import TwinConfig
 from twin.errors import TwinError
+from twin.signals import Terminated
 from twin.urdf import mesh_paths, urdf_text
 
 
@@ -15,7 +16,9 @@ from twin.urdf import mesh_paths, urdf_text
 def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | None = None,
                    rrd_path: str | Path | None = None, rate: int = 1, background: bool = True) -> Iterator[list]:
     """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file is
-    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised.
+    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised
+    (interrupted: Ctrl-C, SIGTERM or SIGHUP). Files are written as NAME.partial and renamed into place
+    when finalized; the folders must exist.
 
     background: the writers run in a recorder process on the other core (the same files, byte for
     byte, at a fraction of the stepping thread's time); False keeps them in this process."""
@@ -41,16 +44,25 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
         raise
     try:
         yield sinks
-    except KeyboardInterrupt as err:
-        _note(err, _close_all(sinks, "interrupted", "KeyboardInterrupt"))
+    except (KeyboardInterrupt, Terminated) as err:
+        why = str(err) if isinstance(err, Terminated) else "KeyboardInterrupt"  # SIGTERM, SIGHUP
+        _note(err, _close_all(sinks, "interrupted", why))
         raise
     except BaseException as err:
-        text = str(err) if isinstance(err, TwinError) else f"{type(err).__name__}: {err}"
-        _note(err, _close_all(sinks, "error", text))
+        _note(err, _close_all(sinks, "error", _error_text(err)))
         raise
     failure = _close_all(sinks, "ok", "")
     if failure is not None:
         raise failure
+
+
+def _error_text(err: BaseException) -> str:
+    """The exception as the finalized marker's one line; even one whose __str__ itself raises."""
+    try:
+        text = str(err)
+    except Exception as inner:  # noqa: BLE001 - a user's exception class may be broken
+        text = f"<unprintable: its __str__ raised {type(inner).__name__}>"
+    return text if isinstance(err, TwinError) else f"{type(err).__name__}: {text}"
 
 
 def _close_all(sinks: list, outcome: str, error: str) -> Exception | None:

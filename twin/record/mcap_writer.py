@@ -3,6 +3,8 @@
 Per-step data goes out in blocks (one message per channel per 0.25 s of simulated time), the scene's
 transforms at a viewing rate (30 Hz), events and commands in time order with the blocks. Every 0.5 s
 of simulated time the chunk is closed and the file flushed, so a killed run loses at most that.
+The file is written as `NAME.partial` beside its place (see twin.outputs) and renamed into place,
+fsynced, when it is finalized: a run killed part-way never leaves a broken file where one was.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from mcap.writer import CompressionType, Writer
 
 from twin.config import TwinConfig
 from twin.errors import RecordingError
+from twin.outputs import partial_path, publish
 from twin.record import schemas as S
 from twin.record import wire
 from twin.record.metadata import check_run, run_metadata
@@ -68,9 +71,10 @@ class McapRecorder:
         kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
         if compression not in kinds:
             raise RecordingError(f"chunk compression {compression!r} is unknown; expected one of {sorted(kinds)}")
-        check_run(run)  # before the file is opened: bad input must not clobber an existing file
+        check_run(run)  # before the file is opened: bad input must not clobber an unfinished file
         mesh_files = _read_meshes(config, meshes)  # likewise an unreadable mesh
         self.path = Path(path)
+        self.partial = partial_path(self.path)  # written here, renamed to path once finalized
         self.config = config
         self.rate = rate
         self.n_objects = len(config.objects)
@@ -91,9 +95,10 @@ class McapRecorder:
         self._sequence: dict[int, int] = {}
         self.frames_written = 0
         self.closed = False
+        if self.path.is_dir():
+            raise RecordingError(f"cannot write recording {str(self.path)!r}: it is a folder; expected an .mcap path")
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+            self._file = open(self.partial, "wb")  # noqa: SIM115 - closed in close() or abandon()
         except OSError as err:
             raise RecordingError(f"cannot write recording {str(self.path)!r}: {err.strerror or err}") from err
         self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, compression=kinds[compression])
@@ -101,6 +106,7 @@ class McapRecorder:
             self._start(config, run, urdf, mesh_files, compression)
         except BaseException:
             self._file.close()
+            self.partial.unlink(missing_ok=True)  # nothing of the run in it yet
             raise
 
     def _start(self, config: TwinConfig, run: dict, urdf: str, mesh_files: list[tuple[str, str, bytes]],
@@ -198,7 +204,7 @@ class McapRecorder:
     # -- ending ---------------------------------------------------------------------------------
     def abandon(self) -> None:
         """The run died without closing (its process was killed): write out what arrived, leave the
-        file without a summary or finalized marker, as a crash would (twin recover reads it)."""
+        .partial file without a summary or finalized marker, as a crash would (twin recover finds it)."""
         if self.closed:
             return
         self.closed = True
@@ -212,7 +218,7 @@ class McapRecorder:
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Write what is buffered (and the final frame, whatever the rate), the finalized marker, the
-        summary; close the file. Idempotent."""
+        summary; fsync the file and rename it into place. Idempotent."""
         if self.closed:
             return
         self.closed = True
@@ -231,6 +237,8 @@ class McapRecorder:
                 "duration_ns": str(last.t_ns if last else 0),
             })
             self._writer.finish()
+            self._file.close()
+            publish(self.partial, self.path)
         except OSError as err:
             raise RecordingError(f"cannot finish recording {str(self.path)!r}: {err.strerror or err}") from err
         finally:

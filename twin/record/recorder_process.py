@@ -5,7 +5,8 @@ The stepping thread then pays one to two microseconds a frame (a tuple copy and 
 marshal + pipe write per batch) instead of the writers' encoding and compression. Files are
 byte-for-byte what the in-process writers make, since the same writer code sees the same stream.
 If the twin's process dies, the recorder sees the pipe close and leaves the MCAP file unfinalized
-(and recoverable) with everything that reached it.
+(and recoverable, as NAME.partial) with everything that reached it. Ctrl-C, SIGTERM and SIGHUP are
+the twin's to handle (it then finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from twin.errors import RecordingError
 from twin.types import Command, Event, Frame
 
 BATCH_FRAMES = 32  # frames per pipe write: ~0.13 s of simulated time at 240 Hz
+_TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _BATCH, _CLOSE = b"B", b"C"
 _COMMAND, _EVENT = 0, 1
 
@@ -44,7 +46,13 @@ class RecorderProcess:
         self._process = ctx.Process(
             target=_serve, args=(child_conn, self._conn, config, run, urdf, meshes, mcap_path, rrd_path, rate),
             name="twin-recorder", daemon=True)
-        self._process.start()
+        # Signals wait until the child ignores them (it inherits the mask, then unblocks): one sent
+        # to the process group right at the fork must not kill the recorder before it can finalize.
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _TWINS_SIGNALS)
+        try:
+            self._process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         child_conn.close()
         try:
             self._expect_ok("recording could not start")
@@ -115,7 +123,9 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
     crash); the process then waits for the close request and answers it with the failure, so the
     twin reports it as one line instead of losing the run's remaining output."""
     parent_end.close()  # the fork's copy of the twin's end: with it open, the twin's death would go unseen
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the twin's to handle; it then closes us
+    for signum in _TWINS_SIGNALS:  # Ctrl-C, SIGTERM, SIGHUP are the twin's to handle; it then closes us
+        signal.signal(signum, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _TWINS_SIGNALS)
     from twin.record.mcap_writer import McapRecorder  # already loaded by the parent
 
     mcap, sinks = None, []
@@ -138,7 +148,7 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
             message = conn.recv_bytes()
         except (EOFError, OSError):  # the twin's process died: keep what arrived, unfinalized
             if not failure:
-                _abandon(sinks, mcap)
+                _abandon(sinks)
             os._exit(0)
         tag, body = message[:1], message[1:]
         if tag == _CLOSE:
@@ -152,7 +162,7 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
             _feed(marshal.loads(body), sinks)
         except Exception as err:  # noqa: BLE001 - e.g. a full disk
             failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
-            _abandon(sinks, mcap)
+            _abandon(sinks)
 
 
 def _feed(items: list[tuple], sinks: list) -> None:
@@ -178,11 +188,11 @@ def _close_all(sinks: list, mcap, outcome: str, error: str) -> str:
     return failure
 
 
-def _abandon(sinks: list, mcap) -> None:
-    """Leave the MCAP file as a crash would (recoverable, unfinalized); close the views."""
+def _abandon(sinks: list) -> None:
+    """Leave every file as a crash would: NAME.partial, unfinalized (the MCAP one recoverable)."""
     for sink in sinks:
         try:
-            sink.abandon() if sink is mcap else sink.close()
+            sink.abandon()
         except Exception:  # noqa: BLE001, S110 - already failing: keep what can be kept
             pass
 

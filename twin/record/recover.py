@@ -3,6 +3,9 @@
 Reads up to the first damaged record, keeps only the frames all three block channels hold (a
 chunk may end between them), drops commands and events after the last kept frame, and writes
 everything else unchanged, plus a `twin.recovered` metadata record.
+
+A killed run leaves `NAME.mcap.partial` (recordings are renamed into place only when finalized):
+`recover("NAME.mcap")` finds it when NAME.mcap does not exist, and then writes NAME.mcap.
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ from pathlib import Path
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from twin.errors import RecordingError
+from twin.errors import ConfigError, RecordingError
+from twin.outputs import check_output, final_path, partial_path, publish
 from twin.record import schemas as S
 from twin.record.mcap_reader import Scan, block_steps, parse_command, parse_event, recording_from_scan, scan
 from twin.record.metadata import parse_config
@@ -25,6 +29,7 @@ BLOCK_TOPICS = (S.JOINTS.topic, S.SUCTION.topic, S.POSES.topic)
 class RecoverReport:
     source: str
     output: str
+    asked: str  # the path the user named (source may be the .partial file found beside it)
     was_complete: bool
     problem: str
     messages_kept: int
@@ -35,7 +40,11 @@ class RecoverReport:
 
     def lines(self) -> list[str]:
         state = "was already complete" if self.was_complete else f"was cut short ({self.problem})"
+        found = [] if self.asked == self.source else [
+            f"{self.asked} does not exist; using {self.source}, the unfinished file of a run that was killed "
+            "(it is kept)"]
         return [
+            *found,
             f"{self.source} {state}",
             (f"wrote {self.output}: {self.frames:,} frames, steps 0..{self.last_step}, {self.duration_s:.3f} s "
              f"simulated; {self.messages_kept:,} messages kept, {self.messages_dropped:,} dropped past the last "
@@ -66,14 +75,31 @@ def _keep(s: Scan, message, steps: dict[int, np.ndarray], last_step: int, dt_ns:
     return message.log_time <= max(0, last_step) * dt_ns
 
 
-def recover(source: str | Path, output: str | Path) -> RecoverReport:
-    """Write the readable, consistent part of `source` to `output` (a complete MCAP file)."""
+def find_source(path: str | Path) -> Path:
+    """The file to recover for `path`: itself, or, when it does not exist, the `.partial` file a
+    killed run left beside it."""
+    p = Path(path)
+    partial = partial_path(p)
+    return partial if not p.exists() and partial.is_file() else p
+
+
+def default_output(source: Path) -> Path:
+    """Where to write when no -o is given: the recording a `.partial` file was meant to become, if
+    that does not exist (a killed run); never over an existing file."""
+    target = final_path(source)
+    if target is None or target.exists():
+        why = f"{str(target)!r} exists" if target is not None else f"{str(source)!r} is no .partial file"
+        raise ConfigError(f"name the restored file with -o FIXED.mcap ({why})")
+    return target
+
+
+def recover(source: str | Path, output: str | Path | None = None) -> RecoverReport:
+    """Write the readable, consistent part of `source` (or the .partial file beside it, see
+    find_source) to `output` (default: see default_output), a complete MCAP file put in place whole."""
+    asked, source = str(source), find_source(source)
+    output = default_output(source) if output is None else output
+    out_path = check_output(output, ".mcap", inputs=[source], option="output")
     s = scan(source, strict=False)
-    out_path = Path(output)
-    if out_path.exists() and out_path.resolve() == Path(source).resolve():
-        raise RecordingError(f"recover would overwrite its input {str(source)!r}; choose another -o path")
-    if out_path.suffix != ".mcap":
-        raise RecordingError(f"output path {str(output)!r} should end in .mcap")
     if S.META_CONFIG not in s.metadata:
         raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
                              " nothing to recover")
@@ -81,15 +107,19 @@ def recover(source: str | Path, output: str | Path) -> RecoverReport:
     steps = {id(m): block_steps(m) for m in s.messages if s.topic_of(m) in BLOCK_TOPICS}  # decoded once
     last_step = _last_common_step(s, steps)
     kept = [m for m in s.messages if _keep(s, m, steps, last_step, dt_ns)]
+    writing = out_path.with_name(out_path.name + ".recovering")  # not .partial: that may be the source
     try:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        with open(out_path, "wb") as f:
-            _write(f, s, kept, last_step)
-    except OSError as err:
-        raise RecordingError(f"cannot write {str(output)!r}: {err.strerror or err}") from err
-    recording = recording_from_scan(scan(out_path, strict=True))  # the result must load
+        try:
+            with open(writing, "wb") as f:
+                _write(f, s, kept, last_step)
+            recording = recording_from_scan(scan(writing, strict=True))  # the result must load
+            publish(writing, out_path)
+        except OSError as err:
+            raise RecordingError(f"cannot write {str(output)!r}: {err.strerror or err}") from err
+    finally:
+        writing.unlink(missing_ok=True)
     return RecoverReport(
-        source=str(source), output=str(output), was_complete=s.complete, problem=s.problem,
+        source=str(source), output=str(output), asked=asked, was_complete=s.complete, problem=s.problem,
         messages_kept=len(kept), messages_dropped=len(s.messages) - len(kept), frames=len(recording.frames),
         last_step=last_step, duration_s=max(0, last_step) * dt_ns * 1e-9,
     )

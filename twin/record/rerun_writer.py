@@ -2,7 +2,8 @@
 
 on_frame only copies into preallocated numpy buffers; every `batch_steps` frames (and at close) the
 buffers go out as columns with `send_columns` — one `rr.log` per step would slow a run ~20x.
-The output (a file, or any stream the caller opened) is chosen apart from the logging code.
+The output (a file, or any stream the caller opened) is chosen apart from the logging code. A file
+is written as `NAME.partial` and renamed into place, fsynced, at close (see twin.outputs).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import rerun as rr
 from twin.columns import FrameColumns
 from twin.config import TwinConfig
 from twin.errors import RecordingError
+from twin.outputs import partial_path, publish
 from twin.record import rerun_scene as scene
 from twin.record.rerun_joints import JointMotion
 from twin.recording import Recording
@@ -37,6 +39,16 @@ def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStre
     stream = rr.RecordingStream(scene.APPLICATION_ID)
     stream.save(target, default_blueprint=scene.blueprint(config))
     return stream
+
+
+def finish_file(stream: rr.RecordingStream, partial: Path, target: Path) -> None:
+    """Flush and close a stream saving to `partial`, then put the finished file in place as `target`."""
+    stream.flush()
+    stream.disconnect()  # closes the file sink: the .rrd is complete on disk
+    try:
+        publish(partial, target)
+    except OSError as err:
+        raise RecordingError(f"cannot finish {str(target)!r}: {err.strerror or err}") from err
 
 
 class _Buffers:
@@ -59,8 +71,13 @@ class RerunRecorder:
     def __init__(self, path: str | os.PathLike, config: TwinConfig, urdf_text: str, *,
                  batch_steps: int = DEFAULT_BATCH_STEPS) -> None:
         tree = self._prepare(config, urdf_text, batch_steps)  # bad input fails before a file is created
+        target = Path(path)
+        if not target.parent.is_dir():
+            raise RecordingError(f"cannot write {str(target)!r}: directory {str(target.parent)!r} does not exist")
+        if target.is_dir():
+            raise RecordingError(f"cannot write {str(target)!r}: it is a directory; expected a .rrd file path")
         self.path = str(path)
-        self._start(file_stream(path, config), tree)
+        self._start(file_stream(partial_path(target), config), tree)
 
     @classmethod
     def to_stream(cls, stream: rr.RecordingStream, config: TwinConfig, urdf_text: str, *,
@@ -133,7 +150,21 @@ class RerunRecorder:
         self._events.append(event)
 
     def close(self) -> None:
-        """Send what is buffered and finish the file."""
+        """Send what is buffered and finish the file (fsynced and renamed into place)."""
+        if self.closed:
+            return
+        self.closed = True
+        self._send_frames()
+        self._send_events()
+        self._send_commands()
+        if self.path:
+            finish_file(self.stream, partial_path(self.path), Path(self.path))
+        else:
+            self.stream.flush()
+
+    def abandon(self) -> None:
+        """The run died without closing: write out what arrived but leave the file as `NAME.partial`,
+        so an earlier file at the path is not replaced by a cut-short view."""
         if self.closed:
             return
         self.closed = True

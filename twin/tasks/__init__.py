@@ -8,7 +8,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from twin.errors import ConfigError, TaskError, TwinError
+from twin.errors import ConfigError, TaskError, TaskTimeout, TwinError
 from twin.tasks import pick_place, seed000, seed001, seed002
 
 TaskFn = Callable[..., None]
@@ -56,6 +56,37 @@ def run_task(twin, fn: TaskFn, params: dict) -> None:
         twin.event("task_error", message=f"{type(err).__name__}: {err}")
         raise
     except Exception as err:
-        twin.event("task_error", message=f"{type(err).__name__}: {err}")
-        raise TaskError(f"task raised {type(err).__name__}: {err}") from err
+        text = f"{type(err).__name__}: {_text(err)}"
+        twin.event("task_error", message=text)
+        raise TaskError(f"task raised {text}") from err
     twin.event("task_end")
+
+
+def _text(err: Exception) -> str:
+    """str(err), or a stand-in when the task's exception class cannot print itself (its __str__ raises)."""
+    try:
+        return str(err)
+    except Exception as inner:  # noqa: BLE001 - any failure of a user's __str__
+        return f"<unprintable: its __str__ raised {type(inner).__name__}>"
+
+
+class TimeLimit:
+    """A sink that ends a task run at the first frame past `limit_s` of simulated time (`--timeout`):
+    an endless task would otherwise record until the disk is full. Put it after the recorders, so
+    they hold that frame too; it raises again on every later frame, so a task that catches the
+    error cannot run on."""
+
+    def __init__(self, limit_s: float) -> None:
+        self.limit_s = limit_s
+        self._limit_ns = round(limit_s * 1e9)
+
+    def on_frame(self, frame) -> None:
+        if frame.t_ns > self._limit_ns:
+            raise TaskTimeout(f"task ran past --timeout {self.limit_s:g} s of simulated time "
+                              f"(stopped at t = {frame.t_ns * 1e-9:.3f} s)")
+
+    def on_command(self, command) -> None:
+        pass
+
+    def on_event(self, event) -> None:
+        pass

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import twin
-from twin.config import SceneObject, TwinConfig
+from twin.config import SceneObject, SuctionParams, TwinConfig
 from twin.errors import TaskError
 from twin.profiles import PROFILES
 from twin.record import schemas as S
@@ -131,6 +131,17 @@ def test_a_pick_that_senses_nothing_fails_the_task_naming_the_cycle():
     kinds = [e.kind for e in sink.events if e.kind != "phase"]
     assert kinds == ["task_start", "suction_empty", "task_error"]  # no placed, no cycle 2
     assert t.frame.pad_pose[2] > 0.2  # the pad was raised before the task failed
+    t.close()
+
+
+def test_a_hold_that_breaks_at_the_pick_fails_the_task_and_places_nothing():
+    """The break golden's scene: a 0.5 kg box on the stock finite-strength pad."""
+    sink = _Events()
+    heavy = TwinConfig(objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False))
+    t = Twin(heavy, sinks=[sink])
+    with pytest.raises(TaskError, match=r"^cycle 1: suction on at \(0\.2, 0\.7\), the hold broke$"):
+        run_task(t, TASKS["pick_place"], {"cycles": 1})
+    assert [e.kind for e in sink.events if e.kind != "phase"] == ["task_start", "attach", "break", "task_error"]
     t.close()
 
 

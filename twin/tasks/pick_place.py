@@ -41,13 +41,14 @@ def run(twin, cycles: int = 2, pause_s: float = 0.5, box: str = "box", keep_goin
         twin.move_to(*pick)
         twin.wait(pause_s)
         twin.suction(True)
-        hold_z = _lower_until_held(twin)
+        hold_z, took_hold = _lower_until_held(twin)
         twin.wait(pause_s)
         held = twin.frame.held_body
         if held != box_index:
             twin.suction(False)
             twin.raise_()
-            what = "nothing sensed" if held == NO_BODY else f"held {_name(twin, held)!r} instead of {box!r}"
+            what = (f"held {_name(twin, held)!r} instead of {box!r}" if held != NO_BODY
+                    else "the hold broke" if took_hold else "nothing sensed")
             _miss(twin, keep_going, cycle, box, f"cycle {cycle}: suction on at {pick}, {what}")
             continue
         twin.raise_()
@@ -73,25 +74,25 @@ def run(twin, cycles: int = 2, pause_s: float = 0.5, box: str = "box", keep_goin
                   f"beyond {max_error_m * 1000:g} mm")
 
 
-def _lower_until_held(twin) -> float:
+def _lower_until_held(twin) -> tuple[float, bool]:
     """Lower the pad as `twin.lower()` does until it holds something (or gets there); returns the Z
-    joint value it stops at. On a hold the Z joint goes back to where it was when the hold was made
+    joint value it stops at and whether it took hold. On a hold the Z joint goes back to where it was when the hold was made
     (the step that attached the box also moved the pad on by up to 2 mm, pressing the box into the
     floor)."""
     down = twin.profile.z_down()
     twin.set_joint_target(Z_JOINT, down)
-    stop_z = down
+    stop_z, took_hold = down, False
     for _ in range(round(LOWER_TIMEOUT_S / twin.config.dt_s)):
         before_z = twin.frame.joint_q[Z_JOINT]
         if abs(before_z - down) <= DOWN_TOL_M:
             break
         twin.step()
         if twin.frame.held_body != NO_BODY:
-            stop_z = before_z
+            stop_z, took_hold = before_z, True
             twin.set_joint_target(Z_JOINT, stop_z)
             break
     twin.settle()
-    return stop_z
+    return stop_z, took_hold
 
 
 def _miss(twin, keep_going: bool, cycle: int, box: str, message: str) -> None:

@@ -18,10 +18,8 @@ from twin.types import NO_BODY
 from twin.urdf import urdf_text
 
 NO_CONSTRAINT = -1
-# Measured with a 50 mm, 0.1 kg box alone on the floor: PyBullet's default solver residual threshold
-# (1e-7) ends the contact solve early and a resting box creeps (in 40 s: 0.2 mm and 0.37 degrees on a
-# plane, 0.5 mm and 0.27 degrees on a box floor); at 1e-12: 1.6 um and 0.004 degrees (tests/test_long_run.py).
-SOLVER_RESIDUAL_THRESHOLD = 1e-12
+# The solver's residual threshold is EngineParams.solver_residual_threshold (recorded with the run):
+# at PyBullet's default 1e-7 a resting box creeps (tests/test_long_run.py measures it).
 # The floor is a static box, not a GEOM_PLANE: PyBullet builds a box-on-plane contact one corner per
 # step, so a box set down on a plane slides 0.03-0.33 mm diagonally (more the higher it drops from);
 # on a box floor it lands where it is put.
@@ -94,7 +92,7 @@ class World:
             numSolverIterations=e.num_solver_iterations,
             numSubSteps=0,
             deterministicOverlappingPairs=e.deterministic_overlapping_pairs,
-            solverResidualThreshold=SOLVER_RESIDUAL_THRESHOLD,
+            solverResidualThreshold=e.solver_residual_threshold,
             physicsClientId=c,
         )
         pb.setGravity(*e.gravity_m_s2, physicsClientId=c)

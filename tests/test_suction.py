@@ -9,6 +9,7 @@ import pytest
 
 from twin.columns import FrameCollector
 from twin.config import SceneObject, SuctionParams, TwinConfig
+from twin.profiles import PROFILES
 from twin.twin import Twin
 from twin.types import NO_BODY
 
@@ -17,10 +18,11 @@ BOX_XY_M = (0.5, 0.0)
 HIGH = 1e3  # a limit that is never reached
 
 
-def _twin(mass_kg: float = 0.1, size_z_m: float = 0.05, **suction) -> tuple[Twin, FrameCollector]:
+def _twin(mass_kg: float = 0.1, size_z_m: float = 0.05, robot: str = "mtb", **suction) -> tuple[Twin, FrameCollector]:
     box = SceneObject("box", size_m=(0.05, 0.05, size_z_m), mass_kg=mass_kg, pos_m=(*BOX_XY_M, size_z_m / 2))
     sink = FrameCollector()
-    return Twin(TwinConfig(objects=(box,), suction=SuctionParams(**suction)), sinks=[sink]), sink
+    config = TwinConfig(profile=PROFILES[robot], objects=(box,), suction=SuctionParams(**suction))
+    return Twin(config, sinks=[sink]), sink
 
 
 def _kinds(sink: FrameCollector) -> list[str]:
@@ -162,3 +164,32 @@ def test_pressing_the_held_box_down_is_not_pull():
     twin.raise_()
     twin.wait(0.5)
     assert _kinds(sink) == ["attach"] and twin.frame.held_body == 0
+
+
+@pytest.mark.parametrize("depth_m", [0.002, 0.010, 0.020])
+def test_a_pad_set_into_a_box_senses_it_as_coppeliasims_ray_sensor_does(depth_m):
+    """sim.setJointPosition can put the pad into a box (report 000's key 5): PyBullet's ray sees no body it
+    starts inside, CoppeliaSim's ray sensor sees the back face; the twin's pad senses and takes the box."""
+    from twin.kinematics import z_joint_for_height
+
+    twin, sink = _twin(robot="seed000")  # its Z stop (report 000's 0.084) reaches 19 mm into a box
+    twin.move_to(*BOX_XY_M, heading_rad=0.0)
+    twin.suction(True)
+    twin.step(2)
+    assert twin.suction_pad.held == NO_BODY  # high above: nothing
+    # the sensor's start (13 mm below the pad root) depth_m below the box top: inside the box
+    tip_z = 0.05 - depth_m + SuctionParams().sensor_offset_m - twin.profile.pad_length_m
+    twin.set_joint_position("z", z_joint_for_height(twin.profile, tip_z))
+    twin.step(1)
+    assert twin.suction_pad.held == 0 and _kinds(sink)[-1] == "attach"
+
+
+def test_a_pad_beside_a_box_at_the_same_height_senses_nothing():
+    from twin.kinematics import z_joint_for_height
+
+    twin, sink = _twin(robot="seed000")
+    twin.move_to(BOX_XY_M[0] + 0.04, BOX_XY_M[1], heading_rad=0.0)  # 15 mm beyond the box's side
+    twin.suction(True)
+    twin.set_joint_position("z", z_joint_for_height(twin.profile, 0.035))
+    twin.step(3)
+    assert twin.suction_pad.held == NO_BODY and "attach" not in _kinds(sink)

@@ -5,6 +5,7 @@ import math
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -27,18 +28,30 @@ KEY_INTERVAL_S = 0.1
 STEPS_PER_KEY = 24  # 0.1 s at 240 Hz
 Z_WAIT = ["wait"] * 6
 MAPS = {
-    "seed000": {"jog": ("d", "a", "e", "q"), "pick": ["5", *Z_WAIT, "8", "wait", "wait"],
-                "place": ["5", *Z_WAIT, "s"], "keeps_heading": False},
+    # report 000's Lua: joints set at once; 8 = suction on and Z up to its count, 5 = Z to the stop
+    "seed000": {"jog": ("d", "a", "e", "q"), "pick": ["8", "5", "8"], "place": ["5", "s", "8"],
+                "keeps_heading": False},
+    # report 001's Lua: the wrist follows deg2 - deg1, so the pad does not keep its heading
     "seed001": {"jog": ("left", "right", "up", "down"), "pick": ["3", *Z_WAIT, "4", *Z_WAIT],
-                "place": ["3", *Z_WAIT, "5", "4"], "keeps_heading": True},
+                "place": ["3", *Z_WAIT, "5", "4"], "keeps_heading": False},
 }
 
 
-def _pad_xy_heading(profile, deg):
-    """Pad (x, y) and heading on the key grid (whole degrees); the wrist turns back when the map keeps it."""
+def _pad_xy_heading(profile, deg, wrist_deg=0.0):
+    """Pad (x, y) and heading on the key grid (whole degrees), the wrist at wrist_deg."""
     q1, q2 = math.radians(deg[0]), math.radians(deg[1])
-    p = fk(profile, (q1, q2, 0.0, 0.0))
+    p = fk(profile, (q1, q2, 0.0, math.radians(wrist_deg)))
     return (p.x_m, p.y_m), p.heading_rad
+
+
+def _wrist_deg(profile_name, frm, to, before=0.0):
+    """Where report 001's map leaves the wrist after the jog keys from frm to to (shoulder keys first,
+    then elbow keys): deg2 - deg1 after a left/right key, deg1 - deg2 after up/down; 0 for seed000."""
+    if profile_name != "seed001":
+        return 0.0
+    if to[1] != frm[1]:
+        return to[0] - to[1]
+    return to[1] - to[0] if to[0] != frm[0] else before
 
 
 def _grid_points(profile, target_m, span_deg=3):
@@ -65,12 +78,13 @@ def plan(profile_name, keeps_heading=None, pick_tolerance_m=0.005):
     keeps = MAPS[profile_name]["keeps_heading"] if keeps_heading is None else keeps_heading
     best = None
     for pick in _grid_points(profile, POINT_A_M):
-        pad_a, h_a = _pad_xy_heading(profile, pick)
+        wrist_a = _wrist_deg(profile_name, (0, 0), pick)
+        pad_a, h_a = _pad_xy_heading(profile, pick, wrist_a)
         if math.dist(pad_a, POINT_A_M) > pick_tolerance_m:
             continue
         offset = _rot((POINT_A_M[0] - pad_a[0], POINT_A_M[1] - pad_a[1]), 0.0 if keeps else -h_a)  # pad frame
         for place in _grid_points(profile, POINT_B_M):
-            pad_b, h_b = _pad_xy_heading(profile, place)
+            pad_b, h_b = _pad_xy_heading(profile, place, _wrist_deg(profile_name, pick, place, wrist_a))
             off = _rot(offset, 0.0 if keeps else h_b)
             box_m = (pad_b[0] + off[0], pad_b[1] + off[1])
             presses = sum(abs(v) for v in pick) + abs(place[0] - pick[0]) + abs(place[1] - pick[1])
@@ -152,17 +166,18 @@ def test_unknown_key_is_ignored_shown_and_replayed():
 
 
 def test_joint_driven_past_its_limit_stops_there_with_an_event():
-    limit_deg = math.degrees(PROFILES["seed001"].shoulder_limit_rad)
+    # mtb's shoulder has limits (the seeds' CoppeliaSim joints are cyclic and have none)
+    limit_deg = math.degrees(PROFILES["mtb"].shoulder_limit_rad)
     presses = int(limit_deg) + 5
-    session, rec = _scripted("seed001", f"left*{presses}", interval_s=0.05)
+    session, rec = _scripted("mtb", f"D*{presses}", interval_s=0.05)
     limits = [e for e in rec.events if e.kind == "joint_limit"]
     assert len(limits) == presses - int(limit_deg)
-    assert all(e.data["joint"] == "Revolute_joint" and e.data["limit"] == pytest.approx(math.radians(limit_deg))
+    assert all(e.data["joint"] == "MTB_axis1" and e.data["limit"] == pytest.approx(math.radians(limit_deg))
                for e in limits)
     q = session.twin.frame.joint_q
     assert math.degrees(q[0]) == pytest.approx(limit_deg, abs=0.05)
     # the wrist stopped turning with the shoulder, so the pad kept its heading
-    assert session.twin.targets[3] == pytest.approx(-PROFILES["seed001"].shoulder_limit_rad)
+    assert session.twin.targets[3] == pytest.approx(-PROFILES["mtb"].shoulder_limit_rad)
     assert math.degrees(q[0] + q[1] + q[3]) == pytest.approx(0.0, abs=0.05)
     _assert_replays_exactly(rec)
 
@@ -226,3 +241,16 @@ def test_paced_script_runs_in_real_time_with_the_same_commands():
     twin.close()
     assert 0.3 <= wall_s < 1.5  # 72 steps of 1/240 s
     assert collector.commands == fast.commands and collector.columns().equals(fast.frames)
+
+
+def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    line = next(x for x in readme.splitlines() if x.startswith("twin teleop --robot seed000 --keys"))
+    keys = line.split('"')[1]
+    out = _cli("--robot", "seed000", "--keys", keys, "--record", str(tmp_path / "keys000.mcap"))
+    assert out.returncode == 0, out.stderr
+    rec = load(tmp_path / "keys000.mcap")
+    kinds = [e.kind for e in rec.events]
+    assert kinds.count("attach") == 1 and kinds.count("release") == 1
+    box = rec.frames.object_poses[-1][0]
+    assert math.dist(box[:2], POINT_B_M) < 0.005 and abs(box[2] - 0.025) < 1e-3

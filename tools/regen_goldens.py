@@ -5,15 +5,21 @@
     python tools/regen_goldens.py NAME ...   # only these (e.g. pick_place_mtb)
     python tools/regen_goldens.py --list     # what would be made, and how
 
-Each golden is one task run recorded through the same recorder as `twin run --record`; its MCAP
+A task golden is one task run recorded through the same recorder as `twin run --record`; its MCAP
 metadata holds the whole TwinConfig and the task with its parameters, so `twin check` re-runs it
 from the file alone. Identical code gives byte-identical files (the writer stamps no wall time).
+A session golden is one run of a report's own step-5 program (tests/fixtures/seed_clients/) against
+`twin serve --realtime` at speed 1, as its author ran it; `twin check` replays its Commands. Its
+steps follow the wall clock, so remaking one gives a new file (the same program, other timings).
 Run this only when a change in behaviour is intended, then review `twin diff` against the old files.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import re
+import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +32,7 @@ from twin.record import open_recorders
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDINGS = ROOT / "recordings"
+CLIENTS = ROOT / "tests" / "fixtures" / "seed_clients"
 RATE_STEPS = 1  # every physics step: exact checks see every step (about 0.5 MB per 10 s of simulated time)
 
 
@@ -57,8 +64,62 @@ def goldens() -> list[Golden]:
     return out
 
 
+@dataclass(frozen=True)
+class Session:
+    """A report's step-5 program (CLIENTS/<robot>.py) driving `twin serve --robot <robot>`."""
+
+    name: str
+    robot: str
+    server_args: tuple[str, ...]
+    how: str
+
+
+def sessions() -> list[Session]:
+    return [
+        Session("session_seed000", "seed000", (), "report 000's step-5 program against `twin serve --robot seed000` "
+                "(realtime, speed 1): the box to (-0.3, -0.55) and back"),
+        Session("session_seed001", "seed001", (), "report 001's step-5 program, robot seed001: its Heron IK misses "
+                "the box by 13 cm"),
+        Session("session_seed002", "seed002", (), "report 002's step-5 program, robot seed002: it stops at its "
+                "first move (NameError joint1, as published)"),
+        Session("session_seed003", "seed003", ("--start",), "report 003's step-5 program, robot seed003 (Play "
+                "pressed, as its author did): the pad follows the link, the box stays"),
+    ]
+
+
+def make_session(session: Session, out_dir: Path = RECORDINGS) -> Path:
+    """Serve, run the program to its end, stop the run (which finalizes the recording), stop serving."""
+    from coppeliasim_zmqremoteapi_client import RemoteAPIClient
+
+    path = out_dir / f"{session.name}.mcap"
+    server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--host", "127.0.0.1", "--port", "0",
+                               "--realtime", "--speed", "1", "--robot", session.robot, "--record", str(path),
+                               *session.server_args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                              env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        port = int(re.search(r"listening on tcp://127\.0\.0\.1:(\d+)", _line(server, "listening on")).group(1))
+        env = dict(os.environ, TWIN_REMOTE_PORT=str(port), TWIN_REMOTE_HOST="127.0.0.1")
+        subprocess.run([sys.executable, f"{session.robot}.py"], cwd=CLIENTS, env=env, capture_output=True,
+                       timeout=120, check=False)  # some programs end in their own NameError, as published
+        RemoteAPIClient("127.0.0.1", port).require("sim").stopSimulation()
+        _line(server, "recorded ")
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    return path
+
+
+def _line(server: subprocess.Popen, text: str) -> str:
+    for line in server.stdout:
+        if text in line:
+            return line
+    raise TwinError(f"twin serve ended before printing {text!r}")
+
+
 def make(golden: Golden, out_dir: Path = RECORDINGS) -> Path:
     """Record one golden into out_dir/NAME.mcap."""
+    if isinstance(golden, Session):
+        return make_session(golden, out_dir)
     path = out_dir / f"{golden.name}.mcap"
     run = {"source": "task", "task": golden.task, "params": golden.params}
     with open_recorders(golden.config, run, mcap_path=path, rate=RATE_STEPS) as sinks:
@@ -72,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--list", action="store_true", help="list the goldens and how each is made")
     parser.add_argument("--out", default=str(RECORDINGS), help="output folder (default recordings/)")
     args = parser.parse_args(argv)
-    known = {g.name: g for g in goldens()}
+    known = {g.name: g for g in [*goldens(), *sessions()]}
     unknown = [n for n in args.names if n not in known]
     if unknown:
         print(f"regen_goldens: error: unknown golden {unknown[0]!r}; expected one of {', '.join(known)}",

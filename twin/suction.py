@@ -2,6 +2,9 @@
 
 While on and empty, the first object the downward ray sensor sees is fixed to the pad; switching
 off releases it; with finite strength the hold breaks on pull, shear or peel beyond the limits.
+Like CoppeliaSim's ray proximity sensor, which detects a shape's back faces too, the sensor also
+sees an object its ray starts inside (a pad set into a box with sim.setJointPosition, as report
+000's keys do); PyBullet's rayTest does not report a body the ray starts in.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 from twin.config import SuctionParams
+from twin.quat import rotate
 from twin.types import NO_BODY, Frame
 from twin.world import World
 
@@ -22,10 +26,12 @@ class SuctionEvent:
 
 
 class Suction:
-    def __init__(self, params: SuctionParams, pad_length_m: float, world: World) -> None:
+    def __init__(self, params: SuctionParams, pad_length_m: float, world: World,
+                 object_sizes_m: tuple[tuple[float, float, float], ...] = ()) -> None:
         self.params = params
         self.world = world
         self.pad_length_m = pad_length_m
+        self.object_half_m = tuple((sx / 2, sy / 2, sz / 2) for sx, sy, sz in object_sizes_m)
         self.on = False
         self.sensed = NO_BODY
         self.held = NO_BODY
@@ -42,7 +48,10 @@ class Suction:
         x, y, z_tip = frame.pad_pose[:3]
         root_z = z_tip + self.pad_length_m
         if on and self.held == NO_BODY:
-            self.sensed = self.world.ray_down(x, y, root_z - p.sensor_offset_m, p.sensor_range_m)
+            z_from = root_z - p.sensor_offset_m
+            self.sensed = self.world.ray_down(x, y, z_from, p.sensor_range_m)
+            if self.sensed == NO_BODY:
+                self.sensed = self._inside(frame, (x, y, z_from))
         else:
             self.sensed = self.held if on else NO_BODY
         if on and not self.on:
@@ -64,6 +73,15 @@ class Suction:
             self._held_this_period = True
             events.append(SuctionEvent("attach", self.held, "suction attached"))
         return events
+
+    def _inside(self, frame: Frame, point: tuple[float, float, float]) -> int:
+        """The first scene object (a box) whose volume holds point, or NO_BODY."""
+        for i, (half, pose) in enumerate(zip(self.object_half_m, frame.object_poses, strict=False)):
+            conj = (-pose[3], -pose[4], -pose[5], pose[6])
+            local = rotate(conj, (point[0] - pose[0], point[1] - pose[1], point[2] - pose[2]))
+            if all(abs(c) <= h for c, h in zip(local, half, strict=True)):
+                return i
+        return NO_BODY
 
     def _drop(self, kind: str, why: str) -> SuctionEvent:
         body = self.held

@@ -36,7 +36,8 @@ class Twin:
         self.config = config or TwinConfig()
         self.profile = self.config.profile
         self.world = World(self.config, gui=gui)
-        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self.world)
+        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self.world,
+                                   tuple(o.size_m for o in self.config.objects))
         self.sinks: list[Sink] = list(sinks)
         self.step_index = 0
         self.signals: dict[str, int] = {}

@@ -41,8 +41,8 @@ class RecoverReport:
     def lines(self) -> list[str]:
         state = "was already complete" if self.was_complete else f"was cut short ({self.problem})"
         found = [] if self.asked == self.source else [
-            f"{self.asked} does not exist; using {self.source}, the unfinished file of a run that was killed "
-            "(it is kept)"]
+            (f"{self.asked} does not exist; using {self.source}, the unfinished file of a run that was killed "
+             "(it is kept)")]
         return [
             *found,
             f"{self.source} {state}",

@@ -115,6 +115,8 @@ def test_serve_refuses_a_busy_port_with_one_line():
 @pytest.mark.parametrize("args, expected", [
     (["--port", "70000"], "port '70000' is invalid"),
     (["--speed", "0"], "speed 0.0 is out of range"),
+    (["--step-grace", "0"], "step grace 0.0 s is out of range; expected 0.01..3600 seconds"),
+    (["--step-grace", "nan"], "step grace nan s is out of range"),
     (["--robot", "nope"], "unknown robot 'nope'"),
 ])
 def test_serve_rejects_bad_options(args, expected):

@@ -1,4 +1,9 @@
-"""`twin serve`: a ZeroMQ REP server speaking CoppeliaSim's remote API (protocol v2) over a Scene.
+"""`twin serve`: a ZeroMQ server speaking CoppeliaSim's remote API (protocol v2) over a Scene.
+
+Socket: ROUTER, not REP. The official client's REQ socket puts an empty delimiter frame before its
+request; ROUTER hands us each message with its connection's routing id, and we answer on that
+envelope. A REP socket keeps one envelope state for all peers, so a peer sending broken framing (a
+frame without the delimiter, then closing) made it drop the next reply to another client.
 
 Time: in realtime mode the twin follows the wall clock (times `speed`): before each request and on
 idle poll timeouts it steps up to floor(elapsed_wall * speed / dt). While any client is in stepping
@@ -23,6 +28,7 @@ from twin.config import TwinConfig
 from twin.errors import ConfigError, TwinError
 from twin.remote.protocol import (
     EMPTY_REPLY,
+    MAX_FRAME_BYTES,
     MAX_REQUEST_BYTES,
     WAIT_REPLY,
     Param,
@@ -31,9 +37,12 @@ from twin.remote.protocol import (
     VersionMismatch,
     check_args,
     decode,
+    describe,
     encode_err,
     encode_ret,
     encode_version_mismatch,
+    printable,
+    safe_str,
 )
 from twin.remote.session import Scene
 from twin.remote.sim_api import SimApi
@@ -42,9 +51,12 @@ MODES = ("realtime", "stepped")
 IDLE_POLL_S = 0.1
 MAX_LAG_S = 0.25  # simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
 DEFAULT_CLIENT_TIMEOUT_S = 600.0
-STEP_GRACE_S = 10.0  # a stepping client silent this long no longer holds the others back
+DEFAULT_STEP_GRACE_S = 10.0  # a stepping client silent this long no longer holds the others back
+STEP_GRACE_RANGE_S = (0.01, 3600.0)
 WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
-ZMQ_MAX_MSG_BYTES = 64 * MAX_REQUEST_BYTES  # beyond this ZMQ drops the peer; below it we answer with an error
+MAX_CLIENTS = 64  # uuids served at once; a client is forgotten when its connection closes or it times out
+MAX_CLIENTS_PER_CONNECTION = 4  # the official client sends one uuid per connection
+RCVHWM = 4  # requests queued per connection (a REQ client has one at a time): bounds what a peer can park
 
 
 @dataclass(slots=True)
@@ -55,24 +67,30 @@ class _Client:
     stepping: bool = False
     wants_step: bool = False
     wait_until_step: int = -1  # the step its pending sim.step() waits for; -1: none
-    fd: int = -1  # the TCP connection its last request came over (ZMQ_SRCFD), to notice it closing
+    peer: bytes = b""  # the routing id of the connection its last request came over
 
 
 class Server:
-    """One REP socket, one Scene; serves requests until stop() is called."""
+    """One ROUTER socket, one Scene; serves requests until stop() is called."""
 
     def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
-                 speed: float = 1.0, log: Callable[[str], None] = print) -> None:
+                 speed: float = 1.0, step_grace_s: float = DEFAULT_STEP_GRACE_S,
+                 log: Callable[[str], None] = print) -> None:
         if mode not in MODES:
             raise ConfigError(f"server mode {mode!r} is unknown; expected one of {', '.join(MODES)}")
         if not (math.isfinite(speed) and 0.01 <= speed <= 1000.0):
             raise ConfigError(f"speed {speed} is out of range; expected 0.01..1000 (1 = real time)")
+        low, high = STEP_GRACE_RANGE_S
+        if not (math.isfinite(step_grace_s) and low <= step_grace_s <= high):
+            raise ConfigError(f"step grace {step_grace_s} s is out of range; expected {low:g}..{high:g} seconds")
         self.scene = scene
         self.mode = mode
         self.speed = speed
+        self.step_grace_s = step_grace_s
         self.log = log
         self.api = SimApi(scene)
         self.clients: dict[str, _Client] = {}
+        self._peer_fds: dict[bytes, int] = {}  # connections seen: routing id -> file descriptor (ZMQ_SRCFD)
         self._n_clients = 0
         self._anchor: tuple[float, int] | None = None  # (wall s, step) where realtime pacing started
         self._slipping = False  # said once: the machine cannot step at --speed
@@ -80,9 +98,10 @@ class Server:
         self._next_reap_s = 0.0
         self._info_reply = encode_ret([self.api.info()])
         self.context = zmq.Context()
-        self.socket = self.context.socket(zmq.REP)
+        self.socket = self.context.socket(zmq.ROUTER)
         self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.MAXMSGSIZE, ZMQ_MAX_MSG_BYTES)
+        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)  # above: ZMQ closes the connection, unread
+        self.socket.setsockopt(zmq.RCVHWM, RCVHWM)
         try:
             if port == 0:
                 port = self.socket.bind_to_random_port(f"tcp://{host}")
@@ -104,7 +123,7 @@ class Server:
         served = 0
         while not self._stop:
             try:
-                frame = sock.recv(zmq.NOBLOCK, copy=False)
+                parts = sock.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:
                 ready = dict(poller.poll(self._poll_timeout_ms()))
                 if monitor in ready:
@@ -121,16 +140,33 @@ class Server:
                 self._drain_monitor()
             now = time.monotonic()
             self._pace(now)
-            if frame.more:  # one request is one frame: read the rest so the socket can answer
-                parts = 1
-                while sock.getsockopt(zmq.RCVMORE):
-                    sock.recv()
-                    parts += 1
-                reply = encode_err(f"malformed request: {parts} message parts; expected one CBOR map in one part")
-            else:
-                reply = self.handle(frame.bytes, now, _source_fd(frame))
-            sock.send(reply)
+            if now >= self._next_reap_s:
+                self._reap(now)
+            sock.send_multipart(self.answer(parts, now))
             self._pace(time.monotonic())
+
+    def answer(self, parts: list, now: float) -> list:
+        """The reply message for one received message: its envelope (routing id and the frames up to
+        the empty delimiter a REQ client adds), then one CBOR frame. Never raises."""
+        peer = parts[0].bytes
+        if len(parts) == 3 and not parts[1].bytes:  # a REQ client: [id, b"", request]
+            envelope, body = [peer, b""], parts[2:]
+        else:
+            cut = next((i for i in range(1, len(parts)) if not parts[i].bytes), 0)
+            envelope, body = [p.bytes for p in parts[:cut + 1]], parts[cut + 1:]
+        if peer not in self._peer_fds:
+            self._drain_monitor()  # first: a closed connection's fd may be this new one's
+            self._peer_fds[peer] = _source_fd(parts[-1])
+        if len(body) != 1:
+            reply = encode_err(f"malformed request: {len(body)} message parts; expected one CBOR map in one part")
+        else:
+            frame = body[0]  # an oversized one is only measured, not copied
+            try:
+                reply = self.handle(frame.buffer if len(frame) > MAX_REQUEST_BYTES else frame.bytes, now, peer)
+            except Exception as err:  # noqa: BLE001 - a bug of ours: no request may end the server
+                self.log(f"internal error: {type(err).__name__}: {safe_str(err)}\n{traceback.format_exc()}")
+                reply = encode_err(f"internal error: {type(err).__name__}")
+        return [*envelope, reply]
 
     def stop(self) -> None:
         """Ask the loop to end (signal-safe); it returns within one idle poll."""
@@ -180,14 +216,17 @@ class Server:
                     self.log(f"error while stopping the simulation: {type(stop_err).__name__}: {stop_err}")
 
     def _drain_monitor(self) -> None:
-        """A client's TCP connection closed (its program ended or closed the socket): forget it."""
+        """A TCP connection closed (a client's program ended or closed its socket): forget its clients."""
         while self._monitor.poll(0):
             event = parse_monitor_message(self._monitor.recv_multipart())
             if event["event"] != zmq.EVENT_DISCONNECTED:
                 continue
             fd = int(event["value"])
+            gone = {peer for peer, peer_fd in self._peer_fds.items() if peer_fd == fd}
+            for peer in gone:
+                del self._peer_fds[peer]
             for uuid, c in list(self.clients.items()):
-                if c.fd == fd:
+                if c.peer in gone:
                     del self.clients[uuid]
                     self.log(f"{c.label} disconnected")
 
@@ -199,21 +238,24 @@ class Server:
                 self.log(f"{c.label} disconnected (silent for more than {c.timeout_s:g} s)")
 
     # -- requests ----------------------------------------------------------------------------
-    def handle(self, raw: bytes, now: float, fd: int = -1) -> bytes:
+    def handle(self, raw: bytes, now: float, peer: bytes = b"") -> bytes:
         """One request in, one reply out; never raises for a client's bad input."""
         try:
             req = decode(raw)
         except VersionMismatch as err:
-            self.log(f"refused a request: {err}")
+            self.log(f"refused a request: {printable(str(err), 200)}")
             return encode_version_mismatch(str(err))
         except RequestError as err:
-            self.log(f"refused a request: {err}")
+            self.log(f"refused a request: {printable(str(err), 200)}")
             return encode_err(str(err))
         client = self.clients.get(req.uuid)
         if client is None:
+            refusal = self._refuse_new_client(peer)
+            if refusal:
+                return encode_err(refusal)
             client = self._connect(req.uuid, req.first, now)
         client.last_seen_s = now
-        client.fd = fd
+        client.peer = peer
         func = req.func
         try:
             entry = self.api.functions.get(func)
@@ -239,12 +281,23 @@ class Server:
                 (name,) = check_args(_MODULE_PARAMS, req.args)
                 _check_module(name)
                 return self._info_reply
-            return encode_err(f"No such function: {func[:120]}")
+            return encode_err(f"No such function: {printable(func, 120)}")
         except (RequestError, TwinError) as err:
             return encode_err(f"{func}: {err}")
         except Exception as err:  # noqa: BLE001 - a bug of ours: report it, keep serving
-            self.log(f"internal error in {func}: {type(err).__name__}: {err}\n{traceback.format_exc()}")
-            return encode_err(f"{func}: internal error: {type(err).__name__}: {err}")
+            message = f"{type(err).__name__}: {safe_str(err)}"
+            self.log(f"internal error in {func}: {message}\n{traceback.format_exc()}")
+            return encode_err(f"{func}: internal error: {message}")
+
+    def _refuse_new_client(self, peer: bytes) -> str:
+        """Why a new uuid cannot be served now ('' if it can): the number of clients is bounded."""
+        if len(self.clients) >= MAX_CLIENTS:
+            return (f"too many clients: {MAX_CLIENTS} are connected (the limit); a client is forgotten when its "
+                    "connection closes or after its timeout")
+        if peer and sum(1 for c in self.clients.values() if c.peer == peer) >= MAX_CLIENTS_PER_CONNECTION:
+            return (f"too many clients on one connection: {MAX_CLIENTS_PER_CONNECTION} uuids already came over it "
+                    "(the limit)")
+        return ""
 
     def _connect(self, uuid: str, first: dict | None, now: float) -> _Client:
         self._n_clients += 1
@@ -254,7 +307,8 @@ class Server:
         c = _Client(label=f"client {self._n_clients}", last_seen_s=now, timeout_s=float(timeout))
         self.clients[uuid] = c
         lang = (first or {}).get("lang")
-        self.log(f"{c.label} connected (uuid {uuid[:8]}, {lang if isinstance(lang, str) else 'unknown language'})")
+        lang = printable(lang, 20) if isinstance(lang, str) else "unknown language"
+        self.log(f"{c.label} connected (uuid {printable(uuid[:8])}, {lang})")
         return c
 
     # -- stepping ----------------------------------------------------------------------------
@@ -298,10 +352,10 @@ class Server:
             if c.wants_step:
                 asked = True
             elif c.stepping:
-                if now - c.last_seen_s < STEP_GRACE_S:
+                if now - c.last_seen_s < self.step_grace_s:
                     return
                 c.stepping = False
-                self.log(f"{c.label} silent for {STEP_GRACE_S:g} s: no longer holds back stepping")
+                self.log(f"{c.label} silent for {self.step_grace_s:g} s (--step-grace): no longer holds back stepping")
         if asked and self.scene.running:
             self.scene.advance(1)
             for c in self.clients.values():
@@ -324,7 +378,7 @@ def _source_fd(frame: zmq.Frame) -> int:
 
 def _check_module(name: str) -> None:
     if name != "sim":
-        raise RequestError(f"no such module {name!r:.60}; this twin offers 'sim'")
+        raise RequestError(f"no such module {describe(name)}; this twin offers 'sim'")
 
 
 _STEPPING_PARAMS = Signature(Param("enable", "bool"))
@@ -333,12 +387,12 @@ _MODULE_PARAMS = Signature(Param("name", "str"))
 
 
 def serve(config: TwinConfig, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
-          speed: float = 1.0, mcap_path: str | None = None, rrd_path: str | None = None, rate: int = 1,
-          start: bool = False, log: Callable[[str], None] = print) -> int:
+          speed: float = 1.0, step_grace_s: float = DEFAULT_STEP_GRACE_S, mcap_path: str | None = None,
+          rrd_path: str | None = None, rate: int = 1, start: bool = False, log: Callable[[str], None] = print) -> int:
     """Run the server until SIGINT/SIGTERM; each start..stop run is recorded to its own file."""
     scene = Scene(config, mcap_path=mcap_path, rrd_path=rrd_path, rate=rate, mode=mode, log=log)
     try:
-        server = Server(scene, host=host, port=port, mode=mode, speed=speed, log=log)
+        server = Server(scene, host=host, port=port, mode=mode, speed=speed, step_grace_s=step_grace_s, log=log)
     except BaseException:
         scene.twin.close()
         raise

@@ -15,7 +15,7 @@ from twin import kinematics
 from twin.errors import UnknownName
 from twin.profiles import PAD_ALIASES, ROBOT_ALIASES
 from twin.quat import quat_mul, rotate, yaw_quat
-from twin.remote.protocol import Param, RequestError, Signature
+from twin.remote.protocol import MAX_SIGNALS, Param, RequestError, Signature, describe, printable
 from twin.remote.session import (
     SIMULATION_ADVANCING_RUNNING,
     SIMULATION_PAUSED,
@@ -70,9 +70,9 @@ class SimApi:
         f("getJointTargetPosition", (H,), self.get_joint_target_position)
         f("getJointVelocity", (H,), self.get_joint_velocity)
         for kind in ("Int32", "Integer"):  # CoppeliaSim >= 4.2 names, and the older ones
-            f(f"set{kind}Signal", (Param("signalName", "str"), Param("signalValue", "int")), self.set_int_signal)
-            f(f"get{kind}Signal", (Param("signalName", "str"),), self.get_int_signal)
-            f(f"clear{kind}Signal", (Param("signalName", "str"),), self.clear_int_signal)
+            f(f"set{kind}Signal", (Param("signalName", "name"), Param("signalValue", "int")), self.set_int_signal)
+            f(f"get{kind}Signal", (Param("signalName", "name"),), self.get_int_signal)
+            f(f"clear{kind}Signal", (Param("signalName", "name"),), self.clear_int_signal)
         f("startSimulation", (), self.start_simulation)
         f("stopSimulation", (), self.stop_simulation)
         f("pauseSimulation", (), self.pause_simulation)
@@ -83,7 +83,7 @@ class SimApi:
         f("getObjectOrientation", (H, REL), lambda h, rel: list(_euler_xyz(self._relative_pose(h, rel)[3:])))
         f("getObjectQuaternion", (H, REL), lambda h, rel: list(self._relative_pose(h, rel)[3:]))
         f("getObjectPose", (H, REL), lambda h, rel: list(self._relative_pose(h, rel)))
-        f("addLog", (Param("verbosityLevel", "int"), Param("logMessage", "str")), self.add_log)
+        f("addLog", (Param("verbosityLevel", "int"), Param("logMessage", "text")), self.add_log)
 
     def _define(self, name: str, params: tuple[Param, ...], fn: Callable) -> None:
         self.functions[f"sim.{name}"] = (Signature(*params), fn)
@@ -107,7 +107,7 @@ class SimApi:
             return HANDLE_JOINT0 + twin.profile.joint_index(name)
         except UnknownName:
             known = [ROBOT_ALIASES[0], *twin.profile.joint_names, PAD_ALIASES[0], *names]
-            raise UnknownName(f"object does not exist: {path!r:.80}; this scene has {', '.join(known)}") from None
+            raise UnknownName(f"object does not exist: {describe(path)}; this scene has {', '.join(known)}") from None
 
     def name_of(self, handle: int) -> str:
         twin = self.scene.twin
@@ -183,7 +183,7 @@ class SimApi:
     # -- joints ------------------------------------------------------------------------------
     def set_joint_target_position(self, handle: int, q: float, motion: list) -> None:
         if motion:
-            raise RequestError(f"sim.setJointTargetPosition: motionParams {motion!r:.60} are not supported; "
+            raise RequestError(f"sim.setJointTargetPosition: motionParams ({describe(motion)}) are not supported; "
                                "pass none (the joint moves at its maximum velocity)")
         self.scene.twin.set_joint_target(self._joint(handle), q)
 
@@ -202,7 +202,12 @@ class SimApi:
     # -- signals -----------------------------------------------------------------------------
     def set_int_signal(self, name: str, value: int) -> None:
         if not INT32[0] <= value <= INT32[1]:
-            raise RequestError(f"signal {name!r:.60} value {value} is outside the int32 range {INT32[0]}..{INT32[1]}")
+            raise RequestError(f"signal {describe(name)} value {describe(value)} is outside the int32 range "
+                               f"{INT32[0]}..{INT32[1]}")
+        signals = self.scene.twin.signals
+        if name not in signals and len(signals) >= MAX_SIGNALS:
+            raise RequestError(f"signal {describe(name)}: the scene already holds {MAX_SIGNALS} signals (the limit); "
+                               "clear one first")
         self.scene.twin.set_signal(name, value)
 
     def get_int_signal(self, name: str) -> int | None:
@@ -227,7 +232,7 @@ class SimApi:
 
     def add_log(self, verbosity: int, message: str) -> None:
         level = VERBOSITY_NAMES.get(verbosity, str(verbosity))
-        self.scene.log(f"[{level}] {self.client}: {message}")
+        self.scene.log(f"[{level}] {self.client}: {printable(message)}")  # escaped: one status line
         self.scene.twin.event("log", message=message, verbosity=verbosity, client=self.client)
 
     def info(self) -> dict:

@@ -218,7 +218,9 @@ def test_a_raising_task_closes_the_file_with_the_error(tmp_path, capsys):
     assert "sensor on fire" in rec.meta[S.META_FINALIZED]["error"]
     assert [e.kind for e in rec.events][-1] == "task_error"
     assert rec.frames.step[-1] == round(1.3e9 / rec.config.dt_ns)
-    assert rec.commands[0].kind == "signal"
+    # task_start (said, so an event Command), the signal, then task_error (said too)
+    assert [c.kind for c in rec.commands] == ["event", "signal", "event"]
+    assert rec.commands[-1].args["kind"] == "task_error"
 
 
 def test_bad_input_does_not_touch_an_existing_recording(tmp_path, capsys):

@@ -25,15 +25,16 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
     from twin.record.mcap_writer import McapRecorder
 
     urdf = urdf_text(config.profile)
+    meshes = mesh_paths(config.profile)
     sinks: list = []
     try:
         if background and (mcap_path is not None or rrd_path is not None):
             from twin.record.recorder_process import RecorderProcess
 
-            sinks.append(RecorderProcess(config, run, urdf=urdf, meshes=mesh_paths(config.profile),
+            sinks.append(RecorderProcess(config, run, urdf=urdf, meshes=meshes,
                                          mcap_path=mcap_path, rrd_path=rrd_path, rate=rate))
         elif mcap_path is not None:
-            sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=mesh_paths(config.profile),
+            sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes,
                                       rate=rate))
         if rrd_path is not None and not background:
             from twin.record.rerun_writer import RerunRecorder
@@ -42,6 +43,8 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
     except BaseException as err:
         _note(err, _close_all(sinks, "error", "recording could not start"))
         raise
+    said = _TaskErrors()
+    sinks.append(said)
     try:
         yield sinks
     except (KeyboardInterrupt, Terminated) as err:
@@ -51,9 +54,33 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
     except BaseException as err:
         _note(err, _close_all(sinks, "error", _error_text(err)))
         raise
-    failure = _close_all(sinks, "ok", "")
+    failure = _close_all(sinks, *said.outcome())  # a task error the caller suppressed is still an error
     if failure is not None:
         raise failure
+
+
+class _TaskErrors:
+    """A sink that remembers the first task_error, so a run whose task raised is never finalized as ok,
+    even when the caller caught the exception (twin check records a crashing task as a run to compare)."""
+
+    def __init__(self) -> None:
+        self.error = ""
+
+    def on_frame(self, frame) -> None:
+        pass
+
+    def on_command(self, command) -> None:
+        pass
+
+    def on_event(self, event) -> None:
+        if event.kind == "task_error" and not self.error:
+            self.error = event.message or "task error"
+
+    def outcome(self) -> tuple[str, str]:
+        return ("error", self.error) if self.error else ("ok", "")
+
+    def close(self) -> None:
+        pass
 
 
 def _error_text(err: BaseException) -> str:

@@ -25,7 +25,7 @@ from twin.errors import RecordingError
 from twin.outputs import partial_path, publish
 from twin.record import schemas as S
 from twin.record import wire
-from twin.record.metadata import check_run, run_metadata
+from twin.record.metadata import check_run, portable_config, run_metadata
 from twin.record.scene_tf import SceneTransforms
 from twin.types import Command, Event, Frame
 
@@ -118,7 +118,8 @@ class McapRecorder:
             self._channel[spec.topic] = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id)
         extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
                  "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
-        for name, record in run_metadata(config, run, extra).items():
+        # a user URDF by its path relative to the recording: no absolute path in the file
+        for name, record in run_metadata(portable_config(config, self.path), run, extra).items():
             self._writer.add_metadata(name, record)
         self._writer.add_attachment(0, 0, "robot.urdf", "application/xml", urdf.encode())
         for name, media_type, data in mesh_files:

@@ -22,13 +22,14 @@ from twin.twin import Twin
 def cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from twin.check import task_run
     from twin.record import open_recorders  # only record/ touches mcap and rerun
 
     fn = resolve(args.task)
     config = twin_config(args)
     params = accepted_params(fn, {"cycles": args.cycles})
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
-    run = {"source": "task", "task": args.task, "params": params}
+    run = task_run(args.task, params, mcap_path)  # a task file by its path relative to the recording
     summary = _Summary()
     limit = [TimeLimit(args.timeout)] if args.timeout is not None else []
     with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:

@@ -14,9 +14,10 @@ class ConfigError(TwinError):
 
 
 class OutOfReach(TwinError):
-    """A target lies outside the reachable annulus or the joint limits."""
+    """A target lies outside the reachable annulus or the joint limits: the task failed (exit 1;
+    3 is kept for runs that cannot be compared)."""
 
-    exit_code = 3
+    exit_code = 1
 
 
 class UnknownName(TwinError):

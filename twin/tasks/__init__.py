@@ -48,13 +48,19 @@ def accepted_params(fn: TaskFn, params: dict) -> dict:
 
 
 def run_task(twin, fn: TaskFn, params: dict) -> None:
-    """Run a task; any exception becomes an Event and a TaskError (OutOfReach etc. pass as they are)."""
+    """Run a task; any exception becomes a task_error Event and a TaskError (a TwinError such as
+    OutOfReach passes as it is). A task that calls sys.exit has failed too, whatever the code:
+    only returning ends a task well."""
     twin.event("task_start", message=getattr(fn, "__module__", "task"), **params)
     try:
         fn(twin, **params)
     except TwinError as err:
         twin.event("task_error", message=f"{type(err).__name__}: {err}")
         raise
+    except SystemExit as err:
+        text = f"the task called sys.exit({_text(err)}) instead of returning"
+        twin.event("task_error", message=f"SystemExit: {text}")
+        raise TaskError(text) from err
     except Exception as err:
         text = f"{type(err).__name__}: {_text(err)}"
         twin.event("task_error", message=text)

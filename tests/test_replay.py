@@ -77,7 +77,9 @@ def test_replay_matches_exactly_for_every_source(recs, capsys, tmp_path, kind):
     assert (code, err) == (0, ""), out
     assert out.startswith("MATCH (tolerance exact")
     original, new = load(recs / f"{kind}.mcap"), load(tmp_path / "new.mcap")
-    assert new.run == original.run and new.config == original.config
+    # the replay's run is the original's, and says which file it replays
+    assert new.run == {**original.run, "replay_of": {"file": f"{kind}.mcap", "sha256": new.run["replay_of"]["sha256"]}}
+    assert new.config == original.config
     assert [(c.step, c.kind, c.args) for c in new.commands] == [(c.step, c.kind, c.args) for c in original.commands]
     assert new.frames.step[-1] == original.frames.step[-1]
 
@@ -146,7 +148,7 @@ def test_replay_refuses_to_record_over_the_recording_it_replays(tmp_path, capsys
     before = golden.read_bytes()
     assert main(["replay", str(golden), "--record", str(golden)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "is the recording being replayed" in err
+    assert err.count("\n") == 1 and "would overwrite its input" in err
     assert golden.read_bytes() == before
 
 

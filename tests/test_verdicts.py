@@ -325,3 +325,27 @@ def test_non_finite_event_data_is_null_in_memory_as_in_the_file(tmp_path):
         t.close()
     assert said.data == {"error_m": None, "limits": [1.0, None]}
     assert next(e for e in load(path).events if e.kind == "placed").data == said.data
+
+
+def test_a_timeout_is_part_of_the_run_so_check_reruns_with_it(tmp_path, capsys):
+    (tmp_path / "endless.py").write_text("def run(twin):\n    while True:\n        twin.step(10)\n")
+    golden = tmp_path / "endless.mcap"
+    assert main(["run", str(tmp_path / "endless.py"), "--timeout", "2", "--record", str(golden)]) == 1
+    rec = load(golden)
+    assert rec.run["timeout_s"] == 2.0 and rec.meta["twin.finalized"]["outcome"] == "error"
+    capsys.readouterr()
+    code, out, _ = twin(capsys, "check", golden)
+    assert code == 0 and "1 match" in out, out
+
+
+def test_diff_outputs_are_checked_before_any_work_and_never_overwrite_an_input(tmp_path, capsys):
+    a = tmp_path / "a.mcap"
+    assert main(["run", "pick_place", "--cycles", "1", "--record", str(a)]) == 0
+    before = a.read_bytes()
+    capsys.readouterr()
+    for args in (["--rrd", str(a)], ["--rrd", str(tmp_path / "no" / "d.rrd")], ["--report", str(tmp_path / "no" / "r.md")]):
+        code, out, err = twin(capsys, "diff", a, a, *args)
+        assert code == 2 and out == "" and err.count("\n") == 1 and err.startswith("twin: error:"), (args, err)
+    assert a.read_bytes() == before
+    code, out, _ = twin(capsys, "diff", a, a, "--rrd", tmp_path / "d.rrd")
+    assert code == 0 and (tmp_path / "d.rrd").stat().st_size > 0 and not (tmp_path / "d.rrd.partial").exists()

@@ -25,7 +25,7 @@ from twin.errors import ConfigError, TwinError
 from twin.recording import Recording
 from twin.replay import collected, replay, replayed_event_kinds
 from twin.report import first_line, render_text
-from twin.tasks import resolve, run_task
+from twin.tasks import TimeLimit, resolve, run_task
 from twin.tolerances import Tolerances
 from twin.twin import Sink, Twin
 
@@ -33,11 +33,13 @@ DEFAULT_DIR = "recordings"
 
 
 def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[Sink] = (),
-                task_dir: str | os.PathLike | None = None) -> Recording:
-    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised)."""
+                task_dir: str | os.PathLike | None = None, timeout_s: float | None = None) -> Recording:
+    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised);
+    timeout_s bounds it in simulated time, as `twin run --timeout` did."""
     fn = resolve(_task_path(task, task_dir))
     collector = ColumnCollector()
-    twin = Twin(config, sinks=[collector, *sinks])
+    limit = [TimeLimit(timeout_s)] if timeout_s is not None else []
+    twin = Twin(config, sinks=[collector, *sinks, *limit])
     try:
         with contextlib.suppress(TwinError):  # recorded, not raised: the task_error event is part of the run
             run_task(twin, fn, dict(params))
@@ -77,7 +79,8 @@ def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, 
     run = golden.run or {}
     if run.get("source") == "task" and run.get("task"):
         task_dir = Path(golden.path).parent if golden.path else None
-        new = record_task(golden.config, run["task"], run.get("params") or {}, sinks=sinks, task_dir=task_dir)
+        new = record_task(golden.config, run["task"], run.get("params") or {}, sinks=sinks, task_dir=task_dir,
+                          timeout_s=run.get("timeout_s"))
         new.run = dict(run)
         return new, None
     return replay(golden, sinks=sinks), replayed_event_kinds(golden)

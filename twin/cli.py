@@ -30,6 +30,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     params = accepted_params(fn, {"cycles": args.cycles})
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
     run = task_run(args.task, params, mcap_path)  # a task file by its path relative to the recording
+    if args.timeout is not None:
+        run["timeout_s"] = args.timeout  # twin check re-runs the task with the same bound
     summary = _Summary()
     limit = [TimeLimit(args.timeout)] if args.timeout is not None else []
     with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:

@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 
 from twin.cli_args import whole_number
-from twin.errors import ConfigError, RecordingError
+from twin.errors import ConfigError
 from twin.tolerances import FIELDS, PRESETS, Tolerances
 
 _TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
@@ -37,11 +37,24 @@ def _add_report_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="print only the verdict and first divergence")
 
 
-def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
-    from twin.report import render_text, report_format, write_report
+def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
+    """Every output path (--report, --rrd, replay's --record) checked before any work: the right
+    suffix, an existing folder, never one of the inputs (also through a link)."""
+    from twin.outputs import check_output
+    from twin.report import report_format
 
     for path in args.report:
+        check_output(path, Path(path).suffix, inputs=inputs, option="--report")
         report_format(path)
+    if args.rrd:
+        check_output(args.rrd, ".rrd", inputs=inputs, option="--rrd")
+    if getattr(args, "record", None):
+        check_output(args.record, ".mcap", inputs=inputs, option="--record")
+
+
+def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
+    from twin.report import render_text, write_report
+
     lines = render_text(result).splitlines()
     if args.quiet:
         lines = lines[:1] + [line for line in lines if line.startswith(
@@ -61,6 +74,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
     from twin.record.mcap_reader import load
 
     tol = _tolerances(args)
+    _check_outputs(args, [args.golden, args.candidate])
     golden, candidate = load(args.golden), load(args.candidate)
     result = compare(golden, candidate, tol, force=args.force)
     return _emit(result, golden, candidate, args)
@@ -72,8 +86,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from twin.replay import REPLAYED_EVENT_KINDS, replay, replay_run, replayed_event_kinds
 
     tol = _tolerances(args)
-    if args.record and Path(args.record).resolve() == Path(args.recording).resolve():
-        raise RecordingError(f"--record {args.record!r} is the recording being replayed; expected another path")
+    _check_outputs(args, [args.recording])
     rec = load(args.recording)
     if args.record:
         from twin.record import open_recorders

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import platform
 import sys
@@ -76,6 +77,8 @@ def check_run(run: dict) -> dict:
         out["task_sha256"] = str(run["task_sha256"])
     if isinstance(run.get("replay_of"), dict):
         out["replay_of"] = {str(k): str(v) for k, v in run["replay_of"].items()}
+    if run.get("timeout_s") is not None:
+        out["timeout_s"] = float(run["timeout_s"])
     return out
 
 
@@ -93,7 +96,8 @@ def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str]) -> di
         S.META_CONFIG: {"json": _dumps(config.to_dict())},
         S.META_RUN: {"source": run["source"], "task": run["task"], "params": _dumps(run["params"]),
                      **({"task_sha256": run["task_sha256"]} if "task_sha256" in run else {}),
-                     **({"replay_of": _dumps(run["replay_of"])} if "replay_of" in run else {})},
+                     **({"replay_of": _dumps(run["replay_of"])} if "replay_of" in run else {}),
+                     **({"timeout_s": repr(run["timeout_s"])} if "timeout_s" in run else {})},
         "twin.engine": engine,
         S.META_RECORDING: dict(sorted(layout.items())),
         S.META_VERSIONS: dict(sorted(versions().items())),
@@ -134,4 +138,13 @@ def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") 
             replay_of = None
         if isinstance(replay_of, dict):
             run["replay_of"] = replay_of
+    if record.get("timeout_s"):
+        try:
+            timeout_s = float(record["timeout_s"])
+        except ValueError:
+            timeout_s = math.nan
+        if not math.isfinite(timeout_s) or timeout_s <= 0:
+            raise RecordingError(f"{where}: {S.META_RUN} field timeout_s = {record['timeout_s']!r:.60} is invalid; "
+                                 "expected seconds > 0")
+        run["timeout_s"] = timeout_s
     return run

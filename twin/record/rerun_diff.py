@@ -14,7 +14,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from twin.compare import DiffResult, error_series
-from twin.errors import RecordingError
+from twin.outputs import check_output, partial_path
+from twin.record.rerun_writer import finish_file
 from twin.recording import Recording
 from twin.report import render_markdown
 from twin.tolerances import FIELDS
@@ -74,14 +75,12 @@ def _log_run(stream: rr.RecordingStream, rec: Recording, root: str, ghost: bool)
 
 
 def write_diff_rrd(golden: Recording, candidate: Recording, result: DiffResult, path: str | os.PathLike) -> None:
-    """Write the diff view to a .rrd file."""
-    target = Path(path)
-    if target.suffix != ".rrd":
-        raise RecordingError(f"Rerun diff file {str(path)!r} must end in .rrd")
-    if not target.parent.is_dir():
-        raise RecordingError(f"cannot write {str(path)!r}: directory {str(target.parent)!r} does not exist")
+    """Write the diff view to a .rrd file (through NAME.rrd.partial, put in place when complete)."""
+    inputs = [p for p in (golden.path, candidate.path) if p and not p.startswith("<")]
+    target = check_output(path, ".rrd", inputs=inputs, option="--rrd")
+    partial = partial_path(target)
     stream = rr.RecordingStream("twin-diff")
-    stream.save(target, default_blueprint=_blueprint())
+    stream.save(partial, default_blueprint=_blueprint())
     stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     _log_run(stream, golden, "golden", ghost=False)
     _log_run(stream, candidate, "candidate", ghost=True)
@@ -104,8 +103,7 @@ def write_diff_rrd(golden: Recording, candidate: Recording, result: DiffResult, 
         stream.log("golden/first_divergence", rr.Points3D([golden.frames.pad_pose[i, :3]], radii=[0.03],
                                                           colors=[DIVERGENCE_RGBA], labels=["first divergence"]),
                    static=True)
-    stream.flush()
-    stream.disconnect()
+    finish_file(stream, partial, target)
 
 
 def _group(name: str) -> str:

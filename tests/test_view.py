@@ -1,17 +1,24 @@
 """`twin view`: MCAP -> .rrd conversion, a headless screenshot that shows the arm, the box and the plots,
-the web viewer, and one-line errors (exit 2) for bad files."""
+the web and native viewers on loopback and free ports, side by side, their `rerun` child never outliving
+`twin view` (SIGTERM, SIGHUP, SIGKILL), no temporary folder left behind, and one-line errors (exit 2)
+for bad files, busy ports and a missing display."""
 
 import glob
 import os
+import re
+import select
 import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+import urllib.parse
 import urllib.request
 
 import numpy as np
+import psutil
 import pytest
 
 from twin.cli import main
@@ -32,6 +39,26 @@ def rerun_home(tmp_path, monkeypatch):
                      ("XDG_CACHE_HOME", "cache")):
         monkeypatch.setenv(var, str(home / sub))
     return home
+
+
+@pytest.fixture(scope="module", autouse=True)
+def no_view_folders_left_in_the_temp_dir():
+    """However a test ends, no `twin-view-*` folder of ours is left in the system's temp dir."""
+    before = set(glob.glob(os.path.join(tempfile.gettempdir(), "twin-view-*")))
+    yield
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "twin-view-*"))) <= before
+
+
+@pytest.fixture(autouse=True)
+def view_tmp(tmp_path, monkeypatch):
+    """A temp dir of the test's own (for `twin view` in this process and in children), empty of
+    `twin-view-*` folders when the test is over."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    yield tmp
+    assert not list(tmp.glob("twin-view-*"))
 
 
 @pytest.fixture(scope="module")
@@ -127,13 +154,44 @@ def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
                     "time 99.000 s is after the end of the recording")
 
 
+URL = re.compile(r"serving the web viewer at (http://127\.0\.0\.1:(\d+)/\?url=(\S+)) \(Ctrl-C to stop\)$")
+
+
+def _start_view(*argv: str, env: dict[str, str] | None = None) -> subprocess.Popen:
+    """`twin view ARGV` as a real process in a session of its own."""
+    return subprocess.Popen([sys.executable, "-m", "twin.cli", "view", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, env=env)
+
+
 def _end_group(proc: subprocess.Popen) -> None:
-    """Stop the twin process started here and the viewer it started (its own session's group)."""
+    """Stop the twin process started here (its own session's group; its viewer has a group of its own)."""
     try:
         os.killpg(proc.pid, signal.SIGTERM)
     except ProcessLookupError:
         pass  # already gone
-    proc.wait(timeout=10)
+    proc.wait(timeout=30)
+
+
+def _served(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[str, int, int]:
+    """(URL, web port, gRPC port) from the line `twin view --web` prints once both listen."""
+    ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
+    line = proc.stdout.readline().strip() if ready else ""
+    match = URL.match(line)
+    assert match, f"no URL line: {line!r}; stderr: {proc.stderr.read() if proc.poll() is not None else ''}"
+    source = urllib.parse.unquote(match[3])
+    grpc = re.fullmatch(r"rerun\+http://127\.0\.0\.1:(\d+)/proxy", source)
+    assert grpc, source
+    return match[1], int(match[2]), int(grpc[1])
+
+
+def _viewer_child(proc: subprocess.Popen) -> psutil.Process:
+    (child,) = psutil.Process(proc.pid).children()
+    assert child.name() == "rerun"
+    return child
+
+
+def _listening(process: psutil.Process) -> set[tuple[str, int]]:
+    return {c.laddr[:2] for c in process.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
 
 
 def _free_port() -> int:
@@ -142,44 +200,165 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_web_viewer_is_served_on_localhost(recorded, rerun_home):
-    port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "view", str(recorded["rrd"]), "--web", "--port",
-                             str(port)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                            start_new_session=True)
+def test_two_web_viewers_run_side_by_side_on_loopback(recorded):
+    first = _start_view(str(recorded["rrd"]), "--web")
+    second = _start_view(str(recorded["mcap"]), "--web")
     try:
-        page = ""
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and proc.poll() is None:
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2) as response:
-                    page = response.read().decode(errors="replace")
-                break
-            except OSError:
-                time.sleep(0.2)
-        assert "web viewer" in page.lower() and "<html" in page.lower()
+        url1, web1, grpc1 = _served(first)
+        url2, web2, grpc2 = _served(second)
+        assert len({web1, grpc1, web2, grpc2}) == 4
+        for proc, web, grpc in ((first, web1, grpc1), (second, web2, grpc2)):
+            assert _listening(_viewer_child(proc)) == {("127.0.0.1", web), ("127.0.0.1", grpc)}
+        for url in (url1, url2):
+            with urllib.request.urlopen(url, timeout=10) as response:
+                page = response.read().decode(errors="replace").lower()
+            assert "<html" in page and "web viewer" in page
+        assert first.poll() is None and second.poll() is None
+    finally:
+        _end_group(first)
+        _end_group(second)
+
+
+def test_given_ports_are_used_and_busy_ones_are_one_line_errors(recorded, capsys):
+    web, grpc = _free_port(), _free_port()
+    proc = _start_view(str(recorded["rrd"]), "--web", "--port", str(web), "--grpc-port", str(grpc))
+    try:
+        assert _served(proc)[1:] == (web, grpc)
+        _one_line_error(capsys, ["view", str(recorded["rrd"]), "--web", "--port", str(web)],
+                        f"--port {web}: 127.0.0.1:{web} is already in use")
+        _one_line_error(capsys, ["view", str(recorded["rrd"]), "--web", "--grpc-port", str(grpc)],
+                        f"--grpc-port {grpc}: 127.0.0.1:{grpc} is already in use")
     finally:
         _end_group(proc)
-    assert proc.stdout.read().startswith(f"serving the web viewer at http://127.0.0.1:{port}")
+    _one_line_error(capsys, ["view", str(recorded["rrd"]), "--web", "--port", str(web), "--grpc-port", str(web)],
+                    f"--port and --grpc-port are the same port {web}")
+
+
+@pytest.mark.skipif(not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer")
+def test_the_printed_url_streams_the_recording(recorded, tmp_path):
+    """What the web page loads from its ?url=: a headless viewer opens that source and gets the whole run."""
+    from rerun.experimental import ViewerClient
+
+    from twin.record.rrd_file import rerun_executable
+
+    proc = _start_view(str(recorded["mcap"]), "--web")
+    port = _free_port()
+    with open(tmp_path / "headless.log", "wb") as log:
+        headless = subprocess.Popen([rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port),
+                                     "--hide-welcome-screen"], stdout=log, stderr=log, start_new_session=True)
+    try:
+        url = _served(proc)[0]
+        source = urllib.parse.unquote(urllib.parse.urlparse(url).query.removeprefix("url="))
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+                client.get_state()
+                break
+            except Exception:  # the headless viewer is not up yet
+                assert time.monotonic() < deadline and headless.poll() is None
+                time.sleep(0.2)
+        client.open(source)
+        ends = {}
+        while time.monotonic() < deadline and not ends.get(scene.TIME_TIMELINE):
+            state = client.get_state()
+            if not state.loading:
+                ends = {t.name: t.end for r in state.recordings for t in r.timelines}
+            time.sleep(0.2)
+        recording = load(recorded["mcap"])
+        assert ends[scene.TIME_TIMELINE] == recording.frames.t_ns[-1]
+        assert ends["step"] == recording.frames.step[-1]
+    finally:
+        os.killpg(headless.pid, signal.SIGKILL)
+        headless.wait(timeout=10)
+        _end_group(proc)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_stop_signal_ends_the_viewer_and_removes_the_temp_folder(recorded, view_tmp, signum):
+    proc = _start_view(str(recorded["mcap"]), "--web")  # an .mcap is drawn into a temporary .rrd
+    try:
+        _served(proc)
+        child = _viewer_child(proc)
+        assert len(list(view_tmp.glob("twin-view-*"))) == 1
+        os.kill(proc.pid, signum)  # the twin process alone, as `kill` or a closed terminal does
+        assert proc.wait(timeout=30) == 128 + signum
+        assert proc.stderr.read().strip() == f"twin: stopped by {signal.Signals(signum).name}"
+        gone, alive = psutil.wait_procs([child], timeout=10)
+        assert not alive, f"rerun {child.pid} outlived twin view"
+    finally:
+        _end_group(proc)
+    assert not list(view_tmp.glob("twin-view-*"))
+
+
+def test_the_viewer_dies_with_a_killed_twin(recorded, view_tmp):
+    proc = _start_view(str(recorded["rrd"]), "--web")
+    try:
+        _served(proc)
+        child = _viewer_child(proc)
+        os.kill(proc.pid, signal.SIGKILL)
+        assert proc.wait(timeout=30) == -signal.SIGKILL
+        gone, alive = psutil.wait_procs([child], timeout=10)
+        assert not alive, f"rerun {child.pid} outlived twin view"
+    finally:
+        _end_group(proc)
+    # Nothing runs after SIGKILL: the folder (here in the test's own temp dir) is left for the OS.
+    for folder in view_tmp.glob("twin-view-*"):
+        shutil.rmtree(folder)
+
+
+def test_no_display_is_one_line_naming_the_other_ways(recorded, monkeypatch, capfd):
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(var, raising=False)
+    assert main(["view", str(recorded["mcap"])]) == 2
+    out, err = capfd.readouterr()
+    assert out == "" and err.count("\n") == 1, err
+    assert err.startswith("twin: error: no display for the native viewer") and "--web, --rrd or --screenshot" in err
+
+
+def test_an_unreachable_display_is_one_line_without_rerun_noise(recorded, monkeypatch, capfd):
+    """The real viewer starts, fails to reach the X server, and its log stays out of the terminal."""
+    unused = next(n for n in range(90, 200) if not os.path.exists(f"/tmp/.X11-unix/X{n}"))
+    monkeypatch.setenv("DISPLAY", f":{unused}")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", str(recorded["rrd"])]) == 2
+    out, err = capfd.readouterr()
+    assert out == "" and err.count("\n") == 1, err
+    assert err.startswith("twin: error: the native Rerun viewer exited with code 1")
+    assert "X server" in err and "--web, --rrd or --screenshot" in err
 
 
 @pytest.mark.skipif(not (HAVE_VULKAN and shutil.which("Xvfb")), reason="needs Vulkan and Xvfb for a window")
-def test_native_viewer_opens_a_window_and_stays_up(recorded, rerun_home):
+def test_native_viewer_opens_a_window_on_loopback_beside_a_web_viewer(recorded, view_tmp):
     # Our own X server on a display it picks itself (-displayfd): no race with other X servers.
     xvfb = subprocess.Popen(["Xvfb", "-displayfd", "1", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True)
     try:
         display = xvfb.stdout.readline().strip()
         assert display.isdigit(), "Xvfb did not report its display"
-        proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "view", str(recorded["mcap"])],
-                                env={**os.environ, "DISPLAY": f":{display}"}, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, start_new_session=True)
+        grpc = _free_port()
+        native = _start_view(str(recorded["mcap"]), "--grpc-port", str(grpc),
+                             env={**os.environ, "DISPLAY": f":{display}"})
+        web = _start_view(str(recorded["rrd"]), "--web")
         try:
-            time.sleep(4.0)  # a viewer that cannot start exits within a second or two
-            alive = proc.poll() is None
+            _served(web)
+            deadline = time.monotonic() + 60
+            while native.poll() is None and time.monotonic() < deadline:  # converting, then starting
+                children = psutil.Process(native.pid).children()
+                if children and _listening(children[0]):
+                    break
+                time.sleep(0.2)
+            time.sleep(2.0)  # a viewer that cannot open its window exits within a second or two
+            assert native.poll() is None, native.stderr.read()[-2000:]
+            assert _listening(_viewer_child(native)) == {("127.0.0.1", grpc)}
+            child = _viewer_child(native)
+            os.kill(native.pid, signal.SIGTERM)
+            assert native.wait(timeout=30) == 128 + signal.SIGTERM
+            assert not psutil.wait_procs([child], timeout=10)[1]
+            assert web.poll() is None
         finally:
-            _end_group(proc)
-        assert alive, proc.stderr.read()[-2000:]
+            _end_group(native)
+            _end_group(web)
     finally:
         xvfb.terminate()
         xvfb.wait(timeout=10)

@@ -9,8 +9,6 @@ import tempfile
 from twin.cli_args import port
 from twin.outputs import check_output
 
-DEFAULT_WEB_PORT = 9090
-
 
 def _seconds(text: str) -> float:
     try:
@@ -28,11 +26,14 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
                                    ".rrd first), serve the web viewer, convert to .rrd, or save a headless screenshot.")
     p.add_argument("file", help="a recording: FILE.mcap or FILE.rrd")
     mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--web", action="store_true", help="serve the web viewer on localhost (offline)")
+    mode.add_argument("--web", action="store_true",
+                      help="serve the web viewer on 127.0.0.1 (offline) and print the URL that opens the recording")
     mode.add_argument("--rrd", metavar="OUT.rrd", help="convert an MCAP recording to a Rerun .rrd file and exit")
     mode.add_argument("--screenshot", metavar="OUT.png", help="render the viewer headless and save a PNG")
-    p.add_argument("--port", type=port(), default=DEFAULT_WEB_PORT,
-                   help=f"web viewer port with --web (default {DEFAULT_WEB_PORT})")
+    p.add_argument("--port", type=port(allow_any=True), default=0,
+                   help="web viewer (HTTP) port with --web (default: a free one)")
+    p.add_argument("--grpc-port", type=port(allow_any=True), default=0,
+                   help="port of the viewer's gRPC server, which streams the recording (default: a free one)")
     p.add_argument("--at", type=_seconds, metavar="SECONDS",
                    help="with --screenshot: the simulated time to show (default: the end of the first hold)")
     p.set_defaults(func=cmd_view)
@@ -46,16 +47,19 @@ def cmd_view(args: argparse.Namespace) -> int:
         frames = viewer.mcap_to_rrd(args.file, args.rrd)
         print(f"wrote {args.rrd}: {frames} frames")
         return 0
+    # Ctrl-C, SIGTERM and SIGHUP unwind through here (twin.signals): the viewer is stopped, the folder removed.
     with tempfile.TemporaryDirectory(prefix="twin-view-") as tmp:
-        rrd = viewer.as_rrd(args.file, tmp)
+        rrd = viewer.as_rrd(args.file, tmp)  # a bad file is reported before a missing display
+        log = f"{tmp}/rerun.log"
         if args.screenshot:
-            shown_s, problems = viewer.screenshot(rrd, args.screenshot, at_s=args.at)
+            shown_s, problems = viewer.screenshot(rrd, args.screenshot, at_s=args.at, grpc_port=args.grpc_port)
             when = "the end of the run" if shown_s is None else f"t = {shown_s:.3f} s"
             print(f"wrote {args.screenshot}: the viewer at {when}")
             for problem in problems:
                 print(f"  view reported: {problem}")
             return 0
         if args.web:
-            print(f"serving the web viewer at http://127.0.0.1:{args.port} (Ctrl-C to stop)")
-            return viewer.serve_web(rrd, args.port)
-        return viewer.open_native(rrd)
+            return viewer.serve_web(rrd, log, web_port=args.port, grpc_port=args.grpc_port,
+                                    on_ready=lambda url: print(f"serving the web viewer at {url} (Ctrl-C to stop)",
+                                                               flush=True))
+        return viewer.open_native(rrd, log, grpc_port=args.grpc_port)

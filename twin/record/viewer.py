@@ -1,36 +1,40 @@
 """Showing a recording in Rerun's viewer: the native window, the web viewer, or a headless screenshot.
 
 An .mcap recording is drawn into a temporary .rrd first (twin.load + write_rrd); an .rrd is checked
-(magic bytes and `rerun rrd verify`) before any viewer starts.
+(magic bytes and `rerun rrd verify`) before any viewer starts. Every viewer is a `rerun` child that
+listens on 127.0.0.1 only, on free ports unless told otherwise, and dies with us (twin.record.rerun_process).
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
-import signal
-import socket
 import subprocess
+import sys
 import tempfile
 import time
+import urllib.parse
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from twin.errors import RecordingError, TwinError
+from twin.errors import RecordingError
 from twin.record import rerun_scene as scene
+from twin.record.rerun_process import (LOOPBACK, ViewerError, last_log_line, loopback_ports, spawn, stop,
+                                       wait_listening)
 from twin.record.rerun_writer import write_rrd
 from twin.record.rrd_file import file_kind, read_scalars, rerun_executable, verify_rrd
 from twin.recording import Recording
+
+__all__ = ["ViewerError", "as_rrd", "holding_time_ns", "mcap_to_rrd", "open_native", "require_display",
+           "screenshot", "serve_web", "web_url"]
 
 DEFAULT_WINDOW_SIZE = "1280x800"
 VIEWER_START_TIMEOUT_S = 30.0
 LOAD_TIMEOUT_S = 60.0
 TOAST_FADE_S = 2.0
-
-
-class ViewerError(TwinError):
-    """The Rerun viewer could not be started or did not answer."""
+DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")
+NO_DISPLAY_HINT = "use --web, --rrd or --screenshot"
 
 
 def load_recording(path: str | os.PathLike) -> Recording:
@@ -58,17 +62,61 @@ def mcap_to_rrd(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike) -> in
     return write_rrd(load_recording(mcap_path), rrd_path)
 
 
-def open_native(rrd: str | os.PathLike) -> int:
-    """The native viewer window on the file; returns when the window closes."""
-    return subprocess.run([rerun_executable(), str(rrd)], check=False).returncode
+def require_display() -> None:
+    """ViewerError (exit 2) when a native window cannot open: on Linux and BSD a window needs an X11
+    or Wayland display, named by $DISPLAY or $WAYLAND_DISPLAY."""
+    if sys.platform in ("darwin", "win32") or any(os.environ.get(v) for v in DISPLAY_VARIABLES):
+        return
+    raise ViewerError(f"no display for the native viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); {NO_DISPLAY_HINT}")
 
 
-def serve_web(rrd: str | os.PathLike, port: int) -> int:
-    """Serve the web viewer (bundled in the wheel, works offline) on localhost:port until interrupted."""
-    if not 1 <= port <= 65535:
-        raise ViewerError(f"web viewer port {port} is out of range; expected 1..65535")
-    cmd = [rerun_executable(), str(rrd), "--web-viewer", "--web-viewer-port", str(port), "--bind", "127.0.0.1"]
-    return subprocess.run(cmd, check=False).returncode
+def open_native(rrd: str | os.PathLike, log_path: str | os.PathLike, *, grpc_port: int = 0) -> int:
+    """The native viewer window on the file; returns 0 when the window is closed.
+
+    Its server (which SDKs and other viewers may connect to) listens on 127.0.0.1 only, on
+    grpc_port or a free port; its log goes to log_path. A viewer that fails (e.g. cannot reach the
+    display) is one ViewerError line with its last log line."""
+    require_display()
+    (port,) = loopback_ports(("--grpc-port", grpc_port))
+    cmd = [rerun_executable(), str(rrd), "--bind", LOOPBACK, "--port", str(port)]
+    with open(log_path, "w+b") as log:
+        proc = spawn(cmd, log)
+        try:
+            code = proc.wait()
+        finally:
+            stop(proc)
+        if code != 0:
+            raise ViewerError(f"the native Rerun viewer exited with code {code} ({last_log_line(log) or 'no output'}); "
+                              f"without a working display {NO_DISPLAY_HINT}")
+    return 0
+
+
+def web_url(web_port: int, grpc_port: int) -> str:
+    """The address that opens the recording in the web viewer (without ?url= it shows a welcome page)."""
+    source = urllib.parse.quote(f"rerun+http://{LOOPBACK}:{grpc_port}/proxy", safe="")
+    return f"http://{LOOPBACK}:{web_port}/?url={source}"
+
+
+def serve_web(rrd: str | os.PathLike, log_path: str | os.PathLike, *, web_port: int = 0, grpc_port: int = 0,
+              on_ready: Callable[[str], None] = print) -> int:
+    """Serve the web viewer (bundled in the wheel, works offline) on 127.0.0.1 until interrupted.
+
+    Both ports are the given ones or free ones, so several viewers run side by side. Once both
+    listen, on_ready gets the URL that opens the recording. Returns 0 when the server ends by itself."""
+    web_port, grpc_port = loopback_ports(("--port", web_port), ("--grpc-port", grpc_port))
+    cmd = [rerun_executable(), str(rrd), "--web-viewer", "--web-viewer-port", str(web_port), "--port",
+           str(grpc_port), "--bind", LOOPBACK]
+    with open(log_path, "w+b") as log:
+        proc = spawn(cmd, log)
+        try:
+            wait_listening(proc, (web_port, grpc_port), log, "the Rerun web viewer", VIEWER_START_TIMEOUT_S)
+            on_ready(web_url(web_port, grpc_port))
+            code = proc.wait()
+        finally:
+            stop(proc)
+        if code != 0:
+            raise ViewerError(f"the Rerun web viewer exited with code {code}: {last_log_line(log) or 'no output'}")
+    return 0
 
 
 def holding_time_ns(rrd: str | os.PathLike) -> int | None:
@@ -87,7 +135,7 @@ def holding_time_ns(rrd: str | os.PathLike) -> int | None:
 
 
 def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: float | None = None,
-               window_size: str = DEFAULT_WINDOW_SIZE) -> tuple[float | None, list[str]]:
+               window_size: str = DEFAULT_WINDOW_SIZE, grpc_port: int = 0) -> tuple[float | None, list[str]]:
     """Render the viewer headless (software Vulkan works) and save a PNG of what a user would see.
 
     The time cursor goes to `at_s` seconds of simulated time, else to the end of the first hold,
@@ -99,16 +147,15 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
     if not out.parent.is_dir():
         raise ViewerError(f"cannot write {str(out_png)!r}: directory {str(out.parent)!r} does not exist")
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
-    port = _free_port()
+    (port,) = loopback_ports(("--grpc-port", grpc_port))
     env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))  # no notification toasts in the picture
     # The viewer's output goes to a file, not a pipe: a chatty viewer must never block on a full pipe.
     with tempfile.TemporaryFile() as log:
         started = time.monotonic()
-        proc = subprocess.Popen([rerun_executable(), "--headless", "--port", str(port), "--window-size", window_size,
-                                 "--hide-welcome-screen"], env=env, stdout=subprocess.DEVNULL, stderr=log,
-                                start_new_session=True)
+        proc = spawn([rerun_executable(), "--headless", "--bind", LOOPBACK, "--port", str(port),
+                      "--window-size", window_size, "--hide-welcome-screen"], log, env=env)
         try:
-            client = _connect(ViewerClient, f"rerun+http://127.0.0.1:{port}/proxy", proc, log)
+            client = _connect(ViewerClient, f"rerun+http://{LOOPBACK}:{port}/proxy", proc, log)
             try:
                 client.open(str(Path(rrd).resolve()))
                 timelines = _wait_loaded(client, proc)
@@ -130,38 +177,19 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
             except (RuntimeError, ValueError, OSError) as err:
                 raise ViewerError(f"the headless Rerun viewer failed to take the screenshot: {err}") from err
         finally:
-            _stop(proc)
+            stop(proc)
     if not out.is_file():
         raise ViewerError(f"the headless viewer did not write {str(out)!r}")
     return (None if at_ns is None else at_ns * 1e-9), problems
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    """End the viewer started here, and anything it started (its own process group)."""
-    for sig, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, None)):
-        with contextlib.suppress(ProcessLookupError):  # already gone
-            os.killpg(proc.pid, sig)
-        try:
-            proc.wait(timeout=wait_s)
-            return
-        except subprocess.TimeoutExpired:
-            continue
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _connect(client_cls, url: str, proc: subprocess.Popen, log):
     deadline = time.monotonic() + VIEWER_START_TIMEOUT_S
     while True:
         if proc.poll() is not None:
-            log.seek(0)
-            err = [ln for ln in log.read().decode(errors="replace").splitlines() if ln.strip()]
+            err = last_log_line(log)
             raise ViewerError(f"the headless Rerun viewer exited with code {proc.returncode}"
-                              f"{': ' + err[-1] if err else ''} (needs Vulkan, e.g. Debian's mesa-vulkan-drivers)")
+                              f"{': ' + err if err else ''} (needs Vulkan, e.g. Debian's mesa-vulkan-drivers)")
         try:
             client = client_cls.connect(url)
             client.get_state()

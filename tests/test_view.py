@@ -51,14 +51,14 @@ def no_view_folders_left_in_the_temp_dir():
 
 @pytest.fixture(autouse=True)
 def view_tmp(tmp_path, monkeypatch):
-    """A temp dir of the test's own (for `twin view` in this process and in children), empty of
-    `twin-view-*` folders when the test is over."""
+    """A temp dir of the test's own (for `twin view` in this process and in children), empty when the
+    test is over: no `twin-view-*` folder, nor a `rerun-data-*` one the viewer makes."""
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp))
     monkeypatch.setattr(tempfile, "tempdir", str(tmp))
     yield tmp
-    assert not list(tmp.glob("twin-view-*"))
+    assert not list(tmp.iterdir())
 
 
 @pytest.fixture(scope="module")
@@ -243,9 +243,10 @@ def test_the_printed_url_streams_the_recording(recorded, tmp_path):
 
     proc = _start_view(str(recorded["mcap"]), "--web")
     port = _free_port()
-    with open(tmp_path / "headless.log", "wb") as log:
+    with open(tmp_path / "headless.log", "wb") as log:  # its own TMPDIR: a killed viewer leaves rerun-data-*
         headless = subprocess.Popen([rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port),
-                                     "--hide-welcome-screen"], stdout=log, stderr=log, start_new_session=True)
+                                     "--hide-welcome-screen"], stdout=log, stderr=log, start_new_session=True,
+                                    env={**os.environ, "TMPDIR": str(tmp_path)})
     try:
         url = _served(proc)[0]
         source = urllib.parse.unquote(urllib.parse.urlparse(url).query.removeprefix("url="))

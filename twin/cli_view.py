@@ -50,16 +50,16 @@ def cmd_view(args: argparse.Namespace) -> int:
     # Ctrl-C, SIGTERM and SIGHUP unwind through here (twin.signals): the viewer is stopped, the folder removed.
     with tempfile.TemporaryDirectory(prefix="twin-view-") as tmp:
         rrd = viewer.as_rrd(args.file, tmp)  # a bad file is reported before a missing display
-        log = f"{tmp}/rerun.log"
         if args.screenshot:
-            shown_s, problems = viewer.screenshot(rrd, args.screenshot, at_s=args.at, grpc_port=args.grpc_port)
+            shown_s, problems = viewer.screenshot(rrd, args.screenshot, tmp, at_s=args.at,
+                                                  grpc_port=args.grpc_port)
             when = "the end of the run" if shown_s is None else f"t = {shown_s:.3f} s"
             print(f"wrote {args.screenshot}: the viewer at {when}")
             for problem in problems:
                 print(f"  view reported: {problem}")
             return 0
         if args.web:
-            return viewer.serve_web(rrd, log, web_port=args.port, grpc_port=args.grpc_port,
+            return viewer.serve_web(rrd, tmp, web_port=args.port, grpc_port=args.grpc_port,
                                     on_ready=lambda url: print(f"serving the web viewer at {url} (Ctrl-C to stop)",
                                                                flush=True))
-        return viewer.open_native(rrd, log, grpc_port=args.grpc_port)
+        return viewer.open_native(rrd, tmp, grpc_port=args.grpc_port)

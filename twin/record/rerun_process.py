@@ -50,9 +50,14 @@ def _die_with_parent(parent_pid: int):
     return preexec
 
 
-def spawn(cmd: Sequence[str], log: IO[bytes], env: dict[str, str] | None = None) -> subprocess.Popen:
+def spawn(cmd: Sequence[str], log: IO[bytes], *, env: dict[str, str] | None = None,
+          tmp_dir: str | os.PathLike | None = None) -> subprocess.Popen:
     """Start `cmd` in its own process group, dying with this process, its output going to `log`
-    (a file, never a pipe: a chatty viewer must not block on a full pipe)."""
+    (a file, never a pipe: a chatty viewer must not block on a full pipe). With tmp_dir, the child's
+    TMPDIR: the viewer makes a `rerun-data-*` folder there that a stopped viewer leaves behind."""
+    env = dict(os.environ if env is None else env)
+    if tmp_dir is not None:
+        env["TMPDIR"] = str(tmp_dir)
     return subprocess.Popen(list(cmd), stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env,
                             start_new_session=True, preexec_fn=_die_with_parent(os.getpid()))
 

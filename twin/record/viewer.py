@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import tempfile
 import time
 import urllib.parse
 from collections.abc import Callable
@@ -35,6 +34,7 @@ LOAD_TIMEOUT_S = 60.0
 TOAST_FADE_S = 2.0
 DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")
 NO_DISPLAY_HINT = "use --web, --rrd or --screenshot"
+LOG_NAME = "rerun.log"  # the viewer's own output, in the caller's temporary folder
 
 
 def load_recording(path: str | os.PathLike) -> Recording:
@@ -70,17 +70,18 @@ def require_display() -> None:
     raise ViewerError(f"no display for the native viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); {NO_DISPLAY_HINT}")
 
 
-def open_native(rrd: str | os.PathLike, log_path: str | os.PathLike, *, grpc_port: int = 0) -> int:
+def open_native(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, grpc_port: int = 0) -> int:
     """The native viewer window on the file; returns 0 when the window is closed.
 
     Its server (which SDKs and other viewers may connect to) listens on 127.0.0.1 only, on
-    grpc_port or a free port; its log goes to log_path. A viewer that fails (e.g. cannot reach the
-    display) is one ViewerError line with its last log line."""
+    grpc_port or a free port. Its log and its temporary files go to work_dir (a folder the caller
+    removes). A viewer that fails (e.g. cannot reach the display) is one ViewerError line with its
+    last log line."""
     require_display()
     (port,) = loopback_ports(("--grpc-port", grpc_port))
     cmd = [rerun_executable(), str(rrd), "--bind", LOOPBACK, "--port", str(port)]
-    with open(log_path, "w+b") as log:
-        proc = spawn(cmd, log)
+    with open(Path(work_dir) / LOG_NAME, "w+b") as log:
+        proc = spawn(cmd, log, tmp_dir=work_dir)
         try:
             code = proc.wait()
         finally:
@@ -97,17 +98,18 @@ def web_url(web_port: int, grpc_port: int) -> str:
     return f"http://{LOOPBACK}:{web_port}/?url={source}"
 
 
-def serve_web(rrd: str | os.PathLike, log_path: str | os.PathLike, *, web_port: int = 0, grpc_port: int = 0,
+def serve_web(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, web_port: int = 0, grpc_port: int = 0,
               on_ready: Callable[[str], None] = print) -> int:
     """Serve the web viewer (bundled in the wheel, works offline) on 127.0.0.1 until interrupted.
 
     Both ports are the given ones or free ones, so several viewers run side by side. Once both
-    listen, on_ready gets the URL that opens the recording. Returns 0 when the server ends by itself."""
+    listen, on_ready gets the URL that opens the recording. Its log and its temporary files go to
+    work_dir (a folder the caller removes). Returns 0 when the server ends by itself."""
     web_port, grpc_port = loopback_ports(("--port", web_port), ("--grpc-port", grpc_port))
     cmd = [rerun_executable(), str(rrd), "--web-viewer", "--web-viewer-port", str(web_port), "--port",
            str(grpc_port), "--bind", LOOPBACK]
-    with open(log_path, "w+b") as log:
-        proc = spawn(cmd, log)
+    with open(Path(work_dir) / LOG_NAME, "w+b") as log:
+        proc = spawn(cmd, log, tmp_dir=work_dir)
         try:
             wait_listening(proc, (web_port, grpc_port), log, "the Rerun web viewer", VIEWER_START_TIMEOUT_S)
             on_ready(web_url(web_port, grpc_port))
@@ -134,12 +136,14 @@ def holding_time_ns(rrd: str | os.PathLike) -> int | None:
     return int(t_ns[last])
 
 
-def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: float | None = None,
-               window_size: str = DEFAULT_WINDOW_SIZE, grpc_port: int = 0) -> tuple[float | None, list[str]]:
+def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str | os.PathLike, *,
+               at_s: float | None = None, window_size: str = DEFAULT_WINDOW_SIZE,
+               grpc_port: int = 0) -> tuple[float | None, list[str]]:
     """Render the viewer headless (software Vulkan works) and save a PNG of what a user would see.
 
     The time cursor goes to `at_s` seconds of simulated time, else to the end of the first hold,
-    else to the end. Returns (time shown in s or None for the end, problems the views reported).
+    else to the end. The viewer's log and temporary files go to work_dir (a folder the caller
+    removes). Returns (time shown in s or None for the end, problems the views reported).
     """
     from rerun.experimental import ViewerClient
 
@@ -149,11 +153,10 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, *, at_s: floa
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
     (port,) = loopback_ports(("--grpc-port", grpc_port))
     env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))  # no notification toasts in the picture
-    # The viewer's output goes to a file, not a pipe: a chatty viewer must never block on a full pipe.
-    with tempfile.TemporaryFile() as log:
+    with open(Path(work_dir) / LOG_NAME, "w+b") as log:
         started = time.monotonic()
         proc = spawn([rerun_executable(), "--headless", "--bind", LOOPBACK, "--port", str(port),
-                      "--window-size", window_size, "--hide-welcome-screen"], log, env=env)
+                      "--window-size", window_size, "--hide-welcome-screen"], log, env=env, tmp_dir=work_dir)
         try:
             client = _connect(ViewerClient, f"rerun+http://{LOOPBACK}:{port}/proxy", proc, log)
             try:

@@ -43,6 +43,7 @@ class Golden:
     task: str
     params: dict
     how: str
+    rate: int = RATE_STEPS  # keep every Nth step (commands and events are kept at every step whatever it is)
 
 
 def goldens() -> list[Golden]:
@@ -52,11 +53,11 @@ def goldens() -> list[Golden]:
     heavy = TwinConfig(objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False))
     out += [  # each report's own step-4 Lua loop on its own scene (docs/seed-conventions.md)
         Golden("seed000_seed000", TwinConfig(profile=PROFILES["seed000"]), "seed000", {"cycles": 1},
-               "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: box to (-0.3, -0.55) and back"),
+               "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: box to (-0.3, -0.55) and back", 4),
         Golden("seed001_seed001", TwinConfig(profile=PROFILES["seed001"]), "seed001", {"cycles": 1},
-               "task seed001 (report 001's Lua loop, its Heron IK as written), 1 cycle, robot seed001: the miss"),
+               "task seed001 (report 001's Lua loop, its Heron IK as written), 1 cycle, robot seed001: the miss", 4),
         Golden("seed002_seed002", TwinConfig(profile=PROFILES["seed002"]), "seed002", {},
-               "task seed002 (report 002's Lua, its Heron IK as written), robot seed002: the miss"),
+               "task seed002 (report 002's Lua, its Heron IK as written), robot seed002: the miss", 4),
     ]
     out.append(Golden("pick_place_break_mtb", heavy, "pick_place", {"cycles": 1},
                       "pick_place, 1 cycle, robot mtb, a 0.5 kg box (4.9 N) on the stock finite-strength pad "
@@ -122,7 +123,7 @@ def make(golden: Golden, out_dir: Path = RECORDINGS) -> Path:
         return make_session(golden, out_dir)
     path = out_dir / f"{golden.name}.mcap"
     run = {"source": "task", "task": golden.task, "params": golden.params}
-    with open_recorders(golden.config, run, mcap_path=path, rate=RATE_STEPS) as sinks:
+    with open_recorders(golden.config, run, mcap_path=path, rate=golden.rate) as sinks:
         record_task(golden.config, golden.task, golden.params, sinks=sinks)
     return path
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import re
 import shutil
@@ -20,7 +19,6 @@ from twin.tasks import TASKS, resolve, run_task
 from twin.twin import Twin
 
 FIXTURES = Path(__file__).parent / "fixtures"
-HERON = FIXTURES / "heron_task.py"
 FAR = FIXTURES / "far_task.py"
 PLACE_TOL_M = 0.005
 EVENT_LINE = re.compile(r"^\s+t=\s*([\d.]+) s\s+(\w+)\s+(\S*)\s+(.*)$")
@@ -69,58 +67,31 @@ def test_twin_run_pick_place_prints_each_cycles_attach_release_and_placement(rob
     assert not list(tmp_path.iterdir())  # --no-record wrote nothing
 
 
-def _load_heron():
-    spec = importlib.util.spec_from_file_location("heron_task", HERON)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_heron_ik_misses_the_pick_point_by_13_cm_while_the_twins_ik_hits_it():
-    from twin import kinematics
-
-    heron = _load_heron()
-    p = PROFILES["seed001"]
-    assert (p.link1_m, p.link2_m) == (heron.LINK1_M, heron.LINK2_M)
-    pose = kinematics.fk(p, (*heron.heron_ik(0.2, 0.7), 0.0, 0.0))
-    miss_m = ((pose.x_m - 0.2) ** 2 + (pose.y_m - 0.7) ** 2) ** 0.5
-    assert 0.12 < miss_m < 0.14  # "about 13 cm"
-    for sol in kinematics.ik(p, 0.2, 0.7):
-        pose = kinematics.fk(p, (sol.shoulder_rad, sol.elbow_rad, 0.0, 0.0))
-        assert abs(pose.x_m - 0.2) < 1e-9 and abs(pose.y_m - 0.7) < 1e-9
-    # with its height fixed the report's form is right in three quadrants; its quadrant fix sends
-    # x > 0, y < 0 to the point mirrored through the base
-    for x, y in [(0.2, 0.7), (-0.3, 0.55), (-0.3, -0.55)]:
-        pose = kinematics.fk(p, (*heron.heron_ik(x, y, height_bug=False), 0.0, 0.0))
-        assert abs(pose.x_m - x) < 1e-9 and abs(pose.y_m - y) < 1e-9
-    pose = kinematics.fk(p, (*heron.heron_ik(0.3, -0.55, height_bug=False), 0.0, 0.0))
-    assert abs(pose.x_m + 0.3) < 1e-9 and abs(pose.y_m - 0.55) < 1e-9
-    pose = kinematics.fk(p, (*heron.heron_ik(0.3, -0.55, height_bug=False, quadrant_bug=False), 0.0, 0.0))
-    assert abs(pose.x_m - 0.3) < 1e-9 and abs(pose.y_m + 0.55) < 1e-9
-
-
-def test_heron_task_reports_an_empty_suction_and_leaves_the_box():
+def test_report_001s_loop_reports_an_empty_suction_and_leaves_the_box():
+    """The built-in seed001 task is report 001's Lua loop with its Heron IK as written: it misses."""
     sink = FrameCollector()
     twin = Twin(TwinConfig(profile=PROFILES["seed001"]), sinks=[sink])
     start = twin.object_pose("box")
-    run_task(twin, resolve(str(HERON)), {"cycles": 1})
+    run_task(twin, resolve("seed001"), {"cycles": 1})
     kinds = [e.kind for e in sink.events]
-    assert kinds == ["task_start", "suction_empty", "task_end"]
-    assert sink.events[1].message == "suction on, nothing sensed"
+    assert kinds[0] == "task_start" and kinds[-1] == "task_end" and "attach" not in kinds
+    assert kinds.count("suction_empty") == 2  # at the pick and at the place
+    assert all(e.message == "suction on, nothing sensed" for e in sink.events if e.kind == "suction_empty")
     end = twin.object_pose("box")
     assert abs(end[0] - start[0]) < 1e-3 and abs(end[1] - start[1]) < 1e-3
     assert all(f.held_body == -1 for f in sink.frames)
-    # the pad went down where the buggy IK sent it: about 13 cm beyond the box
-    lowest = min(sink.frames, key=lambda f: f.pad_pose[2] if f.step < 1200 else 1.0)
-    miss_m = ((lowest.pad_pose[0] - 0.2) ** 2 + (lowest.pad_pose[1] - 0.7) ** 2) ** 0.5
+    # wherever the pad went down, the nearest it came to the box is where the report's IK sent it: 13 cm off
+    z_low = min(f.pad_pose[2] for f in sink.frames) + 1e-3
+    miss_m = min(((f.pad_pose[0] - 0.2) ** 2 + (f.pad_pose[1] - 0.7) ** 2) ** 0.5
+                 for f in sink.frames if f.pad_pose[2] < z_low)
     assert 0.12 < miss_m < 0.14
 
 
-def test_heron_task_from_the_command_line_exits_0(tmp_path):
-    done = _twin_cli("run", str(HERON), "--robot", "seed001", "--cycles", "1", "--no-record", cwd=tmp_path)
+def test_report_001s_loop_from_the_command_line_exits_0(tmp_path):
+    done = _twin_cli("run", "seed001", "--robot", "seed001", "--cycles", "1", "--no-record", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""
-    assert "suction_empty 1" in done.stdout and "attach" not in done.stdout
+    assert "suction_empty 2" in done.stdout and "attach" not in done.stdout
     final = re.search(r"box final pose: x ([-+\d.]+) y ([-+\d.]+)", done.stdout)
     assert abs(float(final.group(1)) - 0.2) < 1e-3 and abs(float(final.group(2)) - 0.7) < 1e-3  # not moved
 

@@ -90,20 +90,24 @@ def test_mtb_map_lowers_and_raises_in_each_scene_s_own_z(name):
     assert t[2] == PROFILES[name].z_up()
 
 
-def test_seed000_keys_press_the_pad_onto_the_box_and_switch_on_only_when_lifted():
+def test_seed000_keys_take_hold_when_the_stop_sets_the_pad_into_the_box():
     """Report 000's keys as its Lua does them: 5 sets joint3 to its stop (0.084, 2.4 cm below the loop's
-    0.06 on the box: the pad comes to rest on the box, its sensor inside it) and 8 switches suction on
-    only together with a lift; so these keys alone never make the pad hold the box (see the README)."""
+    0.06 on the box: the pad's sensor starts inside the box) and 8 switches suction on with a lift. With
+    suction on up high, 5 takes hold (the sensor sees the box it starts in, as CoppeliaSim's does) and
+    8 lifts the box; 5 before 8 leaves the box where it is (suction comes on only as the pad lifts)."""
     p = PROFILES["seed000"]
-    twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))
-    try:
-        for key in parse_keys("d*47 q*126 8 5 8"):
-            twin.press_key(key)
-            twin.wait(0.1)
-        assert twin.suction_pad.held == -1
-        assert math.dist(twin.object_pose("box")[:2], (0.2, 0.7)) < 0.002
-    finally:
-        twin.close()
+    for keys, held in (("d*47 q*126 8 5 8", 0), ("d*47 q*126 5 8", -1)):
+        twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))
+        try:
+            for key in parse_keys(keys):
+                twin.press_key(key)
+                twin.wait(0.1)
+            assert twin.suction_pad.held == held, keys
+            box = twin.object_pose("box")
+            assert math.dist(box[:2], (0.2, 0.7)) < 0.002
+            assert (box[2] > 0.1) if held == 0 else abs(box[2] - 0.025) < 1e-3  # lifted with the pad, or left
+        finally:
+            twin.close()
 
 
 def test_quit_keys_never_steal_a_bound_key():

@@ -289,3 +289,18 @@ def test_step_grace_is_an_option():
         sim.step()  # waits for the silent client 0.5 s, not 10
         server.wait_for(rf"{label} silent for 0.5 s \(--step-grace\): no longer holds back stepping")
         sim.stopSimulation()
+
+
+def test_a_cyclic_joint_reads_back_in_minus_pi_to_pi_as_coppeliasim_reports_it():
+    """The seeds' CoppeliaSim joints are cyclic: report 000's shoulder goes to +218 deg, read back -142."""
+    import math
+
+    with ServerProcess("--stepped", "--robot", "seed000") as server:
+        sim = server.client().require("sim")
+        shoulder = sim.getObject("/joint1")
+        sim.startSimulation()
+        sim.setJointPosition(shoulder, math.radians(218.0))
+        sim.setStepping(True)
+        sim.step()
+        assert sim.getJointPosition(shoulder) == pytest.approx(math.radians(218.0 - 360.0), abs=1e-6)
+        sim.stopSimulation()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 
@@ -63,7 +64,8 @@ def test_the_legacy_calls_and_return_codes(cid, server):
     rc, xyz = vrep.simxGetObjectPosition(cid, pad, -1, WAIT)
     assert rc == vrep.simx_return_ok and len(xyz) == 3
     rc, euler = vrep.simxGetObjectOrientation(cid, pad, -1, WAIT)
-    assert euler == pytest.approx([0.0, 0.0, 0.25], abs=1e-9)
+    # seed001's scene: link 1 along +y at zero, joints turning clockwise seen from above
+    assert euler == pytest.approx([0.0, 0.0, math.pi / 2 - 0.25], abs=1e-9)
     assert vrep.simxSetJointTargetPosition(cid, shoulder, "far", WAIT) == vrep.simx_return_remote_error_flag
     assert vrep.simxSetJointTargetPosition(cid, shoulder, 0.1, 0x090000) == vrep.simx_return_illegal_opmode_flag
     rc, ping_ms = vrep.simxGetPingTime(cid)

@@ -98,7 +98,7 @@ def test_stepped_pick_and_place_places_the_box_and_the_recording_replays_exactly
     assert tuple(rec.frames.object_poses[-1][0][:3]) == (x, y, z)  # what the client read is what was recorded
     kinds = [e.kind for e in rec.events]
     assert kinds.count("attach") == 1 and "release" in kinds and "log" in kinds
-    assert {c.kind for c in rec.commands} == {"joint_target", "signal"}
+    assert {c.kind for c in rec.commands} == {"joint_target", "signal", "event"}  # event: the client's addLog
     assert all(rec.commands[i].step <= rec.commands[i + 1].step for i in range(len(rec.commands) - 1))
     second = load(tmp_path / "session-2.mcap")
     assert len(second.frames) == 4

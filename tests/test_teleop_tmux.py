@@ -117,7 +117,7 @@ def test_curses_pick_and_place_then_replay_exactly(terminal, tmp_path, capsys):
     cmd = f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot mtb --record {shlex.quote(str(record))}"
     term = terminal(cmd)
     text = term.wait_for("the start screen", lambda s: "last keys (none yet)" in s)
-    assert "quit: q, Esc, Ctrl-C, Ctrl-D" in text and "lower Z to its stop" in text and "suction on" in text
+    assert "quit: q, Esc, Ctrl-C, Ctrl-D" in text and "lower Z (down)" in text and "suction on" in text
     assert math.dist(box_xyz(text)[:2], POINT_A_M) < 1e-3
 
     term.send("z")  # not in the mtb map: ignored, shown as such
@@ -127,7 +127,7 @@ def test_curses_pick_and_place_then_replay_exactly(terminal, tmp_path, capsys):
     term.send(*mtb_keys(pick))
     text = term.wait_for("the arm over the box", lambda s: arrived_at(s, pick))
     assert _joints(text)[0][:2] == pytest.approx(pick, abs=0.02)
-    term.send("k")  # lower Z to its stop
+    term.send("k")  # lower Z to the scene's down
     term.wait_for("the pad down on the box", lambda s: arrived(s) and "Z 0.2000 " in s)
     term.send("g")  # suction on
     text = term.wait_for("the suction holding", lambda s: "HOLDING box" in s and "suction  ON" in s)

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
+from twin.outputs import partial_path
 from twin.record.mcap_reader import load
 
 
@@ -121,7 +122,8 @@ def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_pa
     keyboard = XKeyboard(xvfb)
     try:
         deadline = time.monotonic() + 30
-        while keyboard.windows() == 0 or not _grown(record):  # the window is up and the session is stepping
+        # the window is up and the session is stepping (written to NAME.partial until it is finalized)
+        while keyboard.windows() == 0 or not _grown(partial_path(record)):
             assert time.monotonic() < deadline and twin.poll() is None, "no PyBullet window or no steps"
             time.sleep(0.05)
         keyboard.point_at(300, 300)  # no window manager: keys go to the window under the pointer

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 from coppeliasim_zmqremoteapi_client import RemoteAPIClient
-
 from test_remote_server_process import ServerProcess
+
 from twin.cli import main
 from twin.record.mcap_reader import load
 
@@ -43,7 +43,7 @@ def twin(capsys, *argv) -> tuple[int, str, str]:
 def cli(*argv, cwd=None) -> subprocess.CompletedProcess:
     """The real `twin` command in its own process."""
     return subprocess.run([sys.executable, "-m", "twin.cli", *map(str, argv)], capture_output=True, text=True,
-                          cwd=cwd, timeout=300)
+                          cwd=cwd, timeout=300, check=False)
 
 
 # -- 1. a replay diffs as exact against its source ------------------------------------------------

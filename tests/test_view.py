@@ -256,7 +256,7 @@ def test_the_printed_url_streams_the_recording(recorded, tmp_path):
                 client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
                 client.get_state()
                 break
-            except Exception:  # the headless viewer is not up yet
+            except Exception:  # noqa: BLE001 - whatever the client raises while the headless viewer is not up yet
                 assert time.monotonic() < deadline and headless.poll() is None
                 time.sleep(0.2)
         client.open(source)
@@ -285,7 +285,7 @@ def test_a_stop_signal_ends_the_viewer_and_removes_the_temp_folder(recorded, vie
         os.kill(proc.pid, signum)  # the twin process alone, as `kill` or a closed terminal does
         assert proc.wait(timeout=30) == 128 + signum
         assert proc.stderr.read().strip() == f"twin: stopped by {signal.Signals(signum).name}"
-        gone, alive = psutil.wait_procs([child], timeout=10)
+        _, alive = psutil.wait_procs([child], timeout=10)
         assert not alive, f"rerun {child.pid} outlived twin view"
     finally:
         _end_group(proc)
@@ -299,7 +299,7 @@ def test_the_viewer_dies_with_a_killed_twin(recorded, view_tmp):
         child = _viewer_child(proc)
         os.kill(proc.pid, signal.SIGKILL)
         assert proc.wait(timeout=30) == -signal.SIGKILL
-        gone, alive = psutil.wait_procs([child], timeout=10)
+        _, alive = psutil.wait_procs([child], timeout=10)
         assert not alive, f"rerun {child.pid} outlived twin view"
     finally:
         _end_group(proc)

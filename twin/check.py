@@ -146,8 +146,8 @@ def _task_changed(golden: Recording) -> list[str]:
     now = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "missing"
     if now == recorded:
         return []
-    return [f"the task file {run.get('task')!r} changed since the golden was recorded "
-            f"(sha256 {recorded[:12]}... then, {now[:12]}... now)"]
+    return [(f"the task file {run.get('task')!r} changed since the golden was recorded "
+             f"(sha256 {recorded[:12]}... then, {now[:12]}... now)")]
 
 
 def _rate(rec: Recording) -> int:

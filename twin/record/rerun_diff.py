@@ -7,7 +7,6 @@ Everything per step goes out with `send_columns` (one call per entity, whole run
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 import rerun as rr

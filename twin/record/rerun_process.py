@@ -59,7 +59,9 @@ def spawn(cmd: Sequence[str], log: IO[bytes], *, env: dict[str, str] | None = No
     if tmp_dir is not None:
         env["TMPDIR"] = str(tmp_dir)
     return subprocess.Popen(list(cmd), stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env,
-                            start_new_session=True, preexec_fn=_die_with_parent(os.getpid()))
+                            start_new_session=True,
+                            # the only hook that runs in the child before exec; it calls only prctl and getppid
+                            preexec_fn=_die_with_parent(os.getpid()))  # noqa: PLW1509
 
 
 def stop(proc: subprocess.Popen) -> None:

@@ -19,8 +19,7 @@ import numpy as np
 
 from twin.errors import RecordingError
 from twin.record import rerun_scene as scene
-from twin.record.rerun_process import (LOOPBACK, ViewerError, last_log_line, loopback_ports, spawn, stop,
-                                       wait_listening)
+from twin.record.rerun_process import LOOPBACK, ViewerError, last_log_line, loopback_ports, spawn, stop, wait_listening
 from twin.record.rerun_writer import write_rrd
 from twin.record.rrd_file import file_kind, read_scalars, rerun_executable, verify_rrd
 from twin.recording import Recording

@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from twin import kinematics
 from twin.errors import UnknownName
-from twin.profiles import PAD_ALIASES, ROBOT_ALIASES
+from twin.profiles import PAD_ALIASES, ROBOT_ALIASES, ROLES
 from twin.quat import quat_mul, rotate, yaw_quat
 from twin.remote.protocol import MAX_SIGNALS, Param, RequestError, Signature, describe, printable
 from twin.remote.session import (
@@ -191,7 +191,12 @@ class SimApi:
         self.scene.twin.set_joint_position(self._joint(handle), q)
 
     def get_joint_position(self, handle: int) -> float:
-        return self.scene.twin.frame.joint_q[self._joint(handle)]
+        """As CoppeliaSim reports it: a cyclic revolute joint (the seeds' scenes) in -pi..pi."""
+        j = self._joint(handle)
+        q = self.scene.twin.frame.joint_q[j]
+        if self.scene.twin.profile.revolute_cyclic and ROLES[j] != "z":
+            q = math.remainder(q, 2.0 * math.pi)
+        return q
 
     def get_joint_target_position(self, handle: int) -> float:
         return self.scene.twin.targets[self._joint(handle)]

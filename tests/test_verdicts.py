@@ -58,6 +58,8 @@ def test_a_replayed_task_run_diffs_exact_and_says_what_it_replays(tmp_path, caps
     assert {"task_start", "phase", "placed", "task_end", "attach", "release"} <= kinds
     assert load(b).run["replay_of"]["file"] == "a.mcap" and len(load(b).run["replay_of"]["sha256"]) == 64
     assert "replay_of" not in load(a).run
+    code, out, _ = twin(capsys, "info", b)
+    assert code == 0 and "a replay of a.mcap (sha256 " in out
     code, out, _ = twin(capsys, "check", b)
     assert code == 0 and "1 match" in out
 
@@ -202,6 +204,8 @@ def test_check_update_leaves_a_golden_untouched_when_its_task_now_raises(tmp_pat
     rewritten = load(golden)
     assert rewritten.meta["twin.finalized"]["outcome"] == "error"  # the file tells the truth
     assert "the gripper report failed" in rewritten.meta["twin.finalized"]["error"]
+    code, out, _ = twin(capsys, "check", "-v", golden)  # the rewrite holds the task's new sha256
+    assert code == 0 and "changed since the golden was recorded" not in out
 
 
 def test_a_run_whose_task_raised_is_finalized_as_error_even_when_the_caller_goes_on(tmp_path):

@@ -1,6 +1,6 @@
 """The benchmark entry point: `python tools/bench.py [--only NAME ...] [--repeats N]`.
 
-It first measures two physics-only baselines as medians over repeats: the idle scene (plane + the
+It first measures two physics-only baselines as medians over repeats: the idle scene (floor + the
 mtb robot + a box, stepSimulation alone, DIRECT mode, 240 Hz, through twin.world.World), and the
 same physics doing pick_place's work (the task's motor targets and holds applied straight to the
 World at their steps, stepSimulation alone: no Frames, no suction rule, no sinks). A moving arm

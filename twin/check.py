@@ -110,7 +110,7 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
     try:
         golden = load(path)
         if update:
-            with open_recorders(golden.config, golden.run, mcap_path=str(tmp), rate=_rate(golden)) as sinks:
+            with open_recorders(golden.config, _updated_run(golden), mcap_path=str(tmp), rate=_rate(golden)) as sinks:
                 new, kinds = rerun(golden, sinks=sinks)
         else:
             new, kinds = rerun(golden)
@@ -148,6 +148,16 @@ def _task_changed(golden: Recording) -> list[str]:
         return []
     return [(f"the task file {run.get('task')!r} changed since the golden was recorded "
              f"(sha256 {recorded[:12]}... then, {now[:12]}... now)")]
+
+
+def _updated_run(golden: Recording) -> dict:
+    """golden's run description for its rewrite: the task file's sha256 as it is now."""
+    run = dict(golden.run or {})
+    if run.get("task_sha256") and golden.path:
+        path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
+        if path.is_file():
+            run["task_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return run
 
 
 def _rate(rec: Recording) -> int:

@@ -92,6 +92,9 @@ def format_info(info: Info) -> list[str]:
     lines = [f"file: {info.path} ({info.size_bytes:,} bytes)", f"finalized: {state}"]
     params = json.dumps(info.run.get("params", {}), sort_keys=True)
     lines.append(f"run: {info.run.get('source', '')} {info.run.get('task', '')} params {params}")
+    replay_of = info.run.get("replay_of")
+    if isinstance(replay_of, dict):
+        lines.append(f"a replay of {replay_of.get('file', '?')} (sha256 {str(replay_of.get('sha256', '?'))[:12]}...)")
     lines.append(f"robot: {info.robot or '?'}; objects: {', '.join(info.objects) or 'none'}; "
                  f"time step {info.dt_ns:,} ns")
     if info.frames:

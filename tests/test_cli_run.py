@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
@@ -173,3 +174,23 @@ def test_gui_under_xvfb_runs_pick_place(tmp_path):
     finally:
         xvfb.terminate()
         xvfb.wait(timeout=10)
+
+
+@pytest.mark.parametrize(("cycles", "final_m"), [(1, (-0.3, -0.55)), (2, (0.2, 0.7))])
+def test_report_000s_loop_carries_the_box_to_b_and_a_second_carry_back(cycles, final_m, tmp_path):
+    done = _twin_cli("run", "seed000", "--robot", "seed000", "--cycles", str(cycles), "--no-record", cwd=tmp_path)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    assert f"attach {cycles}" in done.stdout and f"release {cycles}" in done.stdout
+    placed = re.findall(r"placed ([\d.]+) mm from \(([-\d.]+), ([-\d.]+)\)", done.stdout)
+    assert [(float(x), float(y)) for _, x, y in placed] == [(-0.3, -0.55), (0.2, 0.7)][:cycles]
+    assert all(float(mm) < 5.0 for mm, _, _ in placed)
+    final = re.search(r"box final pose: x ([-+\d.]+) y ([-+\d.]+)", done.stdout)
+    assert math.dist((float(final.group(1)), float(final.group(2))), final_m) < 0.005
+
+
+def test_report_002s_program_as_a_task_misses_and_leaves_the_box(tmp_path):
+    done = _twin_cli("run", "seed002", "--robot", "seed002", "--no-record", cwd=tmp_path)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    assert "suction_empty 2" in done.stdout and "attach" not in done.stdout
+    final = re.search(r"box final pose: x ([-+\d.]+) y ([-+\d.]+)", done.stdout)
+    assert math.dist((float(final.group(1)), float(final.group(2))), (0.2, 0.7)) < 1e-3

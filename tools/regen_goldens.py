@@ -53,7 +53,7 @@ def goldens() -> list[Golden]:
     heavy = TwinConfig(objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False))
     out += [  # each report's own step-4 Lua loop on its own scene (docs/seed-conventions.md)
         Golden("seed000_seed000", TwinConfig(profile=PROFILES["seed000"]), "seed000", {"cycles": 1},
-               "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: box to (-0.3, -0.55) and back", 4),
+               "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: the box to (-0.3, -0.55)", 4),
         Golden("seed001_seed001", TwinConfig(profile=PROFILES["seed001"]), "seed001", {"cycles": 1},
                "task seed001 (report 001's Lua loop, its Heron IK as written), 1 cycle, robot seed001: the miss", 4),
         Golden("seed002_seed002", TwinConfig(profile=PROFILES["seed002"]), "seed002", {},

@@ -4,8 +4,10 @@ The report's lines, in order: its own `round` and `ik` (the atan2/acos IK return
 4 places, called with the axes swapped: `ik(0.7, 0.2)` for the box at (0.2, 0.7)), joint1 = -q1 and
 joint2 = q2 as targets, `sim.wait(t)` as `twin.wait(t)`, joint3 = 0.06 (the pad on the box) and
 -0.06 (12 cm up), and the suction pad's script parameter `active` ('ture' switches it on: any string
-is true in Lua) as the profile's suction signal. Each pass places the box at (-0.3, -0.55), picks it
-up again there and places it back at (0.2, 0.7); `cycles` bounds the report's `while(true)` loop.
+is true in Lua) as the profile's suction signal. Each pass of the report's `while(true)` loop places
+the box at (-0.3, -0.55), picks it up again there and places it back at (0.2, 0.7); `cycles` bounds
+the loop by carries (each one place, as for the other tasks): 1 ends with the box at (-0.3, -0.55),
+after the raise that follows that place; 2 is one whole pass.
 The task adds only what the report's scene showed its author: a `placed` event after each release.
 Run it on the seed000 profile, whose joint conventions are that scene's (docs/seed-conventions.md).
 """
@@ -46,7 +48,7 @@ def _placed(twin, box: str, place: tuple[float, float], n: int) -> None:
 
 
 def run(twin, cycles: int = 1, box: str = "box") -> None:
-    """The report's loop, `cycles` passes (each: to B and back to A)."""
+    """The report's loop, up to `cycles` carries (A to B, B to A, A to B, ...)."""
     if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
         raise ValueError(f"cycles {cycles!r} is invalid; expected an integer >= 1")
     joint_hanld1, joint_hanld2, joint_hanld3 = "joint1", "joint2", "joint3"
@@ -56,7 +58,7 @@ def run(twin, cycles: int = 1, box: str = "box") -> None:
     twin.set_joint_target(joint_hanld2, theta[1] * ANGLE1)
     twin.wait(3)
     releases = 0
-    for _ in range(cycles):  # (0.2,0.7,0) 和 (-0.3,-0.55,0) 來回取放: while(true)
+    while releases < cycles:  # (0.2,0.7,0) 和 (-0.3,-0.55,0) 來回取放: while(true)
         twin.wait(3)
         twin.set_joint_target(joint_hanld3, 0.06)
         twin.wait(3)
@@ -76,6 +78,8 @@ def run(twin, cycles: int = 1, box: str = "box") -> None:
         twin.wait(3)
         _placed(twin, box, (-0.3, -0.55), releases)
         twin.set_joint_target(joint_hanld3, -0.06)
+        if releases == cycles:  # the bound: the raise after this place ends the run (the wait below)
+            break
         twin.wait(3)
         twin.suction(True)  # 'active', 'ture'
         twin.wait(3)

@@ -304,3 +304,25 @@ def test_a_cyclic_joint_reads_back_in_minus_pi_to_pi_as_coppeliasim_reports_it()
         sim.step()
         assert sim.getJointPosition(shoulder) == pytest.approx(math.radians(218.0 - 360.0), abs=1e-6)
         sim.stopSimulation()
+
+
+def test_a_stopped_simulation_holds_a_bounded_number_of_commands_then_refuses_with_a_reply(tmp_path):
+    from twin.record.mcap_reader import load
+    from twin.remote.session import MAX_PENDING_COMMANDS
+
+    record = tmp_path / "held.mcap"
+    with ServerProcess("--stepped", "--record", str(record)) as server:
+        sim = server.client().require("sim")
+        shoulder = sim.getObject("/MTB_axis1")
+        for i in range(MAX_PENDING_COMMANDS):  # while stopped: each is held for the next run
+            sim.setJointTargetPosition(shoulder, 0.001 * (i % 100))
+        with pytest.raises(Exception, match="already holds 10000 commands for its next run"):
+            sim.setJointTargetPosition(shoulder, 0.5)
+        sim.startSimulation()  # the held commands go into the run; new ones are taken again
+        sim.setJointTargetPosition(shoulder, 0.5)
+        sim.setStepping(True)
+        sim.step()
+        sim.stopSimulation()
+        server.wait_for(r"recorded .*held\.mcap")
+    commands = [c for c in load(record).commands if c.kind == "joint_target"]
+    assert len(commands) == MAX_PENDING_COMMANDS + 1 and commands[-1].args["q"] == 0.5

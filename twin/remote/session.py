@@ -20,14 +20,19 @@ from twin.types import Command, Event, Frame
 SIMULATION_STOPPED = 0x00
 SIMULATION_PAUSED = 0x08
 SIMULATION_ADVANCING_RUNNING = 0x11
+# Commands a stopped scene holds for its next run (each is kept, then recorded): a client looping
+# sim.setJointPosition while stopped would otherwise grow the server without bound.
+MAX_PENDING_COMMANDS = 10_000
 
 
 class _Relay:
     """The twin's one sink: holds what happens while stopped, forwards it to the recorders once the
-    run starts (so Commands given before startSimulation are in the run's recording)."""
+    run starts (so Commands given before startSimulation are in the run's recording). Past
+    MAX_PENDING_COMMANDS held Commands it refuses the next one before the twin applies it."""
 
     def __init__(self) -> None:
         self.pending: list[tuple[str, Any]] = []
+        self.pending_commands = 0
         self.targets: list = []
         self.holding = True
 
@@ -39,6 +44,10 @@ class _Relay:
 
     def on_command(self, command: Command) -> None:
         if self.holding:
+            if self.pending_commands >= MAX_PENDING_COMMANDS:  # raised before the twin applies it
+                raise ConfigError(f"the simulation is stopped and already holds {MAX_PENDING_COMMANDS} commands "
+                                  "for its next run; start it (sim.startSimulation) or stop sending")
+            self.pending_commands += 1
             self.pending.append(("on_command", command))
         for s in self.targets:
             s.on_command(command)
@@ -54,6 +63,7 @@ class _Relay:
             for s in sinks:
                 getattr(s, method)(item)
         self.pending.clear()
+        self.pending_commands = 0
         self.holding = False
         self.targets = list(sinks)
 

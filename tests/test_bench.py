@@ -37,3 +37,20 @@ def test_list_names_every_section_and_unknown_sections_are_refused():
     done = _bench("--only", "nope")
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.strip().startswith("bench: error: unknown section 'nope'") and done.stderr.count("\n") == 1
+
+
+def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
+    import json
+
+    out = tmp_path / "bench.json"
+    done = _bench("--only", "twin", "--only", "record", "--repeats", "1", "--physics-steps", "2000", "--json", str(out))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(out.read_text())
+    for key in ("record_both_vs_motion", "record_both_vs_idle", "record_mcap_vs_motion", "twin_vs_motion",
+                "mcap_mb_per_sim_min", "physics_steps_per_s", "motion_physics_steps_per_s"):
+        assert isinstance(data[key], float) and data[key] > 0, key
+    assert abs(data["record_both_vs_motion"] - data["record_both_steps_per_s"] / data["motion_physics_steps_per_s"]) < 1e-5
+    assert any(r["section"] == "total" and r["measure"] == "wall time" for r in data["rows"])
+    assert len(data["rows"]) == sum(1 for line in done.stdout.splitlines() if line.count("|") == 2) - 1
+    bad = _bench("--only", "twin", "--json", str(tmp_path / "no" / "b.json"))
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "does not exist" in bad.stderr

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import os
 import platform
 import statistics
@@ -39,6 +40,7 @@ class BenchContext:
     repeats: int
     motion_physics_steps_per_s: float = 0.0  # median over repeats, pick_place's motion (0: not measured)
     physics_step_us: float = field(init=False)
+    figures: dict[str, float] = field(default_factory=dict)  # named numbers for --json (sections add theirs)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "physics_step_us", 1e6 / self.physics_steps_per_s)
@@ -150,7 +152,7 @@ def _table(rows: list[tuple[str, str, str]]) -> list[str]:
     return lines
 
 
-def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS) -> int:
+def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_path: str | None = None) -> int:
     sections = discover()
     unknown = sorted(set(only) - set(sections))
     if unknown:
@@ -163,6 +165,8 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS) -> in
     samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))
     motion = tuple(pick_place_physics_steps_per_s() for _ in range(repeats))
     ctx = BenchContext(statistics.median(samples), samples, repeats, statistics.median(motion))
+    ctx.figures.update(physics_steps_per_s=ctx.physics_steps_per_s,
+                       motion_physics_steps_per_s=ctx.motion_physics_steps_per_s)
     realtime = ctx.physics_steps_per_s * DT_S
     rows = [("section", "measure", "value"),
             ("machine", "python / pybullet API / cpus",
@@ -186,7 +190,17 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS) -> in
         rows.append((name, "section wall time", f"{time.perf_counter() - t0:.1f} s"))
     rows.append(("total", "wall time", f"{time.perf_counter() - t_start:.1f} s"))
     print("\n".join(_table(rows)))
+    if json_path:
+        write_json(json_path, ctx.figures, rows)
     return 1 if failed else 0
+
+
+def write_json(path: str, figures: dict[str, float], rows: list[tuple[str, str, str]]) -> None:
+    """The run as JSON: every named figure at the top level (ratios are plain numbers, e.g.
+    record_both_vs_motion), and every row of the table under "rows"."""
+    doc = {**{k: round(v, 6) for k, v in sorted(figures.items())},
+           "rows": [{"section": a, "measure": b, "value": c} for a, b, c in rows[1:]]}
+    Path(path).write_text(json.dumps(doc, indent=2) + "\n")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -197,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--physics-steps", type=int, default=PHYSICS_STEPS,
                         help=f"steps per physics-only sample (default {PHYSICS_STEPS})")
     parser.add_argument("--list", action="store_true", help="list the sections and exit")
+    parser.add_argument("--json", metavar="FILE", help="also write every figure of the table to FILE as JSON")
     args = parser.parse_args(argv)
     if args.list:
         print("\n".join(discover()))
@@ -205,7 +220,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench: error: --repeats {args.repeats} and --physics-steps {args.physics_steps} must be >= 1",
               file=sys.stderr)
         return 2
-    return run(args.only, args.repeats, args.physics_steps)
+    if args.json and not Path(args.json).parent.is_dir():
+        print(f"bench: error: --json {args.json!r}: folder {str(Path(args.json).parent)!r} does not exist",
+              file=sys.stderr)
+        return 2
+    return run(args.only, args.repeats, args.physics_steps, args.json)
 
 
 if __name__ == "__main__":

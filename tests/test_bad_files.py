@@ -38,6 +38,8 @@ from twin.cli import main
 from twin.errors import RecordingError
 from twin.record import schemas as S
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 MAX_RSS_MB = 600  # peak of one reader over any corpus file (the forked child starts at pytest's ~200 MB)
 TIMEOUT_S = 30.0  # a hang guard; every run here takes well under a second or two
 AS_LIMIT = 6 << 30  # address-space cap of each child: a regression fails instead of swamping the machine

@@ -158,6 +158,7 @@ def test_gui_without_a_display_is_one_line(tmp_path):
 
 
 @pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb is not installed")
+@pytest.mark.slow  # real processes
 def test_gui_under_xvfb_runs_pick_place(tmp_path):
     read_fd, write_fd = os.pipe()  # Xvfb picks a free display and writes its number here
     xvfb = subprocess.Popen(["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "800x600x24", "-nolisten", "tcp", "-noreset"],

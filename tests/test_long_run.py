@@ -24,6 +24,8 @@ from twin.tasks import TASKS, run_task
 from twin.tasks.pick_place import POINT_A_M
 from twin.twin import Twin
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 MAX_ERROR_M = 0.002
 # What the twin gives now (README): at most 0.1 um of placement drift and 0.0002 deg of yaw per cycle.
 DRIFT_LIMIT_M_PER_CYCLE = 1e-6  # ten times the measured drift

@@ -16,6 +16,8 @@ import pytest
 
 import twin
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 TWIN = [shutil.which("twin")] if shutil.which("twin") else [sys.executable, "-m", "twin.cli"]
 
 ENDLESS = '''

@@ -19,6 +19,8 @@ from test_remote_server_process import ServerProcess
 from twin.remote.protocol import MAX_FRAME_BYTES, MAX_ITEMS, MAX_NAME_CHARS, MAX_REQUEST_BYTES, MAX_SIGNALS
 from twin.remote.server import MAX_CLIENTS, MAX_CLIENTS_PER_CONNECTION
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 REPLY_TIMEOUT_S = 30.0  # generous: a reply that does not come within it never comes
 
 

@@ -12,6 +12,8 @@ from twin.cli import main as twin_main
 from twin.profiles import PROFILES
 from twin.record.mcap_reader import load
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 PICK_M = (0.2, 0.7)
 PLACE_M = (-0.3, -0.55)
 Z_DOWN_M = 0.2

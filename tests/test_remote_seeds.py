@@ -25,6 +25,8 @@ from test_remote_server_process import ServerProcess
 from twin.cli import main as twin_main
 from twin.record.mcap_reader import load
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 CLIENTS = Path(__file__).parent / "fixtures" / "seed_clients"
 A_M = (0.2, 0.7)
 B_M = (-0.3, -0.55)

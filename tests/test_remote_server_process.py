@@ -19,6 +19,8 @@ from typing import Self
 import pytest
 from coppeliasim_zmqremoteapi_client import RemoteAPIClient
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 STARTUP_TIMEOUT_S = 30.0
 
 

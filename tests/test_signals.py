@@ -20,6 +20,8 @@ import pytest
 import twin
 from twin.record import schemas as S
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 TWIN = [shutil.which("twin")] if shutil.which("twin") else [sys.executable, "-m", "twin.cli"]
 
 ENDLESS = '''

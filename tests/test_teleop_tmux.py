@@ -18,7 +18,7 @@ from twin.cli import main
 from twin.record.mcap_reader import load
 from twin.tasks.pick_place import POINT_A_M, POINT_B_M
 
-pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="needs tmux (tools/setup_test_system.sh)")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(shutil.which("tmux") is None, reason="needs tmux (tools/setup_test_system.sh)")]
 
 NUMBER = r"([+-]?\d+\.\d+)"
 JOINTS = re.compile(rf"shoulder +{NUMBER} +elbow +{NUMBER} +Z {NUMBER} +wrist +{NUMBER}$", re.MULTILINE)

@@ -25,8 +25,8 @@ def _libs():
 
 
 LIBS = _libs()
-pytestmark = pytest.mark.skipif(shutil.which("Xvfb") is None or LIBS is None,
-                                reason="needs Xvfb and libXtst (tools/setup_test_system.sh)")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(shutil.which("Xvfb") is None or LIBS is None,
+                                                   reason="needs Xvfb and libXtst (tools/setup_test_system.sh)")]
 
 
 class XKeyboard:

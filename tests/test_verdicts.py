@@ -64,6 +64,7 @@ def test_a_replayed_task_run_diffs_exact_and_says_what_it_replays(tmp_path, caps
     assert code == 0 and "1 match" in out
 
 
+@pytest.mark.slow  # real processes
 def test_a_stepped_remote_session_with_addlog_replays_exact(tmp_path, capsys):
     session = tmp_path / "remote.mcap"
     server = ServerProcess("--stepped", "--record", str(session))
@@ -222,6 +223,7 @@ def test_a_run_whose_task_raised_is_finalized_as_error_even_when_the_caller_goes
 
 
 # -- 6. goldens of your own tasks check from anywhere ---------------------------------------------
+@pytest.mark.slow  # real processes
 def test_a_user_task_golden_checks_from_root_and_from_a_copy_of_the_project(tmp_path):
     project = tmp_path / "project"
     (project / "tasks").mkdir(parents=True)
@@ -243,6 +245,7 @@ def test_a_user_task_golden_checks_from_root_and_from_a_copy_of_the_project(tmp_
     assert (copy / "recordings" / "again.mcap").read_bytes() == (project / "recordings" / "mine.mcap").read_bytes()
 
 
+@pytest.mark.slow  # real processes
 def test_a_user_robot_golden_checks_from_another_folder_and_stores_no_absolute_path(tmp_path):
     from test_urdf import write_user_robot  # the STL-mesh SCARA the URDF tests build
 

@@ -27,6 +27,8 @@ from twin.record.mcap_reader import load
 from twin.record.rrd_file import read_scalars, verify_rrd
 from twin.record.viewer import holding_time_ns
 
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
 HAVE_VULKAN = bool(glob.glob("/usr/share/vulkan/icd.d/*.json"))
 
 

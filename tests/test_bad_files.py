@@ -30,13 +30,13 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 import twin
-import twin.check
-import twin.record.info
-import twin.record.recover
-import twin.record.viewer  # the CLI imports these lazily: imported once here, every forked child has them
+import twin.record.mcap.info
+import twin.record.mcap.recover
+import twin.record.rerun.viewer  # the CLI imports these lazily: imported once here, every forked child has them
+import twin.verify.check
 from twin.cli import main
 from twin.errors import RecordingError
-from twin.record import schemas as S
+from twin.record.mcap import schemas as S
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
@@ -420,9 +420,9 @@ def _get(value, path):
 
 def test_nan_in_event_data_is_written_as_null(tmp_path):
     """The JSON channels never hold NaN or Infinity: event data from a diverged simulation is null."""
-    from twin.config import TwinConfig
+    from twin.model.config import TwinConfig
     from twin.record import open_recorders
-    from twin.twin import Twin
+    from twin.sim.twin import Twin
 
     path = tmp_path / "nan.mcap"
     with open_recorders(TwinConfig(), {"source": "task", "task": "x", "params": {}}, mcap_path=path) as sinks:

@@ -11,14 +11,14 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from twin.check import check_all, record_task
 from twin.cli import main
-from twin.config import EngineParams, SceneObject, TwinConfig
-from twin.profiles import PROFILES
+from twin.compare.tolerances import Tolerances
+from twin.model.config import EngineParams, SceneObject, TwinConfig
+from twin.model.profiles import PROFILES
 from twin.record import open_recorders
-from twin.record.mcap_reader import load
-from twin.replay import save
-from twin.tolerances import Tolerances
+from twin.record.mcap.reader import load
+from twin.verify.check import check_all, record_task
+from twin.verify.replay import save
 
 BASE = TwinConfig()
 PARAMS = {"cycles": 1}
@@ -138,7 +138,7 @@ def test_bad_input_gives_one_line_and_exit_2(files, capsys, tmp_path, make, args
 
 
 def test_rrd_diff_view_shows_both_runs_and_the_error(files, capsys, tmp_path):
-    from twin.record.rrd_file import read_scalars
+    from twin.record.rerun.rrd_file import read_scalars
 
     d, runs = files
     rrd = tmp_path / "diff.rrd"

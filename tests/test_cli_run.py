@@ -13,11 +13,11 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
-from twin.columns import FrameCollector
-from twin.config import TwinConfig
-from twin.profiles import PROFILES
+from twin.model.columns import FrameCollector
+from twin.model.config import TwinConfig
+from twin.model.profiles import PROFILES
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, resolve, run_task
-from twin.twin import Twin
 
 FIXTURES = Path(__file__).parent / "fixtures"
 FAR = FIXTURES / "far_task.py"

@@ -13,17 +13,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twin.check import record_task
-from twin.columns import FrameColumns
-from twin.compare import NotComparable, compare
-from twin.config import EngineParams, SceneObject, TwinConfig
+from twin.compare.engine import NotComparable, compare
+from twin.compare.events import match_events
+from twin.compare.metrics import quat_angle
+from twin.compare.report import render_json, render_junit, render_markdown, render_text
+from twin.compare.tolerances import FIELDS, Tolerances, parse_override
 from twin.errors import ConfigError
-from twin.event_match import match_events
-from twin.metrics import quat_angle
-from twin.profiles import PROFILES
-from twin.report import render_json, render_junit, render_markdown, render_text
-from twin.tolerances import FIELDS, Tolerances, parse_override
-from twin.types import Event
+from twin.model.columns import FrameColumns
+from twin.model.config import EngineParams, SceneObject, TwinConfig
+from twin.model.profiles import PROFILES
+from twin.model.types import Event
+from twin.verify.check import record_task
 
 BASE = TwinConfig()
 PARAMS = {"cycles": 1}

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from twin.check import check_all
-from twin.profiles import PROFILES
-from twin.record.mcap_reader import load
-from twin.tolerances import Tolerances
+from twin.compare.tolerances import Tolerances
+from twin.model.profiles import PROFILES
+from twin.record.mcap.reader import load
+from twin.verify.check import check_all
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDINGS = ROOT / "recordings"
@@ -39,8 +39,8 @@ def test_every_golden_rerun_matches_exactly():
 @pytest.mark.parametrize("path", GOLDENS, ids=lambda p: p.stem)
 def test_every_golden_replays_to_an_exact_match_with_every_event(path, tmp_path):
     """Replay feeds the file's commands (what the task said included) back: nothing may differ."""
-    from twin.compare import compare
-    from twin.replay import replay, replayed_event_kinds
+    from twin.compare.engine import compare
+    from twin.verify.replay import replay, replayed_event_kinds
 
     golden = load(path)
     assert replayed_event_kinds(golden) is None  # annotations are Commands: every event compares
@@ -69,8 +69,8 @@ def test_a_golden_holds_a_suction_break():
 
 PLUGIN_TEST = """
 import os
-from twin.check import record_task
-from twin.config import TwinConfig
+from twin.verify.check import record_task
+from twin.model.config import TwinConfig
 
 def test_run(golden):
     run = record_task(TwinConfig(), "pick_place", {"cycles": 1})

@@ -9,12 +9,12 @@ from mcap.reader import make_reader
 
 import twin
 from twin.cli import main
-from twin.config import TwinConfig
+from twin.model.config import TwinConfig
 from twin.record import open_recorders
-from twin.record import schemas as S
-from twin.record.info import describe
+from twin.record.mcap import schemas as S
+from twin.record.mcap.info import describe
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
 
 
 @pytest.fixture(scope="module")

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from twin.config import TwinConfig
 from twin.errors import ConfigError
-from twin.keymaps import BUILTIN, help_lines, keymap_for, load_keymap, parse_keys, quit_keys
-from twin.profiles import PROFILES
-from twin.twin import Twin
-from twin.world import decode_key_events, pb
+from twin.model.config import TwinConfig
+from twin.model.keymaps import BUILTIN, help_lines, keymap_for, load_keymap, parse_keys, quit_keys
+from twin.model.profiles import PROFILES
+from twin.sim.twin import Twin
+from twin.sim.world import decode_key_events, pb
 
 DEG = math.radians(1)
 

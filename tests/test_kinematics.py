@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twin import kinematics as k
 from twin.errors import OutOfReach
-from twin.profiles import PROFILES
+from twin.model.profiles import PROFILES
+from twin.robot import kinematics as k
 
 POSITION_TOL_M = 1e-9
 QUADRANTS = {  # (lowest, highest) polar angle of the target, radians

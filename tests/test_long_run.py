@@ -16,13 +16,13 @@ from pathlib import Path
 import pytest
 
 import twin
-from twin.config import SceneObject, SuctionParams, TwinConfig
 from twin.errors import TaskError
-from twin.profiles import PROFILES
-from twin.record import schemas as S
+from twin.model.config import SceneObject, SuctionParams, TwinConfig
+from twin.model.profiles import PROFILES
+from twin.record.mcap import schemas as S
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
 from twin.tasks.pick_place import POINT_A_M
-from twin.twin import Twin
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 

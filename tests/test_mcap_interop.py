@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from twin.cli import main
-from twin.record.rrd_file import rerun_executable, verify_rrd
+from twin.record.rerun.rrd_file import rerun_executable, verify_rrd
 
 TOPICS = ("/robot_description", "/twin/joints", "/twin/suction", "/twin/poses", "/tf", "/events", "/twin/events",
           "/commands")

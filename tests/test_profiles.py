@@ -7,11 +7,12 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from twin.config import TwinConfig
 from twin.errors import ConfigError, TwinError, UnknownName
-from twin.profiles import JOINT_ALIASES, PROFILES, ROLES, RobotProfile, get_profile
-from twin.urdf import urdf_from_profile
-from twin.world import World, pb
+from twin.model.config import TwinConfig
+from twin.model.profiles import JOINT_ALIASES, PROFILES, ROLES, RobotProfile
+from twin.robot.profile_files import get_profile
+from twin.robot.urdf import urdf_from_profile
+from twin.sim.world import World, pb
 
 SHOULDER_NAMES = ("MTB_axis1", "joint1", "Revolute_joint", "AB")
 VARIANT_NAMES = {  # role -> the names the four reports and the MTB scene use
@@ -170,8 +171,8 @@ def test_the_seed_profiles_carry_the_reports_link_lengths():
 def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
     """The URDF built from a profile and the profile's fk agree: the pad link's origin (its root)
     is pad_length above the fk tip, and its yaw is the fk heading."""
-    from twin import kinematics
-    from twin.twin import Twin
+    from twin.robot import kinematics
+    from twin.sim.twin import Twin
 
     twin = Twin(TwinConfig(profile=PROFILES[profile_name]))
     try:

@@ -15,17 +15,18 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 import twin
-from twin import kinematics
 from twin.cli import main
-from twin.columns import FrameCollector, FrameColumns
-from twin.config import TwinConfig
 from twin.errors import RecordingError
-from twin.record import open_recorders, wire
-from twin.record import schemas as S
-from twin.record.mcap_reader import decode_frames, scan
+from twin.model.columns import FrameCollector, FrameColumns
+from twin.model.config import TwinConfig
+from twin.record import open_recorders
+from twin.record.mcap import schemas as S
+from twin.record.mcap import wire
+from twin.record.mcap.reader import decode_frames, scan
+from twin.robot import kinematics
+from twin.robot.urdf import urdf_text
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
-from twin.urdf import urdf_text
 
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
 
@@ -142,7 +143,7 @@ def test_fast_path_equals_the_protobuf_decoder_on_every_block(recorded):
 
 def _compose(a, b):
     """(translation, quaternion) a∘b."""
-    from twin.quat import quat_mul, rotate
+    from twin.model.quat import quat_mul, rotate
 
     ta, qa = a
     tb, qb = b
@@ -273,7 +274,7 @@ def test_the_fast_scanner_reads_what_mcaps_own_stream_reader_reads(recorded):
     from mcap.records import Message
     from mcap.stream_reader import StreamReader
 
-    from twin.record import mcap_scan
+    from twin.record.mcap import scan as mcap_scan
 
     path, _ = recorded
     with open(path, "rb") as f:
@@ -288,7 +289,7 @@ def test_the_fast_scanner_reads_what_mcaps_own_stream_reader_reads(recorded):
 
 @pytest.mark.parametrize("compression", ["lz4", "none"])
 def test_every_chunk_compression_loads_the_same(recorded, tmp_path, compression):
-    from twin.record.mcap_writer import McapRecorder
+    from twin.record.mcap.writer import McapRecorder
 
     _, collector = recorded
     config = TwinConfig()

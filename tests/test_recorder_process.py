@@ -12,15 +12,15 @@ import time
 import numpy as np
 import pytest
 
-from twin.config import TwinConfig
 from twin.errors import ConfigError, RecordingError
-from twin.outputs import partial_path
+from twin.model.config import TwinConfig
 from twin.record import open_recorders
-from twin.record import schemas as S
-from twin.record.mcap_reader import load, scan
-from twin.record.recover import recover
+from twin.record.mcap import schemas as S
+from twin.record.mcap.reader import load, scan
+from twin.record.mcap.recover import recover
+from twin.record.outputs import partial_path
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
 
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
 
@@ -60,9 +60,9 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
     path = tmp_path / "killed.mcap"
     script = textwrap.dedent(f"""
         import os, signal
-        from twin.config import TwinConfig
+        from twin.model.config import TwinConfig
         from twin.record import open_recorders
-        from twin.twin import Twin
+        from twin.sim.twin import Twin
         config = TwinConfig()
         with open_recorders(config, {RUN!r}, mcap_path={str(path)!r}) as sinks:
             twin = Twin(config, sinks=sinks)
@@ -130,7 +130,7 @@ def test_twin_events_carry_plain_json_data_and_refuse_the_rest():
 
 
 def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
-    from twin.record.mcap_writer import McapRecorder
+    from twin.record.mcap.writer import McapRecorder
 
     path = tmp_path / "keep.mcap"
     path.write_bytes(b"an earlier recording")

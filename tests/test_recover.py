@@ -13,13 +13,13 @@ import pytest
 
 import twin
 from twin.cli import main
-from twin.columns import FrameCollector
-from twin.config import TwinConfig
+from twin.model.columns import FrameCollector
+from twin.model.config import TwinConfig
 from twin.record import open_recorders
-from twin.record import schemas as S
-from twin.record.recover import recover
+from twin.record.mcap import schemas as S
+from twin.record.mcap.recover import recover
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
 
 LOOP_TASK = '''"""Moves between three points forever, reporting simulated time (a crash-test task)."""
 import time
@@ -156,9 +156,9 @@ def test_a_damaged_chunk_is_reported_and_recovery_stops_before_it(complete, tmp_
 
 @pytest.mark.parametrize("rate", [1, 1000])
 def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_path, rate):
-    from twin.record.mcap_reader import recording_from_scan, scan
-    from twin.record.mcap_writer import McapRecorder
-    from twin.urdf import urdf_text
+    from twin.record.mcap.reader import recording_from_scan, scan
+    from twin.record.mcap.writer import McapRecorder
+    from twin.robot.urdf import urdf_text
 
     _, collector = complete
     config = TwinConfig()

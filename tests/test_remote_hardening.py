@@ -309,7 +309,7 @@ def test_a_cyclic_joint_reads_back_in_minus_pi_to_pi_as_coppeliasim_reports_it()
 
 
 def test_a_stopped_simulation_holds_a_bounded_number_of_commands_then_refuses_with_a_reply(tmp_path):
-    from twin.record.mcap_reader import load
+    from twin.record.mcap.reader import load
     from twin.remote.session import MAX_PENDING_COMMANDS
 
     record = tmp_path / "held.mcap"

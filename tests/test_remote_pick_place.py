@@ -7,10 +7,10 @@ import math
 import pytest
 from test_remote_server_process import ServerProcess
 
-from twin import kinematics
 from twin.cli import main as twin_main
-from twin.profiles import PROFILES
-from twin.record.mcap_reader import load
+from twin.model.profiles import PROFILES
+from twin.record.mcap.reader import load
+from twin.robot import kinematics
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 

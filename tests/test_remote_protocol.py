@@ -13,9 +13,9 @@ import pytest
 import zmq
 from test_remote_server_process import ServerProcess
 
-from twin.config import TwinConfig
 from twin.errors import UnknownName
-from twin.profiles import JOINT_ALIASES, PAD_ALIASES, PROFILES, ROLES
+from twin.model.config import TwinConfig
+from twin.model.profiles import JOINT_ALIASES, PAD_ALIASES, PROFILES, ROLES
 from twin.remote.session import Scene
 from twin.remote.sim_api import SimApi
 

@@ -23,7 +23,7 @@ import pytest
 from test_remote_server_process import ServerProcess
 
 from twin.cli import main as twin_main
-from twin.record.mcap_reader import load
+from twin.record.mcap.reader import load
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 

@@ -8,18 +8,18 @@ from pathlib import Path
 
 import pytest
 
-from twin.check import record_task
 from twin.cli import main
-from twin.columns import FrameCollector
-from twin.compare import compare
-from twin.config import TwinConfig
+from twin.compare.engine import compare
 from twin.errors import RecordingError
-from twin.keymaps import builtin_keymap
+from twin.model.columns import FrameCollector
+from twin.model.config import TwinConfig
+from twin.model.keymaps import builtin_keymap
+from twin.model.types import Command
 from twin.record import open_recorders
-from twin.record.mcap_reader import load
-from twin.replay import REPLAYED_EVENT_KINDS, collected, replay, save
-from twin.twin import Twin
-from twin.types import Command
+from twin.record.mcap.reader import load
+from twin.sim.twin import Twin
+from twin.verify.check import record_task
+from twin.verify.replay import REPLAYED_EVENT_KINDS, collected, replay, save
 
 
 def twin(capsys, *argv) -> tuple[int, str, str]:
@@ -135,8 +135,8 @@ def test_replay_bad_input(capsys, tmp_path):
 
 
 def test_check_replays_a_golden_without_a_task(recs):
-    from twin.check import check_all
-    from twin.tolerances import Tolerances
+    from twin.compare.tolerances import Tolerances
+    from twin.verify.check import check_all
 
     outcomes = check_all([str(recs / "teleop.mcap"), str(recs / "remote.mcap")], Tolerances.from_preset("exact"))
     assert [o.status for o in outcomes] == ["match", "match"]

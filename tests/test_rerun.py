@@ -10,18 +10,18 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from twin.columns import FrameCollector
-from twin.config import SceneObject, TwinConfig
 from twin.errors import RecordingError
-from twin.profiles import PROFILES
-from twin.record import rerun_scene as scene
-from twin.record.rerun_joints import JointMotion
-from twin.record.rerun_writer import RerunRecorder, write_rrd
-from twin.record.rrd_file import read_scalars, rerun_executable, verify_rrd
-from twin.recording import Recording
+from twin.model.columns import FrameCollector
+from twin.model.config import SceneObject, TwinConfig
+from twin.model.profiles import PROFILES
+from twin.model.recording import Recording
+from twin.record.rerun import scene
+from twin.record.rerun.joints import JointMotion
+from twin.record.rerun.rrd_file import read_scalars, rerun_executable, verify_rrd
+from twin.record.rerun.writer import RerunRecorder, write_rrd
+from twin.robot.urdf import urdf_text
+from twin.sim.twin import Twin
 from twin.tasks import pick_place, run_task
-from twin.twin import Twin
-from twin.urdf import urdf_text
 
 BATCH_STEPS = 400  # three full batches plus a partial one in a ~1400-step run
 
@@ -226,7 +226,7 @@ def test_bad_output_and_batch_size_are_one_line_errors(tmp_path):
 def test_a_user_urdf_with_stl_meshes_is_drawn_from_its_meshes(tmp_path):
     from test_urdf import write_user_robot  # the STL SCARA that test_urdf builds
 
-    from twin.profiles import get_profile
+    from twin.robot.profile_files import get_profile
 
     config = TwinConfig(profile=get_profile(str(write_user_robot(tmp_path))))
     path = tmp_path / "stl.rrd"

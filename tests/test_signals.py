@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 import twin
-from twin.record import schemas as S
+from twin.record.mcap import schemas as S
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from twin.columns import FrameCollector
-from twin.config import SceneObject, SuctionParams, TwinConfig
-from twin.profiles import PROFILES
-from twin.twin import Twin
-from twin.types import NO_BODY
+from twin.model.columns import FrameCollector
+from twin.model.config import SceneObject, SuctionParams, TwinConfig
+from twin.model.profiles import PROFILES
+from twin.model.types import NO_BODY
+from twin.sim.twin import Twin
 
 G_M_S2 = 9.81
 BOX_XY_M = (0.5, 0.0)
@@ -170,7 +170,7 @@ def test_pressing_the_held_box_down_is_not_pull():
 def test_a_pad_set_into_a_box_senses_it_as_coppeliasims_ray_sensor_does(depth_m):
     """sim.setJointPosition can put the pad into a box (report 000's key 5): PyBullet's ray sees no body it
     starts inside, CoppeliaSim's ray sensor sees the back face; the twin's pad senses and takes the box."""
-    from twin.kinematics import z_joint_for_height
+    from twin.robot.kinematics import z_joint_for_height
 
     twin, sink = _twin(robot="seed000")  # its Z stop (report 000's 0.084) reaches 19 mm into a box
     twin.move_to(*BOX_XY_M, heading_rad=0.0)
@@ -185,7 +185,7 @@ def test_a_pad_set_into_a_box_senses_it_as_coppeliasims_ray_sensor_does(depth_m)
 
 
 def test_a_pad_beside_a_box_at_the_same_height_senses_nothing():
-    from twin.kinematics import z_joint_for_height
+    from twin.robot.kinematics import z_joint_for_height
 
     twin, sink = _twin(robot="seed000")
     twin.move_to(BOX_XY_M[0] + 0.04, BOX_XY_M[1], heading_rad=0.0)  # 15 mm beyond the box's side

@@ -10,17 +10,17 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
-from twin.columns import FrameCollector
 from twin.errors import ConfigError
-from twin.keymaps import parse_keys
-from twin.kinematics import fk, ik
-from twin.profiles import PROFILES
-from twin.record.mcap_reader import load
-from twin.replay import REPLAYED_EVENT_KINDS, collected, replay
+from twin.model.columns import FrameCollector
+from twin.model.keymaps import parse_keys
+from twin.model.profiles import PROFILES
+from twin.record.mcap.reader import load
+from twin.robot.kinematics import fk, ik
+from twin.sim.twin import Twin
 from twin.tasks.pick_place import POINT_A_M, POINT_B_M
-from twin.teleop import EventLog, Session, TeleopOptions, run_teleop, summary_lines, teleop_config
-from twin.teleop_ui import status_lines
-from twin.twin import Twin
+from twin.teleop.screen import status_lines
+from twin.teleop.session import EventLog, Session, TeleopOptions, run_teleop, summary_lines, teleop_config
+from twin.verify.replay import REPLAYED_EVENT_KINDS, collected, replay
 
 # Per seed map: the keys for shoulder +1/-1 deg, elbow +1/-1 deg, and the pick/place key sequences (with
 # `wait` intervals for the Z stroke, 0.2 m at 0.5 m/s, when keys come every KEY_INTERVAL_S).

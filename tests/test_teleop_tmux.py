@@ -15,7 +15,7 @@ import pytest
 from test_teleop import plan
 
 from twin.cli import main
-from twin.record.mcap_reader import load
+from twin.record.mcap.reader import load
 from twin.tasks.pick_place import POINT_A_M, POINT_B_M
 
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(shutil.which("tmux") is None, reason="needs tmux (tools/setup_test_system.sh)")]

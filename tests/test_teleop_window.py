@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
-from twin.outputs import partial_path
-from twin.record.mcap_reader import load
+from twin.record.mcap.reader import load
+from twin.record.outputs import partial_path
 
 
 def _libs():

@@ -10,14 +10,14 @@ from dataclasses import fields
 
 import pytest
 
-from twin.columns import FrameCollector, FrameColumns
-from twin.config import TwinConfig
 from twin.errors import ConfigError, OutOfReach, UnknownName
-from twin.kinematics import wrap_rad
-from twin.profiles import PROFILES
+from twin.model.columns import FrameCollector, FrameColumns
+from twin.model.config import TwinConfig
+from twin.model.profiles import PROFILES
+from twin.model.types import Command
+from twin.robot.kinematics import wrap_rad
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
-from twin.types import Command
 
 ONE_CYCLE = {"cycles": 1}
 

@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
-from twin.config import TwinConfig
 from twin.errors import ConfigError
-from twin.profiles import get_profile
-from twin.twin import Twin
-from twin.urdf import mesh_paths, urdf_text
-from twin.world import pb
+from twin.model.config import TwinConfig
+from twin.robot.profile_files import get_profile
+from twin.robot.urdf import mesh_paths, urdf_text
+from twin.sim.twin import Twin
+from twin.sim.world import pb
 
 SHOULDER_Z_M, ELBOW_DZ_M, LINK1_M, LINK2_M = 0.152, 0.05, 0.467, 0.4005
 PAD_ABOVE_Z_JOINT_M, PAD_LENGTH_M = 0.065, 0.012

@@ -16,7 +16,7 @@ from coppeliasim_zmqremoteapi_client import RemoteAPIClient
 from test_remote_server_process import ServerProcess
 
 from twin.cli import main
-from twin.record.mcap_reader import load
+from twin.record.mcap.reader import load
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -210,9 +210,9 @@ def test_check_update_leaves_a_golden_untouched_when_its_task_now_raises(tmp_pat
 
 
 def test_a_run_whose_task_raised_is_finalized_as_error_even_when_the_caller_goes_on(tmp_path):
-    from twin.check import record_task
-    from twin.config import TwinConfig
+    from twin.model.config import TwinConfig
     from twin.record import open_recorders
+    from twin.verify.check import record_task
 
     (tmp_path / "crash.py").write_text(CRASHING_TASK)
     path = tmp_path / "x.mcap"
@@ -269,9 +269,9 @@ def test_a_moved_event_prints_each_side_its_own_time_and_json_gives_the_window(t
     import copy
     import dataclasses
 
-    from twin.compare import compare
-    from twin.report import render_json, render_junit, render_text
-    from twin.tolerances import Tolerances
+    from twin.compare.engine import compare
+    from twin.compare.report import render_json, render_junit, render_text
+    from twin.compare.tolerances import Tolerances
 
     a = tmp_path / "a.mcap"
     assert main(["run", "pick_place", "--cycles", "1", "--record", str(a)]) == 0
@@ -295,8 +295,8 @@ def test_a_moved_event_prints_each_side_its_own_time_and_json_gives_the_window(t
 
 
 def test_physical_flags_a_sub_millimetre_change_with_a_margin(capsys, tmp_path):
-    from twin.compare import compare
-    from twin.tolerances import Tolerances
+    from twin.compare.engine import compare
+    from twin.compare.tolerances import Tolerances
 
     a = tmp_path / "a.mcap"
     assert main(["run", "pick_place", "--cycles", "1", "--record", str(a)]) == 0
@@ -320,9 +320,9 @@ def test_a_task_that_calls_sys_exit_0_fails(tmp_path):
 
 
 def test_non_finite_event_data_is_null_in_memory_as_in_the_file(tmp_path):
-    from twin.config import TwinConfig
+    from twin.model.config import TwinConfig
     from twin.record import open_recorders
-    from twin.twin import Twin
+    from twin.sim.twin import Twin
 
     path = tmp_path / "nan.mcap"
     with open_recorders(TwinConfig(), {"source": "task", "task": "", "params": {}}, mcap_path=path) as sinks:

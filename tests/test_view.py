@@ -22,10 +22,10 @@ import psutil
 import pytest
 
 from twin.cli import main
-from twin.record import rerun_scene as scene
-from twin.record.mcap_reader import load
-from twin.record.rrd_file import read_scalars, verify_rrd
-from twin.record.viewer import holding_time_ns
+from twin.record.mcap.reader import load
+from twin.record.rerun import scene
+from twin.record.rerun.rrd_file import read_scalars, verify_rrd
+from twin.record.rerun.viewer import holding_time_ns
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
@@ -241,7 +241,7 @@ def test_the_printed_url_streams_the_recording(recorded, tmp_path):
     """What the web page loads from its ?url=: a headless viewer opens that source and gets the whole run."""
     from rerun.experimental import ViewerClient
 
-    from twin.record.rrd_file import rerun_executable
+    from twin.record.rerun.rrd_file import rerun_executable
 
     proc = _start_view(str(recorded["mcap"]), "--web")
     port = _free_port()
@@ -368,10 +368,10 @@ def test_native_viewer_opens_a_window_on_loopback_beside_a_web_viewer(recorded, 
 
 
 def test_a_run_that_never_holds_is_shown_at_its_end(tmp_path):
-    from twin.config import TwinConfig
-    from twin.record.rerun_writer import RerunRecorder
-    from twin.twin import Twin
-    from twin.urdf import urdf_text
+    from twin.model.config import TwinConfig
+    from twin.record.rerun.writer import RerunRecorder
+    from twin.robot.urdf import urdf_text
+    from twin.sim.twin import Twin
 
     config = TwinConfig()
     path = tmp_path / "no_hold.rrd"

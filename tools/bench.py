@@ -64,8 +64,8 @@ class BenchContext:
 
 def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
     """One sample of the bare PyBullet loop: the default twin scene, stepSimulation only."""
-    from twin.config import TwinConfig
-    from twin.world import World
+    from twin.model.config import TwinConfig
+    from twin.sim.world import World
 
     world = World(TwinConfig())
     try:
@@ -81,11 +81,11 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
 
 def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
     """One sample of the bare PyBullet loop doing pick_place's work (see the module docstring)."""
-    from twin.columns import FrameCollector
-    from twin.config import TwinConfig
+    from twin.model.columns import FrameCollector
+    from twin.model.config import TwinConfig
+    from twin.sim.twin import Twin
+    from twin.sim.world import World
     from twin.tasks import TASKS
-    from twin.twin import Twin
-    from twin.world import World
 
     collector = FrameCollector()
     twin = Twin(sinks=[collector])
@@ -159,7 +159,7 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_
         print(f"bench: error: unknown section {unknown[0]!r}; expected one of {', '.join(sections)}", file=sys.stderr)
         return 2
     chosen = {name: path for name, path in sections.items() if not only or name in only}
-    from twin.world import pybullet_version
+    from twin.sim.world import pybullet_version
 
     t_start = time.perf_counter()
     samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))

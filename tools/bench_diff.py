@@ -17,13 +17,13 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
-from twin.check import record_task
-from twin.compare import compare
-from twin.config import SceneObject, TwinConfig
+from twin.compare.engine import compare
+from twin.compare.report import render_text
+from twin.compare.tolerances import Tolerances
+from twin.model.config import SceneObject, TwinConfig
 from twin.record import open_recorders
-from twin.record.mcap_reader import load
-from twin.report import render_text
-from twin.tolerances import Tolerances
+from twin.record.mcap.reader import load
+from twin.verify.check import record_task
 
 SIM_MINUTES = 10.0
 CYCLE_S = 4.4  # simulated seconds per pick_place cycle with the mtb profile at 240 Hz

@@ -14,11 +14,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from twin.config import TwinConfig
+from twin.model.config import TwinConfig
 from twin.record import open_recorders
-from twin.record.mcap_reader import load
+from twin.record.mcap.reader import load
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
 
 CYCLES = 16
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": CYCLES}}
@@ -47,9 +47,9 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> tuple[int, float, float
 
 def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
     """Process CPU time the MCAP recorder spends per frame, fed a recorded run's frames (no physics)."""
-    from twin.columns import FrameCollector
-    from twin.record.mcap_writer import McapRecorder
-    from twin.urdf import urdf_text
+    from twin.model.columns import FrameCollector
+    from twin.record.mcap.writer import McapRecorder
+    from twin.robot.urdf import urdf_text
 
     config = TwinConfig()
     collector = FrameCollector()
@@ -71,7 +71,7 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
 
 def _have_rerun_writer() -> bool:
     try:
-        import twin.record.rerun_writer  # noqa: F401
+        import twin.record.rerun.writer  # noqa: F401
     except ImportError:
         return False
     return True

@@ -74,7 +74,7 @@ def server_side_us(requests: int = 20_000) -> float:
     """Microseconds the server spends on one getJointPosition request (decode, call, encode), no transport."""
     import cbor2
 
-    from twin.config import TwinConfig
+    from twin.model.config import TwinConfig
     from twin.remote.server import Server
     from twin.remote.session import Scene
 

@@ -11,10 +11,10 @@ import statistics
 import sys
 import time
 
-from twin.config import TwinConfig
-from twin.profiles import PROFILES
+from twin.model.config import TwinConfig
+from twin.model.profiles import PROFILES
+from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
-from twin.twin import Twin
 
 CYCLES = 2
 IDLE_STEPS = 5_000

@@ -24,11 +24,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.check import record_task
-from twin.config import SceneObject, SuctionParams, TwinConfig
 from twin.errors import TwinError
-from twin.profiles import PROFILES
+from twin.model.config import SceneObject, SuctionParams, TwinConfig
+from twin.model.profiles import PROFILES
 from twin.record import open_recorders
+from twin.verify.check import record_task
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDINGS = ROOT / "recordings"

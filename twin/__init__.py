@@ -6,11 +6,11 @@ from os import PathLike
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from twin.recording import Recording
+    from twin.model.recording import Recording
 
 
 def load(path: str | PathLike) -> Recording:
-    """Load an MCAP recording as a twin.recording.Recording (frames as numpy columns, commands, events)."""
-    from twin.record.mcap_reader import load as load_mcap
+    """Load an MCAP recording as a twin.model.recording.Recording (frames as numpy columns, commands, events)."""
+    from twin.record.mcap.reader import load as load_mcap
 
     return load_mcap(path)

@@ -6,10 +6,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.config import TwinConfig
 from twin.errors import TwinError
+from twin.model.config import TwinConfig
+from twin.robot.urdf import mesh_paths, urdf_text
 from twin.signals import Terminated
-from twin.urdf import mesh_paths, urdf_text
 
 
 @contextmanager
@@ -22,14 +22,14 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
 
     background: the writers run in a recorder process on the other core (the same files, byte for
     byte, at a fraction of the stepping thread's time); False keeps them in this process."""
-    from twin.record.mcap_writer import McapRecorder
+    from twin.record.mcap.writer import McapRecorder
 
     urdf = urdf_text(config.profile)
     meshes = mesh_paths(config.profile)
     sinks: list = []
     try:
         if background and (mcap_path is not None or rrd_path is not None):
-            from twin.record.recorder_process import RecorderProcess
+            from twin.record.process import RecorderProcess
 
             sinks.append(RecorderProcess(config, run, urdf=urdf, meshes=meshes,
                                          mcap_path=mcap_path, rrd_path=rrd_path, rate=rate))
@@ -37,7 +37,7 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
             sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes,
                                       rate=rate))
         if rrd_path is not None and not background:
-            from twin.record.rerun_writer import RerunRecorder
+            from twin.record.rerun.writer import RerunRecorder
 
             sinks.append(RerunRecorder(rrd_path, config, urdf))
     except BaseException as err:
@@ -94,8 +94,8 @@ def _error_text(err: BaseException) -> str:
 
 def _close_all(sinks: list, outcome: str, error: str) -> Exception | None:
     """Close every sink even if one fails; return the first failure."""
-    from twin.record.mcap_writer import McapRecorder
-    from twin.record.recorder_process import RecorderProcess
+    from twin.record.mcap.writer import McapRecorder
+    from twin.record.process import RecorderProcess
 
     first: Exception | None = None
     for sink in sinks:

@@ -12,10 +12,11 @@ import sys
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
-from twin.config import TwinConfig
 from twin.errors import ConfigError, RecordingError
-from twin.record import schemas as S
-from twin.record import strict_json
+from twin.model.config import TwinConfig
+from twin.model.versions import ENGINE
+from twin.record.mcap import schemas as S
+from twin.record.mcap import strict_json
 
 RUN_SOURCES = ("task", "teleop", "remote")
 
@@ -32,10 +33,8 @@ def _version(dist: str) -> str:
 
 
 def versions() -> dict[str, str]:
-    from twin.world import pybullet_version
-
     return {
-        "twin": _version("twin"), "pybullet": _version("pybullet"), "pybullet_api": pybullet_version(),
+        "twin": _version("twin"), "pybullet": _version("pybullet"), "pybullet_api": ENGINE.get("pybullet_api", "unknown"),
         "numpy": _version("numpy"), "mcap": _version("mcap"), "protobuf": _version("protobuf"),
         "python": platform.python_version(), "platform": f"{sys.platform} {platform.machine()}",
     }

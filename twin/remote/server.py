@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import zmq
 from zmq.utils.monitor import parse_monitor_message
 
-from twin.config import TwinConfig
 from twin.errors import ConfigError, TwinError
+from twin.model.config import TwinConfig
 from twin.remote.protocol import (
     EMPTY_REPLY,
     MAX_FRAME_BYTES,

@@ -12,10 +12,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from twin.config import TwinConfig
 from twin.errors import ConfigError, TwinError
-from twin.twin import Twin
-from twin.types import Command, Event, Frame
+from twin.model.config import TwinConfig
+from twin.model.types import Command, Event, Frame
+from twin.sim.twin import Twin
 
 SIMULATION_STOPPED = 0x00
 SIMULATION_PAUSED = 0x08

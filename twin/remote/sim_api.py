@@ -11,10 +11,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from twin import kinematics
 from twin.errors import UnknownName
-from twin.profiles import PAD_ALIASES, ROBOT_ALIASES, ROLES
-from twin.quat import quat_mul, rotate, yaw_quat
+from twin.model.profiles import PAD_ALIASES, ROBOT_ALIASES, ROLES
+from twin.model.quat import quat_mul, rotate, yaw_quat
 from twin.remote.protocol import MAX_SIGNALS, Param, RequestError, Signature, describe, printable
 from twin.remote.session import (
     SIMULATION_ADVANCING_RUNNING,
@@ -22,6 +21,7 @@ from twin.remote.session import (
     SIMULATION_STOPPED,
     Scene,
 )
+from twin.robot import kinematics
 
 HANDLE_WORLD = -1
 HANDLE_ROBOT = 10

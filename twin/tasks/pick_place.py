@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 from twin.errors import TaskError
-from twin.types import NO_BODY
+from twin.model.types import NO_BODY
 
 POINT_A_M = (0.2, 0.7)
 POINT_B_M = (-0.3, -0.55)

@@ -1,0 +1,54 @@
+"""Argument types shared by the `twin` subcommands: each refuses bad text with one clear line."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+from twin.model.config import TwinConfig, dt_ns_from_hz
+from twin.robot.profile_files import get_profile
+
+
+def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
+    """--robot and --rate-hz (and --gui where a window makes sense): what builds the twin."""
+    p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
+    p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
+    if gui:
+        p.add_argument("--gui", action="store_true", help="open the PyBullet window")
+
+
+def twin_config(args: argparse.Namespace) -> TwinConfig:
+    """The twin configuration the --robot and --rate-hz options ask for."""
+    return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
+
+
+def whole_number(minimum: int = 1) -> Callable[[str], int]:
+    """An argparse type: an integer >= minimum."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = minimum - 1
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= {minimum}")
+        return value
+
+    return parse
+
+
+def port(*, allow_any: bool = False) -> Callable[[str], int]:
+    """An argparse type: a TCP port 1..65535, or 0 (any free port) when allow_any."""
+    lowest = 0 if allow_any else 1
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = -1
+        if not lowest <= value <= 65535:
+            expected = "0..65535 (0: any free port)" if allow_any else "a whole number 1..65535"
+            raise argparse.ArgumentTypeError(f"port {text!r} is invalid; expected {expected}")
+        return value
+
+    return parse

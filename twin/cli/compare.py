@@ -1,0 +1,162 @@
+"""The `twin diff`, `twin replay` and `twin check` commands: argument parsing and printing only.
+
+Exit codes: 0 match, 1 mismatch, 2 unreadable or bad input, 3 runs not comparable (diff/replay).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from twin.cli.args import whole_number
+from twin.compare.tolerances import FIELDS, PRESETS, Tolerances
+from twin.errors import ConfigError
+
+_TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
+    f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
+
+
+def _add_tolerance_options(p: argparse.ArgumentParser, default: str) -> None:
+    p.add_argument("--tolerance", default=default, metavar="PRESET",
+                   help=f"preset: {', '.join(PRESETS)} (default {default}); see recordings/README.md")
+    p.add_argument("--tol", action="append", default=[], metavar="CHANNEL.FIELD=VALUE", help=_TOL_HELP)
+    p.add_argument("--event-window", type=whole_number(0), default=None, metavar="STEPS",
+                   help="events match when within this many steps (default: the preset's)")
+
+
+def _tolerances(args: argparse.Namespace) -> Tolerances:
+    tol = Tolerances.from_preset(args.tolerance).with_overrides(args.tol)
+    return tol.with_event_window(args.event_window)
+
+
+def _add_report_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--report", action="append", default=[], metavar="FILE",
+                   help="also write the report to FILE.md, FILE.json or FILE.xml (JUnit); repeatable")
+    p.add_argument("--rrd", default=None, metavar="FILE.rrd",
+                   help="write a Rerun recording showing both runs (the candidate as a ghost) and the error")
+    p.add_argument("--quiet", "-q", action="store_true", help="print only the verdict and first divergence")
+
+
+def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
+    """Every output path (--report, --rrd, replay's --record) checked before any work: the right
+    suffix, an existing folder, never one of the inputs (also through a link)."""
+    from twin.compare.report import report_format
+    from twin.record.outputs import check_output
+
+    for path in args.report:
+        check_output(path, Path(path).suffix, inputs=inputs, option="--report")
+        report_format(path)
+    if args.rrd:
+        check_output(args.rrd, ".rrd", inputs=inputs, option="--rrd")
+    if getattr(args, "record", None):
+        check_output(args.record, ".mcap", inputs=inputs, option="--record")
+
+
+def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
+    from twin.compare.report import render_text, write_report
+
+    lines = render_text(result).splitlines()
+    if args.quiet:
+        lines = lines[:1] + [line for line in lines if line.startswith(
+            ("first divergence", "  expected", "  the candidate has it", "  the golden has it"))]
+    print("\n".join(lines))
+    for path in args.report:
+        write_report(result, path)
+    if args.rrd:
+        from twin.verify.diff_view import write_diff_rrd
+
+        write_diff_rrd(golden, candidate, result, args.rrd)
+    return result.exit_code
+
+
+def cmd_diff(args: argparse.Namespace) -> int:
+    from twin.compare.engine import compare
+    from twin.record.mcap.reader import load
+
+    tol = _tolerances(args)
+    _check_outputs(args, [args.golden, args.candidate])
+    golden, candidate = load(args.golden), load(args.candidate)
+    result = compare(golden, candidate, tol, force=args.force)
+    return _emit(result, golden, candidate, args)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from twin.compare.engine import compare
+    from twin.record.mcap.reader import load
+    from twin.verify.replay import REPLAYED_EVENT_KINDS, replay, replay_run, replayed_event_kinds
+
+    tol = _tolerances(args)
+    _check_outputs(args, [args.recording])
+    rec = load(args.recording)
+    if args.record:
+        from twin.record import open_recorders
+
+        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record) as sinks:
+            new = replay(rec, sinks=sinks)
+        new.path = args.record
+    else:
+        new = replay(rec)
+    kinds = replayed_event_kinds(rec)
+    result = compare(rec, new, tol, event_kinds=kinds)
+    if kinds is not None:
+        result.notes.append("this recording predates recorded task and client events: replay compares only the "
+                            "events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS)))
+    return _emit(result, rec, new, args)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from twin.verify.check import Progress, check_all, exit_code, golden_paths, summary_table
+
+    tol = _tolerances(args)
+    if args.junit and not args.junit.endswith(".xml"):
+        raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
+    paths = golden_paths(args.paths)
+    outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=Progress(len(paths)),
+                         allow_error=args.allow_error)
+    if args.junit:
+        from twin.compare.report import render_check_junit
+
+        try:
+            Path(args.junit).write_text(render_check_junit(outcomes))
+        except OSError as err:
+            raise ConfigError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
+    for o in outcomes:
+        if o.status in ("differ", "refused") and args.verbose:
+            print(f"== {o.path}\n{o.report}")
+    print(summary_table(outcomes), end="")
+    updated = [o.path for o in outcomes if o.status == "updated"]
+    if updated:
+        print("rewrote: " + ", ".join(updated))
+    return exit_code(outcomes)
+
+
+def add_compare_commands(sub: argparse._SubParsersAction) -> None:
+    """Add diff, replay and check to the `twin` command's subparsers."""
+    p = sub.add_parser("diff", help="compare two recordings by content (exit 0 match, 1 mismatch, 2 bad input, "
+                                    "3 not comparable)")
+    p.add_argument("golden", help="the reference recording (.mcap)")
+    p.add_argument("candidate", help="the recording to check (.mcap)")
+    _add_tolerance_options(p, "exact")
+    p.add_argument("--force", action="store_true",
+                   help="compare even when robot profile, time step or scene objects differ")
+    _add_report_options(p)
+    p.set_defaults(func=cmd_diff)
+
+    p = sub.add_parser("replay", help="rebuild the twin from a recording, feed its commands back, compare")
+    p.add_argument("recording", help="the recording to replay (.mcap)")
+    p.add_argument("--record", default=None, metavar="NEW.mcap", help="also record the replayed run")
+    _add_tolerance_options(p, "exact")
+    _add_report_options(p)
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap)")
+    p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/)")
+    p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which); "
+                   "never with a run whose task failed")
+    p.add_argument("--allow-error", action="store_true",
+                   help="with --update: also write a run whose task failed (its outcome stays error)")
+    p.add_argument("--jobs", "-j", type=whole_number(1), default=1, metavar="N", help="parallel processes (default 1)")
+    p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
+    p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")
+    _add_tolerance_options(p, "exact")
+    p.set_defaults(func=cmd_check)

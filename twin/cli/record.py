@@ -1,0 +1,86 @@
+"""Recording options shared by `twin run`, `teleop` and `serve`, and the `twin info` and `twin recover`
+commands: argument parsing and printing only."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from twin.cli.args import whole_number
+from twin.errors import ConfigError, RecordingError
+from twin.record.outputs import check_output, partial_path
+
+DEFAULT_FOLDER = "runs"
+
+
+def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True) -> None:
+    """--record FILE.mcap, --no-record (when recording is on by default), --rrd FILE.rrd, --rate N."""
+    default_text = f"default {DEFAULT_FOLDER}/<task>_<robot>.mcap" if record_by_default else "default: no MCAP file"
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--record", metavar="FILE.mcap", help=f"record the run to this MCAP file ({default_text})")
+    if record_by_default:
+        group.add_argument("--no-record", action="store_true", help="do not write an MCAP recording")
+    p.add_argument("--rrd", metavar="FILE.rrd", help="also write a Rerun recording (a view, regenerable from MCAP)")
+    p.add_argument("--rate", type=whole_number(1), default=1, metavar="N",
+                   help="MCAP: keep every Nth physics step (default 1: every step; the last step is always kept); "
+                        "the .rrd view keeps every step")
+    p.set_defaults(record_by_default=record_by_default)
+
+
+def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | None, Path | None]:
+    """The MCAP and Rerun paths the options ask for (the MCAP default is runs/<default_stem>.mcap),
+    checked before any work (suffix, not a folder, the folder exists). Only the default folder
+    runs/ is created; a folder the user names must exist."""
+    mcap = args.record
+    if mcap is None and getattr(args, "record_by_default", False) and not getattr(args, "no_record", False):
+        mcap = str(Path(DEFAULT_FOLDER) / f"{default_stem}.mcap")
+        try:
+            Path(DEFAULT_FOLDER).mkdir(exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"cannot create the default folder {DEFAULT_FOLDER!r}: {err.strerror or err}; "
+                              "pass --record FILE.mcap or --no-record") from err
+    mcap_path = check_output(mcap, ".mcap", option="recording") if mcap is not None else None
+    rrd_path = check_output(args.rrd, ".rrd", option="recording") if args.rrd is not None else None
+    return mcap_path, rrd_path
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from twin.record.mcap.info import describe, format_info
+
+    partial = partial_path(args.file)
+    if not Path(args.file).exists() and partial.is_file():
+        raise RecordingError(f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
+                             f"of a run that was killed (or is still running); `twin recover {args.file}` restores it")
+    info = describe(args.file)
+    for line in format_info(info):
+        print(line)
+    if not info.intact:
+        raise RecordingError(f"recording {args.file!r} is not finalized: {info.problem}; "
+                             f"`twin recover {args.file} -o FIXED.mcap` restores its readable part")
+    return 0
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    from twin.record.mcap.recover import recover
+
+    report = recover(args.file, args.output)
+    for line in report.lines():
+        print(line)
+    return 0
+
+
+def add_record_commands(sub) -> None:
+    p = sub.add_parser("info", help="describe a recording: duration, channels, events, metadata, finalized or not",
+                       description="Exit code 0 for a complete file, 2 for a missing, unreadable or unfinished one.")
+    p.add_argument("file", metavar="FILE.mcap")
+    p.set_defaults(func=cmd_info)
+    p = sub.add_parser("recover", help="restore the readable part of a recording cut short (crash, kill -9)",
+                       description="Reads up to the first damaged record and writes a complete MCAP file. A run "
+                                   "writes NAME.mcap.partial and renames it to NAME.mcap when it ends; a killed run "
+                                   "leaves the .partial file: `twin recover NAME.mcap` finds it and writes NAME.mcap.")
+    p.add_argument("file", metavar="BROKEN.mcap",
+                   help="the cut-short file; for a killed run, its NAME.mcap (its NAME.mcap.partial is used)")
+    p.add_argument("-o", "--output", metavar="FIXED.mcap",
+                   help="where to write the restored file (default, for a killed run's .partial file: the NAME.mcap "
+                        "it was meant to become, if that does not exist)")
+    p.set_defaults(func=cmd_recover)

@@ -1,0 +1,1 @@
+"""Comparing two runs in physical units (numpy only: no pybullet, mcap or rerun)."""

@@ -1,0 +1,481 @@
+"""The diff engine: compare a candidate run with a golden one, field by field, in physical units.
+
+Frames are aligned by step number (so a decimated golden compares with a full candidate); angles
+are wrapped; orientations compare by the angle between quaternions; events pair by kind and body,
+in order, within a window of steps. Commands (every input, kept at every step whatever the frame
+rate) compare exactly, so a divergence between the kept frames of a decimated file still shows.
+The outcome fields judge the result alone: the task ended ok, and how often the pad took and let go.
+Everything is numpy over whole columns: no per-frame Python.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from twin.compare.events import EventDiff, match_events
+from twin.compare.metrics import REVOLUTE, abs_error, differs, discrete_error, joint_error, norm_error, quat_angle
+from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
+from twin.errors import RecordingError, TwinError
+from twin.model.recording import META_FINALIZED, Recording
+from twin.model.types import Command
+
+JOINT_UNITS = {"position": ("rad", "m"), "target": ("rad", "m"), "velocity": ("rad/s", "m/s"),
+               "effort": ("N·m", "N")}
+
+
+class NotComparable(TwinError):
+    """The two runs differ in structure (joints by role, time step, scene objects)."""
+
+    exit_code = 3
+
+
+@dataclass
+class Divergence:
+    """Where the candidate first leaves the golden, in one field of one element."""
+
+    step: int
+    t_s: float
+    channel: str
+    field: str
+    element: str
+    expected: list
+    actual: list
+    difference: float
+    tolerance: float
+    unit: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.channel}.{self.field}"
+
+
+@dataclass
+class FieldStat:
+    name: str
+    unit: str
+    tolerance: float
+    worst: float  # largest error over steps and elements
+    worst_step: int
+    worst_element: str
+    rms: float
+    steps_over: int  # steps where some element is over tolerance
+    first: Divergence | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.first is None
+
+
+@dataclass
+class FinalPose:
+    name: str
+    expected: list
+    actual: list
+    distance_m: float
+    angle_rad: float
+    ok: bool
+
+
+@dataclass
+class DiffResult:
+    golden: dict  # describe(): path, profile, run, frames
+    candidate: dict
+    tolerances: Tolerances
+    fields: list[FieldStat]
+    events_matched: int
+    events_shifted: int  # matched, but at another step inside the window
+    event_diffs: list[EventDiff]
+    final_poses: list[FinalPose]
+    length: tuple[int, int]  # last step of golden, candidate
+    steps_compared: int
+    config_differences: list[tuple[str, str, str]]
+    notes: list[str] = field(default_factory=list)
+    first: Divergence | None = None
+    first_command: Divergence | None = None  # the first difference in the command sequences
+    likely_cause: str = ""  # the command nearest before the first divergence, in the golden
+    events_compared: bool = True  # False: the tolerances pair no events (outcome); counts still compare
+
+    @property
+    def match(self) -> bool:
+        return self.first is None
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.match else 1
+
+    def to_dict(self) -> dict:
+        def clean(x):
+            if isinstance(x, float) and not math.isfinite(x):
+                return str(x)
+            if isinstance(x, dict):
+                return {k: clean(v) for k, v in x.items()}
+            if isinstance(x, list | tuple):
+                return [clean(v) for v in x]
+            return x
+
+        out = asdict(self)
+        out["tolerances"] = self.tolerances.to_dict()
+        out["match"] = self.match
+        return clean(out)
+
+
+# field -> (column, component slice, metric, element kind)
+_SPECS = {
+    "joints.position": ("joint_q", None, joint_error, "joint"),
+    "joints.velocity": ("joint_qd", None, abs_error, "joint"),
+    "joints.effort": ("joint_effort", None, abs_error, "joint"),
+    "joints.target": ("joint_target", None, joint_error, "joint"),
+    "suction.on": ("suction_on", None, discrete_error, ""),
+    "suction.sensed": ("sensed_body", None, discrete_error, ""),
+    "suction.held": ("held_body", None, discrete_error, ""),
+    "hold.force": ("hold_force_n", None, norm_error, ""),
+    "hold.torque": ("hold_torque_nm", None, norm_error, ""),
+    "pad.position": ("pad_pose", slice(0, 3), norm_error, ""),
+    "pad.orientation": ("pad_pose", slice(3, 7), quat_angle, ""),
+    "objects.position": ("object_poses", slice(0, 3), norm_error, "object"),
+    "objects.orientation": ("object_poses", slice(3, 7), quat_angle, "object"),
+}
+
+
+def _shaped(values: np.ndarray, components: slice | None, kind: str) -> np.ndarray:
+    """Any column -> (n, elements, components)."""
+    if values.ndim == 1:
+        return values[:, None, None]
+    if kind == "joint":
+        return values[:, :, None]
+    if values.ndim == 2:
+        return values[:, None, components or slice(None)]
+    return values[:, :, components]
+
+
+# -- the engine --------------------------------------------------------------------------------
+def comparable(golden: Recording, candidate: Recording) -> list[str]:
+    """Why the two runs cannot be compared (empty when they can): structure, not names. Two robots
+    with the same joints by role compare (a renamed profile or a longer link is a difference to
+    report); another time step or another set of scene objects does not."""
+    g, c = golden.config, candidate.config
+    why = []
+    if len(g.profile.joint_names) != len(c.profile.joint_names):
+        why.append(f"the candidate's robot has {len(c.profile.joint_names)} joints, the golden's "
+                   f"{len(g.profile.joint_names)}")
+    if g.dt_ns != c.dt_ns:
+        why.append(f"time step {c.dt_ns} ns differs from the golden's {g.dt_ns} ns")
+    gn, cn = [o.name for o in g.objects], [o.name for o in c.objects]
+    if sorted(gn) != sorted(cn):
+        why.append(f"scene objects {cn} differ from the golden's {gn}")
+    return why
+
+
+def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | None = None, *,
+            force: bool = False, event_kinds: frozenset[str] | None = None) -> DiffResult:
+    """Compare candidate with golden; raises NotComparable for structurally different runs unless force.
+
+    event_kinds: the event kinds to pair one by one (None: all).
+    """
+    tol = tolerances or Tolerances()
+    why = comparable(golden, candidate)
+    if why and not force:
+        raise NotComparable("the runs are not comparable: " + "; ".join(why) + " (use --force to compare anyway)")
+    notes = [f"compared despite: {w}" for w in why]
+    g, c = golden.frames, candidate.frames
+    if len(g) == 0 or len(c) == 0:
+        raise RecordingError(f"cannot compare a run without frames (golden {golden.path or '<memory>'}: {len(g)} "
+                             f"frames, candidate {candidate.path or '<memory>'}: {len(c)} frames)")
+    gi, ci = align(g.step, c.step)
+    common, g_obj, c_obj = _common_objects(golden, candidate)
+    fields = [_field_stat(name, a, b, metric, tol[name], elements, g.step[gi], g.t_ns[gi])
+              for name, a, b, metric, elements in _field_arrays(golden, candidate, gi, ci, common, g_obj, c_obj)]
+
+    dt_ns = golden.config.dt_ns
+    length = (int(g.step[-1]), int(c.step[-1]))
+    fields.append(_length_stat(length, tol["run.length"], dt_ns))
+    finals = _final_poses(g.object_poses[-1][g_obj], c.object_poses[-1][c_obj], common, tol)
+    fields.extend(_final_stats(finals, tol, max(length), dt_ns))
+    fields.append(_command_stat(golden.commands, candidate.commands, tol["commands.sequence"], dt_ns))
+    fields.append(_task_stat(golden, candidate, tol["outcome.task"], max(length), dt_ns))
+    fields.extend(_count_stats(golden.events, candidate.events, tol, max(length), dt_ns))
+    if tol.event_window_steps is None:
+        matched, shifted, event_diffs = 0, 0, []
+    else:
+        matched, shifted, event_diffs = match_events(golden.events, candidate.events, tol.event_window_steps,
+                                                     event_kinds)
+    notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
+
+    result = DiffResult(
+        golden=describe(golden), candidate=describe(candidate), tolerances=tol, fields=fields,
+        events_matched=matched, events_shifted=shifted, event_diffs=event_diffs, final_poses=finals,
+        length=length, steps_compared=int(gi.shape[0]),
+        config_differences=config_differences({**golden.config.to_dict(), "run": golden.run or {}},
+                                              {**candidate.config.to_dict(), "run": candidate.run or {}}),
+        notes=notes, events_compared=tol.event_window_steps is not None,
+    )
+    result.first = _first(fields, event_diffs, dt_ns, tol.event_window_steps)
+    result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
+    if result.first is not None:
+        result.likely_cause = likely_cause(golden.commands, result.first.step)
+    return result
+
+
+def _common_objects(golden: Recording, candidate: Recording) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Object names both runs have (golden order) and their indices in each run."""
+    g_names = [o.name for o in golden.config.objects]
+    c_names = [o.name for o in candidate.config.objects]
+    common = [n for n in g_names if n in c_names]
+    return (common, np.array([g_names.index(n) for n in common], dtype=np.int64),
+            np.array([c_names.index(n) for n in common], dtype=np.int64))
+
+
+def _field_arrays(golden: Recording, candidate: Recording, gi: np.ndarray, ci: np.ndarray, common: list[str],
+                  g_obj: np.ndarray, c_obj: np.ndarray):
+    """Per field: (name, golden (n, k, c), candidate (n, k, c), metric, element names) on aligned steps;
+    common, g_obj, c_obj as _common_objects gives them."""
+    g, c = golden.frames, candidate.frames
+    g_names = [o.name for o in golden.config.objects]
+    c_names = [o.name for o in candidate.config.objects]
+    joint_names = list(golden.config.profile.joint_names)
+    for name, (column, comp, metric, kind) in _SPECS.items():
+        a, b = getattr(g, column)[gi], getattr(c, column)[ci]
+        if kind == "object":
+            a, b = a[:, g_obj], b[:, c_obj]
+        elif column in ("sensed_body", "held_body"):
+            b = _remap_bodies(b, c_names, g_names)
+        elements = joint_names if kind == "joint" else common if kind == "object" else [""]
+        yield name, _shaped(a, comp, kind), _shaped(b, comp, kind), metric, elements
+
+
+def error_series(golden: Recording, candidate: Recording) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """On the steps both runs have: (steps, t_ns, {field: largest error over its elements}), FIELDS units."""
+    gi, ci = align(golden.frames.step, candidate.frames.step)
+    out = {}
+    for name, a, b, metric, _elements in _field_arrays(golden, candidate, gi, ci, *_common_objects(golden, candidate)):
+        err = metric(a, b)
+        out[name] = err.max(axis=1) if err.shape[1] else np.zeros(err.shape[0])
+    return golden.frames.step[gi], golden.frames.t_ns[gi], out
+
+
+def align(g_steps: np.ndarray, c_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the steps both runs have, in step order."""
+    n = min(len(g_steps), len(c_steps))
+    if np.array_equal(g_steps[:n], c_steps[:n]):
+        idx = np.arange(n)
+        return idx, idx
+    _, gi, ci = np.intersect1d(g_steps, c_steps, assume_unique=True, return_indices=True)
+    return gi, ci
+
+
+def _remap_bodies(b: np.ndarray, c_names: list[str], g_names: list[str]) -> np.ndarray:
+    """Candidate object indices -> golden indices (by name); -2 for objects the golden lacks."""
+    table = np.array([g_names.index(n) if n in g_names else -2 for n in c_names] + [-1], dtype=np.int64)
+    return table[b]  # index -1 (no body) reads the table's last entry, -1
+
+
+def _field_stat(name: str, a: np.ndarray, b: np.ndarray, metric, tolerance: float, elements: list[str],
+                steps: np.ndarray, t_ns: np.ndarray) -> FieldStat:
+    unit = FIELDS[name][0]
+    n = a.shape[0]
+    if n == 0 or a.shape[1] == 0:
+        return FieldStat(name, unit, tolerance, 0.0, -1, "", 0.0, 0)
+    err = metric(a, b)
+    if tolerance == 0:
+        over = differs(a, b)
+    else:
+        over = ~(err <= tolerance)
+    over_steps = over.any(axis=1)
+    finite = np.where(np.isnan(err), INF, err)
+    flat = int(np.argmax(finite))
+    w_i, w_k = divmod(flat, finite.shape[1])
+    stat = FieldStat(name, unit, tolerance, float(finite[w_i, w_k]), int(steps[w_i]), elements[w_k],
+                     float(np.sqrt(np.mean(np.square(finite)))), int(over_steps.sum()))
+    if stat.steps_over and tolerance != INF:
+        i = int(np.argmax(over_steps))
+        k = int(np.argmax(over[i]))
+        channel, fld = name.split(".")
+        if channel == "joints":
+            unit = JOINT_UNITS[fld][0 if REVOLUTE[k] else 1]
+        stat.first = Divergence(int(steps[i]), int(t_ns[i]) * 1e-9, channel, fld, elements[k], _values(a[i, k]),
+                                _values(b[i, k]), float(err[i, k]), tolerance, unit)
+    elif tolerance == INF:
+        stat.steps_over = 0
+    return stat
+
+
+def _values(x: np.ndarray) -> list:
+    return [v.item() for v in x]
+
+
+def _length_stat(length: tuple[int, int], tolerance: float, dt_ns: int) -> FieldStat:
+    diff = abs(length[0] - length[1])
+    stat = FieldStat("run.length", "steps", tolerance, float(diff), min(length), "", float(diff), int(diff > tolerance))
+    if diff > tolerance:
+        step = min(length) + 1
+        stat.first = Divergence(step, step * dt_ns * 1e-9, "run", "length", "", [length[0]], [length[1]],
+                                float(diff), tolerance, "steps")
+    return stat
+
+
+def _final_poses(g: np.ndarray, c: np.ndarray, names: list[str], tol: Tolerances) -> list[FinalPose]:
+    dist = np.linalg.norm(g[:, :3] - c[:, :3], axis=-1)
+    ang = quat_angle(g[:, 3:], c[:, 3:])
+    out = []
+    for k, name in enumerate(names):
+        ok = True
+        for key, err, a, b in (("final.position", dist[k], g[k, :3], c[k, :3]),
+                               ("final.orientation", ang[k], g[k, 3:], c[k, 3:])):
+            t = tol[key]
+            ok &= bool(np.array_equal(a, b) if t == 0 else err <= t)
+        out.append(FinalPose(name, _values(g[k]), _values(c[k]), float(dist[k]), float(ang[k]), ok))
+    return out
+
+
+def _final_stats(finals: list[FinalPose], tol: Tolerances, last_step: int, dt_ns: int) -> list[FieldStat]:
+    stats = []
+    for name, attr, part in (("final.position", "distance_m", slice(0, 3)), ("final.orientation", "angle_rad",
+                                                                              slice(3, 7))):
+        t = tol[name]
+        errs = [getattr(f, attr) for f in finals]
+        worst_k = int(np.argmax(errs)) if errs else 0
+        # "not <=" so that a NaN error counts as bad, as it does in _final_poses
+        bad = [f for f in finals if (f.expected[part] != f.actual[part] if t == 0 else not getattr(f, attr) <= t)]
+        stat = FieldStat(name, FIELDS[name][0], t, errs[worst_k] if errs else 0.0, last_step,
+                         finals[worst_k].name if finals else "", float(np.sqrt(np.mean(np.square(errs)))) if errs
+                         else 0.0, len(bad))
+        if bad:
+            f = bad[0]
+            stat.first = Divergence(last_step, last_step * dt_ns * 1e-9, "final", name.split(".")[1], f.name,
+                                    f.expected[part], f.actual[part], getattr(f, attr), t, FIELDS[name][0])
+        stats.append(stat)
+    return stats
+
+
+def _command_text(c: Command) -> str:
+    args = ", ".join(f"{k}={v!r}" for k, v in sorted(c.args.items()))
+    return f"step {c.step} {c.kind}({args})"
+
+
+def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: int) -> FieldStat:
+    """The two command sequences, entry by entry: step, kind and arguments (exact, or off with inf)."""
+    n = max(len(g), len(c))
+    differing = [i for i in range(n) if i >= len(g) or i >= len(c) or g[i] != c[i]]
+    first_i = differing[0] if differing else -1
+    step = -1 if first_i < 0 else min(x[first_i].step for x in (g, c) if first_i < len(x))
+    stat = FieldStat("commands.sequence", "", tolerance, float(len(differing)), step, "", float(len(differing)),
+                     len(differing) if tolerance != INF else 0)
+    if differing and tolerance != INF:
+        expected = [_command_text(g[first_i]) if first_i < len(g) else None]
+        actual = [_command_text(c[first_i]) if first_i < len(c) else None]
+        kind = (g[first_i] if first_i < len(g) else c[first_i]).kind
+        stat.first = Divergence(step, step * dt_ns * 1e-9, "commands", "sequence", f"#{first_i} {kind}",
+                                expected, actual, float(len(differing)), tolerance, "")
+    return stat
+
+
+def likely_cause(commands: list[Command], step: int) -> str:
+    """The golden's command nearest at or before step (the input most likely to explain a divergence there)."""
+    before = [c for c in commands if c.step <= step]
+    return _command_text(max(before, key=lambda c: c.step)) if before else ""
+
+
+def task_outcome(rec: Recording) -> str:
+    """How the run's task ended: the finalized outcome in its file (ok, error, interrupted), and error
+    whenever a task_error event says so (a run kept in memory has only its events)."""
+    outcome = str((rec.meta.get(META_FINALIZED) or {}).get("outcome", "ok"))
+    if any(e.kind == "task_error" for e in rec.events) and outcome == "ok":
+        outcome = "error"
+    return outcome
+
+
+def _task_stat(golden: Recording, candidate: Recording, tolerance: float, last_step: int, dt_ns: int) -> FieldStat:
+    a, b = task_outcome(golden), task_outcome(candidate)
+    stat = FieldStat("outcome.task", "", tolerance, float(a != b), last_step, "", float(a != b),
+                     int(a != b and tolerance != INF))
+    if a != b and tolerance != INF:
+        stat.first = Divergence(last_step, last_step * dt_ns * 1e-9, "outcome", "task", "", [a], [b], 1.0,
+                                tolerance, "")
+    return stat
+
+
+def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) -> list[FieldStat]:
+    stats = []
+    for kind in COUNTED_EVENTS:
+        name = f"counts.{kind}"
+        a, b = sum(e.kind == kind for e in g), sum(e.kind == kind for e in c)
+        t = tol[name]
+        over = not abs(a - b) <= t
+        stat = FieldStat(name, "events", t, float(abs(a - b)), last_step, "", float(abs(a - b)), int(over))
+        if over:
+            stat.first = Divergence(last_step, last_step * dt_ns * 1e-9, "counts", kind, "", [a], [b],
+                                    float(abs(a - b)), t, "events")
+        stats.append(stat)
+    return stats
+
+
+def recorded_rate(rec: Recording) -> int:
+    """Every how many physics steps the file keeps a frame (1: every step)."""
+    try:
+        rate = int((rec.meta.get("twin.recording") or {}).get("rate_steps", 1))
+    except (TypeError, ValueError):
+        rate = 1
+    steps = rec.frames.step
+    if rate <= 1 and len(steps) > 2:
+        rate = int(np.min(np.diff(steps[:-1]))) if len(steps) > 2 else 1
+    return max(1, rate)
+
+
+def _decimation_notes(golden: Recording, candidate: Recording, compared: int) -> list[str]:
+    notes = []
+    for name, rec in (("golden", golden), ("candidate", candidate)):
+        rate = recorded_rate(rec)
+        if rate > 1:
+            notes.append(f"the {name} is decimated (a frame every {rate} steps): frames compare on the {compared} "
+                         "steps both files keep; commands, events and final poses compare at every step")
+    return notes
+
+
+def _first(fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int,
+           window_steps: int | None) -> Divergence | None:
+    candidates = [f.first for f in fields if f.first is not None]
+    for d in event_diffs[:1]:
+        element = f"{d.event_kind} {d.body}".strip()
+        candidates.append(Divergence(d.step, d.step * dt_ns * 1e-9, "events", d.kind, element,
+                                     [d.expected_step], [d.actual_step],
+                                     float(abs(d.expected_step - d.actual_step)) if d.kind == "moved" else INF,
+                                     float(window_steps or 0), "steps"))
+    return min(candidates, key=lambda d: d.step) if candidates else None
+
+
+def describe(rec: Recording) -> dict:
+    f = rec.frames
+    return {
+        "path": rec.path, "profile": rec.config.profile.name, "run": rec.run,
+        "frames": len(f), "first_step": int(f.step[0]) if len(f) else -1,
+        "last_step": int(f.step[-1]) if len(f) else -1,
+        "dt_ns": rec.config.dt_ns, "objects": [o.name for o in rec.config.objects], "events": len(rec.events),
+        "commands": len(rec.commands),
+    }
+
+
+def config_differences(g: dict, c: dict, prefix: str = "") -> list[tuple[str, str, str]]:
+    """Leaf-by-leaf differences of two configuration dicts: (key, golden, candidate)."""
+    out = []
+    for key in sorted(set(g) | set(c)):
+        name = f"{prefix}{key}"
+        a, b = g.get(key, "<absent>"), c.get(key, "<absent>")
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += config_differences(a, b, name + ".")
+        elif _dict_list(a) and _dict_list(b) and len(a) == len(b):
+            for i, (x, y) in enumerate(zip(a, b, strict=True)):
+                out += config_differences(x, y, f"{name}[{i}].")
+        elif _plain(a) != _plain(b):
+            out.append((name, repr(_plain(a)), repr(_plain(b))))
+    return out
+
+
+def _dict_list(x) -> bool:
+    return isinstance(x, list | tuple) and bool(x) and all(isinstance(v, dict) for v in x)
+
+
+def _plain(x):
+    return [_plain(v) for v in x] if isinstance(x, list | tuple) else x

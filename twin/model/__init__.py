@@ -1,0 +1,1 @@
+"""The data: Frame, Command, Event, their columns, the configuration and profiles, rotations."""

@@ -1,0 +1,1 @@
+"""MCAP: the writer, readers, recovery and `twin info` (the source of truth)."""

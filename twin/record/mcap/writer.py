@@ -1,0 +1,288 @@
+"""McapRecorder: a sink that writes the twin's stream to MCAP, the recording's source of truth.
+
+Per-step data goes out in blocks (one message per channel per 0.25 s of simulated time), the scene's
+transforms at a viewing rate (30 Hz), events and commands in time order with the blocks. Every 0.5 s
+of simulated time the chunk is closed and the file flushed, so a killed run loses at most that.
+The file is written as `NAME.partial` beside its place (see twin.outputs) and renamed into place,
+fsynced, when it is finalized: a run killed part-way never leaves a broken file where one was.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+from foxglove_schemas_protobuf.Log_pb2 import Log
+from mcap.writer import CompressionType, Writer
+
+from twin.errors import RecordingError
+from twin.model.config import TwinConfig
+from twin.model.types import Command, Event, Frame
+from twin.record.mcap import schemas as S
+from twin.record.mcap import wire
+from twin.record.mcap.scene_tf import SceneTransforms
+from twin.record.metadata import check_run, portable_config, run_metadata
+from twin.record.outputs import partial_path, publish
+
+BLOCK_S = 0.25
+FLUSH_S = 0.5
+VIEW_HZ = 30.0
+CHUNK_BYTES = 8 * 1024 * 1024  # chunks end at our flushes, not at a size
+_WARNING = {"out_of_reach", "joint_limit", "settle_timeout", "suction_empty", "key_unknown"}
+_ERROR = {"task_error", "break"}
+
+
+def _json(value: object) -> bytes:
+    """Standard JSON: a NaN or infinity (a diverged simulation's event data) is written as null, never as
+    the NaN/Infinity tokens Python would write and other JSON readers refuse."""
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"), default=_plain, allow_nan=False).encode()
+    except ValueError:
+        return json.dumps(_finite_or_null(value), sort_keys=True, separators=(",", ":"), default=_plain).encode()
+
+
+def _finite_or_null(value: object) -> object:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(v) for v in value]
+    return value
+
+
+def _plain(value: object) -> object:
+    """Twin.event already makes event data plain JSON; anything else here is a programming error."""
+    raise TypeError(f"{type(value).__name__} value {value!r} is not JSON data")
+
+
+class McapRecorder:
+    """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized marker)."""
+
+    def __init__(self, path: str | Path, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path] = (),
+                 rate: int = 1, compression: str = "zstd") -> None:
+        if isinstance(rate, bool) or not isinstance(rate, int) or rate < 1:
+            raise RecordingError(f"recording rate {rate!r} is invalid; expected a whole number of steps >= 1")
+        kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+        if compression not in kinds:
+            raise RecordingError(f"chunk compression {compression!r} is unknown; expected one of {sorted(kinds)}")
+        check_run(run)  # before the file is opened: bad input must not clobber an unfinished file
+        mesh_files = _read_meshes(config, meshes)  # likewise an unreadable mesh
+        self.path = Path(path)
+        self.partial = partial_path(self.path)  # written here, renamed to path once finalized
+        self.config = config
+        self.rate = rate
+        self.n_objects = len(config.objects)
+        dt_ns = config.dt_ns
+        self.block_frames = max(1, round(BLOCK_S * 1e9 / (dt_ns * rate)))
+        self.view_every = max(1, round(1e9 / (VIEW_HZ * dt_ns)))
+        self.flush_ns = round(FLUSH_S * 1e9)
+        self._joint_names = b"".join(wire.str_field(S.NAMES, n) for n in config.profile.joint_names)
+        self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
+        self._tf = SceneTransforms(urdf, config.profile.joint_names, tuple(o.name for o in config.objects))
+        self._frames: list[Frame] = []
+        # one row of a block's float columns: q, qd, effort, target (4 each), force, torque (3), pad (7), objects
+        self._pack_floats = struct.Struct(f"<{29 + 7 * self.n_objects}d").pack
+        self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
+        self._last_frame: Frame | None = None
+        self._last_written_step = -1
+        self._last_flush_ns = 0
+        self._sequence: dict[int, int] = {}
+        self.frames_written = 0
+        self.closed = False
+        if self.path.is_dir():
+            raise RecordingError(f"cannot write recording {str(self.path)!r}: it is a folder; expected an .mcap path")
+        try:
+            self._file = open(self.partial, "wb")  # noqa: SIM115 - closed in close() or abandon()
+        except OSError as err:
+            raise RecordingError(f"cannot write recording {str(self.path)!r}: {err.strerror or err}") from err
+        self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, compression=kinds[compression])
+        try:
+            self._start(config, run, urdf, mesh_files, compression)
+        except BaseException:
+            self._file.close()
+            self.partial.unlink(missing_ok=True)  # nothing of the run in it yet
+            raise
+
+    def _start(self, config: TwinConfig, run: dict, urdf: str, mesh_files: list[tuple[str, str, bytes]],
+               compression: str) -> None:
+        self._writer.start(profile="", library=S.LIBRARY)
+        self._channel: dict[str, int] = {}
+        for spec in S.CHANNELS:
+            schema_id = self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
+            self._channel[spec.topic] = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id)
+        extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
+                 "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
+        # a user URDF by its path relative to the recording: no absolute path in the file
+        for name, record in run_metadata(portable_config(config, self.path), run, extra).items():
+            self._writer.add_metadata(name, record)
+        self._writer.add_attachment(0, 0, "robot.urdf", "application/xml", urdf.encode())
+        for name, media_type, data in mesh_files:
+            self._writer.add_attachment(0, 0, name, media_type, data)
+        self._add(S.ROBOT_DESCRIPTION.topic, 0, _json({"data": urdf}))
+        self._writer.flush()
+
+    # -- sink -----------------------------------------------------------------------------------
+    def on_frame(self, frame: Frame) -> None:
+        self._last_frame = frame
+        if frame.step % self.view_every == 0:
+            self._pending.append((frame.t_ns, self._channel[S.TF.topic], self._tf.message(frame)))
+        if frame.step % self.rate == 0:
+            self._frames.append(frame)
+            if len(self._frames) >= self.block_frames:
+                self._write_block()
+                return
+        if frame.t_ns - self._last_flush_ns >= 2 * self.flush_ns:  # blocks far apart (a high --rate)
+            self._write_pending()
+            self._flush(frame.t_ns)
+
+    def on_command(self, command: Command) -> None:
+        body = _json({"step": command.step, "kind": command.kind, "args": command.args})
+        self._pending.append((command.step * self.config.dt_ns, self._channel[S.COMMANDS.topic], body))
+
+    def on_event(self, event: Event) -> None:
+        full = _json({"step": event.step, "t_ns": event.t_ns, "kind": event.kind, "body": event.body,
+                      "message": event.message, "data": event.data})
+        self._pending.append((event.t_ns, self._channel[S.EVENTS.topic], full))
+        self._pending.append((event.t_ns, self._channel[S.LOG.topic], _log_message(event)))
+
+    # -- writing --------------------------------------------------------------------------------
+    def _add(self, topic: str, t_ns: int, data: bytes) -> None:
+        self._add_id(self._channel[topic], t_ns, data)
+
+    def _add_id(self, channel_id: int, t_ns: int, data: bytes) -> None:
+        if len(data) > S.MAX_MESSAGE_BYTES:  # the readers refuse larger messages (a bound on damaged files)
+            raise RecordingError(f"a message of {len(data):,} bytes exceeds the {S.MAX_MESSAGE_BYTES:,} a recording "
+                                 "may hold (a URDF or scene too large)")
+        seq = self._sequence.get(channel_id, 0)
+        self._sequence[channel_id] = seq + 1
+        self._writer.add_message(channel_id, log_time=t_ns, data=data, publish_time=t_ns, sequence=seq)
+
+    def _write_pending(self) -> None:
+        self._pending.sort(key=lambda item: item[0])  # stable: same-time items keep their order
+        for t_ns, channel_id, data in self._pending:
+            self._add_id(channel_id, t_ns, data)
+        self._pending.clear()
+
+    def _write_block(self) -> None:
+        frames = self._frames
+        n = len(frames)
+        ints = np.array([(f.step, f.t_ns, f.sensed_body, f.held_body, f.suction_on) for f in frames], dtype=np.int64)
+        chain, pack = itertools.chain.from_iterable, self._pack_floats
+        floats = np.frombuffer(b"".join([
+            pack(*f.joint_q, *f.joint_qd, *f.joint_effort, *f.joint_target, *f.hold_force_n, *f.hold_torque_nm,
+                 *f.pad_pose, *chain(f.object_poses)) for f in frames]), dtype="<f8").reshape(n, -1)
+        head = wire.packed(S.STEP, ints[:, 0], "<i8") + wire.packed(S.T_NS, ints[:, 1], "<i8")
+        joints = (head + self._joint_names
+                  + wire.packed(S.J_POSITION, floats[:, 0:4], "<f8") + wire.packed(S.J_VELOCITY, floats[:, 4:8], "<f8")
+                  + wire.packed(S.J_EFFORT, floats[:, 8:12], "<f8") + wire.packed(S.J_TARGET, floats[:, 12:16], "<f8"))
+        suction = (head + self._object_names + wire.packed(S.S_ON, ints[:, 4], "|u1")
+                   + wire.packed(S.S_SENSED, ints[:, 2], "<i4") + wire.packed(S.S_HELD, ints[:, 3], "<i4")
+                   + wire.packed(S.S_FORCE, floats[:, 16:19], "<f8")
+                   + wire.packed(S.S_TORQUE, floats[:, 19:22], "<f8"))
+        poses = (head + self._object_names + wire.packed(S.P_PAD, floats[:, 22:29], "<f8")
+                 + wire.packed(S.P_OBJECTS, floats[:, 29:], "<f8"))
+        t_last = frames[-1].t_ns
+        self._write_pending()
+        self._add(S.JOINTS.topic, t_last, joints)
+        self._add(S.SUCTION.topic, t_last, suction)
+        self._add(S.POSES.topic, t_last, poses)
+        self.frames_written += n
+        self._last_written_step = frames[-1].step
+        frames.clear()
+        if t_last - self._last_flush_ns >= self.flush_ns:
+            self._flush(t_last)
+
+    def _flush(self, t_ns: int) -> None:
+        self._writer.flush()
+        self._last_flush_ns = t_ns
+
+    # -- ending ---------------------------------------------------------------------------------
+    def abandon(self) -> None:
+        """The run died without closing (its process was killed): write out what arrived, leave the
+        .partial file without a summary or finalized marker, as a crash would (twin recover finds it)."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            if self._frames:
+                self._write_block()
+            self._write_pending()
+            self._writer.flush()
+        finally:
+            self._file.close()
+
+    def close(self, outcome: str = "ok", error: str = "") -> None:
+        """Write what is buffered (and the final frame, whatever the rate), the finalized marker, the
+        summary; fsync the file and rename it into place. Idempotent."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            last = self._last_frame
+            if last is not None and last.step != self._last_written_step and (
+                    not self._frames or self._frames[-1].step != last.step):
+                self._frames.append(last)
+            if self._frames:
+                self._write_block()
+            self._write_pending()
+            self._writer.flush()
+            self._writer.add_metadata(S.META_FINALIZED, {
+                "outcome": outcome, "error": error,
+                "last_step": str(last.step if last else -1), "frames": str(self.frames_written),
+                "duration_ns": str(last.t_ns if last else 0),
+            })
+            self._writer.finish()
+            self._file.close()
+            publish(self.partial, self.path)
+        except OSError as err:
+            raise RecordingError(f"cannot finish recording {str(self.path)!r}: {err.strerror or err}") from err
+        finally:
+            self._file.close()
+
+
+def _log_message(event: Event) -> bytes:
+    level = Log.ERROR if event.kind in _ERROR else Log.WARNING if event.kind in _WARNING else Log.INFO
+    seconds, nanos = divmod(event.t_ns, 1_000_000_000)
+    text = event.message or event.kind
+    if event.data:
+        text += " " + _json(event.data).decode()
+    msg = Log(level=level, message=text, name=event.kind, file=event.body, line=0)
+    msg.timestamp.seconds, msg.timestamp.nanos = seconds, nanos
+    return msg.SerializeToString(deterministic=True)
+
+
+def _read_meshes(config: TwinConfig, meshes: list[Path]) -> list[tuple[str, str, bytes]]:
+    """(attachment name, media type, bytes) of each mesh file, read before the recording is opened."""
+    out = []
+    for mesh, name in _mesh_names(config, meshes):
+        try:
+            out.append((name, _media_type(mesh), mesh.read_bytes()))
+        except OSError as err:
+            raise RecordingError(f"cannot attach mesh {str(mesh)!r}: {err.strerror or err}") from err
+    return out
+
+
+def _mesh_names(config: TwinConfig, meshes: list[Path]) -> list[tuple[Path, str]]:
+    """Attachment names for mesh files: their path relative to the URDF's folder (as the URDF names
+    them, so attachments saved next to robot.urdf resolve), or the bare file name."""
+    base = Path(config.profile.urdf_path).resolve().parent if config.profile.urdf_path else None
+    out = []
+    for mesh in meshes:
+        mesh = Path(mesh)
+        try:
+            rel = mesh.resolve().relative_to(base).as_posix() if base else mesh.name
+        except ValueError:
+            rel = mesh.name
+        out.append((mesh, rel))
+    return out
+
+
+def _media_type(path: Path) -> str:
+    return {".stl": "model/stl", ".obj": "model/obj", ".dae": "model/vnd.collada+xml"}.get(
+        os.path.splitext(str(path))[1].lower(), "application/octet-stream")

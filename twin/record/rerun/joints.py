@@ -1,0 +1,73 @@
+"""Joint transforms for many joint values at once (numpy), for animating a URDF drawn by Rerun.
+
+Rerun's `UrdfJoint.compute_transform_columns` costs ~3 µs per value and per joint; this vectorised
+form costs a fraction of that. Tests check the result against Rerun's own `compute_transform`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from twin.errors import RecordingError
+from twin.model.quat import quat_from_rpy, rotate
+
+if TYPE_CHECKING:
+    from rerun.urdf import UrdfJoint
+
+MOVING_TYPES = ("revolute", "continuous", "prismatic")
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions (x, y, z, w), broadcast over leading axes (twin.quat's, vectorized)."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ], axis=-1)
+
+
+@dataclass(frozen=True)
+class JointMotion:
+    """What a moving URDF joint needs to turn joint values into parent-from-child transforms."""
+
+    name: str
+    joint_type: str
+    parent_frame: str
+    child_frame: str
+    origin_xyz: np.ndarray
+    origin_quat: np.ndarray  # (x, y, z, w)
+    axis: np.ndarray  # unit vector in the joint frame
+
+    @staticmethod
+    def from_urdf_joint(joint: UrdfJoint) -> JointMotion:
+        """From a `rerun.urdf.UrdfJoint` (or anything with the same properties)."""
+        if joint.joint_type not in MOVING_TYPES:
+            raise RecordingError(f"URDF joint {joint.name!r} is {joint.joint_type!r}; expected one of {MOVING_TYPES}")
+        axis = np.asarray(joint.axis, dtype=np.float64)
+        norm = float(np.linalg.norm(axis))
+        if not norm > 0.0:
+            raise RecordingError(f"URDF joint {joint.name!r} has a zero axis; expected a direction like '0 0 1'")
+        return JointMotion(
+            name=joint.name, joint_type=joint.joint_type,
+            parent_frame=joint.parent_link, child_frame=joint.child_link,
+            origin_xyz=np.asarray(joint.origin_xyz, dtype=np.float64),
+            origin_quat=np.asarray(quat_from_rpy(*joint.origin_rpy)), axis=axis / norm,
+        )
+
+    def transforms(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(translations (n, 3), quaternions (n, 4) as x, y, z, w) of the child frame in the parent frame."""
+        values = np.asarray(values, dtype=np.float64)
+        n = values.shape[0]
+        if self.joint_type == "prismatic":
+            translations = self.origin_xyz + values[:, None] * np.asarray(rotate(self.origin_quat, self.axis))
+            quaternions = np.broadcast_to(self.origin_quat, (n, 4))
+            return translations, quaternions
+        half = 0.5 * values[:, None]
+        about_axis = np.concatenate([np.sin(half) * self.axis, np.cos(half)], axis=1)
+        return np.broadcast_to(self.origin_xyz, (n, 3)), quat_mul(self.origin_quat, about_axis)

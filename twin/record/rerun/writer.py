@@ -1,0 +1,259 @@
+"""The Rerun sink: a run drawn as an .rrd file (robot from its URDF, boxes, pad, joint plots, events).
+
+on_frame only copies into preallocated numpy buffers; every `batch_steps` frames (and at close) the
+buffers go out as columns with `send_columns` — one `rr.log` per step would slow a run ~20x.
+The output (a file, or any stream the caller opened) is chosen apart from the logging code. A file
+is written as `NAME.partial` and renamed into place, fsynced, at close (see twin.outputs).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Self
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+
+from twin.errors import RecordingError
+from twin.model.columns import FrameColumns
+from twin.model.config import TwinConfig
+from twin.model.recording import Recording
+from twin.model.types import Command, Event, Frame
+from twin.record.outputs import partial_path, publish
+from twin.record.rerun import scene
+from twin.record.rerun.joints import JointMotion
+from twin.robot.urdf import urdf_text as profile_urdf_text
+
+DEFAULT_BATCH_STEPS = 2048
+
+
+def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStream:
+    """A recording stream of its own that saves to `path` (with the twin's default blueprint)."""
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise RecordingError(f"cannot write {str(target)!r}: directory {str(target.parent)!r} does not exist")
+    if target.is_dir():
+        raise RecordingError(f"cannot write {str(target)!r}: it is a directory; expected a .rrd file path")
+    stream = rr.RecordingStream(scene.APPLICATION_ID)
+    stream.save(target, default_blueprint=scene.blueprint(config))
+    return stream
+
+
+def finish_file(stream: rr.RecordingStream, partial: Path, target: Path) -> None:
+    """Flush and close a stream saving to `partial`, then put the finished file in place as `target`."""
+    stream.flush()
+    stream.disconnect()  # closes the file sink: the .rrd is complete on disk
+    try:
+        publish(partial, target)
+    except OSError as err:
+        raise RecordingError(f"cannot finish {str(target)!r}: {err.strerror or err}") from err
+
+
+class _Buffers:
+    """Preallocated columns for the frames of one batch."""
+
+    def __init__(self, capacity: int, n_objects: int) -> None:
+        self.step = np.empty(capacity, dtype=np.int64)
+        self.t_ns = np.empty(capacity, dtype=np.int64)
+        self.joint_q = np.empty((capacity, 4), dtype=np.float64)
+        self.joint_target = np.empty((capacity, 4), dtype=np.float64)
+        self.suction_on = np.empty(capacity, dtype=np.bool_)
+        self.held_body = np.empty(capacity, dtype=np.int32)
+        self.pad_pose = np.empty((capacity, 7), dtype=np.float64)
+        self.object_poses = np.empty((capacity, n_objects, 7), dtype=np.float64)
+
+
+class RerunRecorder:
+    """A sink (on_frame/on_command/on_event) that writes what it receives to a Rerun recording."""
+
+    def __init__(self, path: str | os.PathLike, config: TwinConfig, urdf_text: str, *,
+                 batch_steps: int = DEFAULT_BATCH_STEPS) -> None:
+        tree = self._prepare(config, urdf_text, batch_steps)  # bad input fails before a file is created
+        target = Path(path)
+        if not target.parent.is_dir():
+            raise RecordingError(f"cannot write {str(target)!r}: directory {str(target.parent)!r} does not exist")
+        if target.is_dir():
+            raise RecordingError(f"cannot write {str(target)!r}: it is a directory; expected a .rrd file path")
+        self.path = str(path)
+        self._start(file_stream(partial_path(target), config), tree)
+
+    @classmethod
+    def to_stream(cls, stream: rr.RecordingStream, config: TwinConfig, urdf_text: str, *,
+                  batch_steps: int = DEFAULT_BATCH_STEPS) -> Self:
+        """Log into a stream the caller opened (saved, served or spawned); the caller sends the blueprint."""
+        self = cls.__new__(cls)
+        tree = self._prepare(config, urdf_text, batch_steps)
+        self.path = ""
+        self._start(stream, tree)
+        return self
+
+    def _prepare(self, config: TwinConfig, urdf_text: str, batch_steps: int) -> rr.urdf.UrdfTree:
+        if isinstance(batch_steps, bool) or not isinstance(batch_steps, int) or batch_steps < 1:
+            raise RecordingError(f"batch size {batch_steps!r} is invalid; expected an integer >= 1 steps")
+        self.config = config
+        self.batch_steps = batch_steps
+        tree = scene.load_urdf_tree(config, urdf_text)
+        self._joints = [JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, tree)]
+        # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per batch.
+        self._frame_names = [(pa.array([j.parent_frame] * batch_steps, pa.utf8()),
+                              pa.array([j.child_frame] * batch_steps, pa.utf8())) for j in self._joints]
+        self._object_paths = [scene.object_path(o.name) for o in config.objects]
+        self._buf = _Buffers(batch_steps, len(config.objects))
+        self._n = 0
+        self._events: list[Event] = []
+        self._commands: list[Command] = []
+        self.frames_written = 0
+        self.closed = False
+        return tree
+
+    def _start(self, stream: rr.RecordingStream, tree: rr.urdf.UrdfTree) -> None:
+        self.stream = stream
+        scene.log_static_scene(stream, self.config, tree)
+
+    # -- sink ---------------------------------------------------------------------------------
+    def on_frame(self, frame: Frame) -> None:
+        i = self._n
+        b = self._buf
+        b.step[i] = frame.step
+        b.t_ns[i] = frame.t_ns
+        b.joint_q[i] = frame.joint_q
+        b.joint_target[i] = frame.joint_target
+        b.suction_on[i] = frame.suction_on
+        b.held_body[i] = frame.held_body
+        b.pad_pose[i] = frame.pad_pose
+        if self._object_paths:  # numpy cannot broadcast an empty tuple into shape (0, 7)
+            b.object_poses[i] = frame.object_poses
+        self._n = i + 1
+        if self._n == self.batch_steps:
+            self._send_frames()
+
+    def on_frames(self, frames: FrameColumns) -> None:
+        """Many frames at once (a loaded recording): the same buffers and batches as on_frame."""
+        start, total = 0, len(frames)
+        while start < total:
+            k = min(self.batch_steps - self._n, total - start)
+            i, b = self._n, self._buf
+            for name in ("step", "t_ns", "joint_q", "joint_target", "suction_on", "held_body", "pad_pose",
+                         "object_poses"):
+                getattr(b, name)[i:i + k] = getattr(frames, name)[start:start + k]
+            self._n += k
+            start += k
+            if self._n == self.batch_steps:
+                self._send_frames()
+
+    def on_command(self, command: Command) -> None:
+        self._commands.append(command)
+
+    def on_event(self, event: Event) -> None:
+        self._events.append(event)
+
+    def close(self) -> None:
+        """Send what is buffered and finish the file (fsynced and renamed into place)."""
+        if self.closed:
+            return
+        self.closed = True
+        self._send_frames()
+        self._send_events()
+        self._send_commands()
+        if self.path:
+            finish_file(self.stream, partial_path(self.path), Path(self.path))
+        else:
+            self.stream.flush()
+
+    def abandon(self) -> None:
+        """The run died without closing: write out what arrived but leave the file as `NAME.partial`,
+        so an earlier file at the path is not replaced by a cut-short view."""
+        if self.closed:
+            return
+        self.closed = True
+        self._send_frames()
+        self._send_events()
+        self._send_commands()
+        self.stream.flush()
+        if self.path:
+            self.stream.disconnect()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- batches ------------------------------------------------------------------------------
+    def _send_frames(self) -> None:
+        n = self._n
+        if n == 0:
+            return
+        b = self._buf
+        # Fresh buffers for the next batch: the arrays just sent may still be referenced by the SDK.
+        self._buf = _Buffers(self.batch_steps, len(self._object_paths))
+        self._n = 0
+        self.frames_written += n
+        times = [rr.TimeColumn(scene.STEP_TIMELINE, sequence=b.step[:n]),
+                 rr.TimeColumn(scene.TIME_TIMELINE, duration=b.t_ns[:n].astype("timedelta64[ns]"))]
+        send = self.stream.send_columns
+        for j, joint in enumerate(self._joints):
+            translations, quaternions = joint.transforms(b.joint_q[:n, j])
+            parents, children = self._frame_names[j]
+            # Frame names go in every row: the viewer does not join a static frame name to timed poses.
+            send(scene.joint_path(joint.name), indexes=times, columns=rr.Transform3D.columns(
+                translation=translations, quaternion=quaternions,
+                parent_frame=parents.slice(0, n), child_frame=children.slice(0, n)))
+        for k, path in enumerate(self._object_paths):
+            poses = b.object_poses[:n, k]
+            send(path, indexes=times, columns=rr.Transform3D.columns(translation=poses[:, :3], quaternion=poses[:, 3:]))
+        sleeve_centres = b.pad_pose[:n, :3] + [0.0, 0.0, 0.5 * self.config.profile.pad_length_m]
+        send(scene.PAD_PATH, indexes=times, columns=rr.Cylinders3D.columns(
+            centers=sleeve_centres, colors=scene.pad_colors(b.suction_on[:n], b.held_body[:n])))
+        for j, role in enumerate(scene.ROLES):
+            base = scene.Z_PATH if role == "z" else scene.ANGLES_PATH
+            send(f"{base}/{role}", indexes=times, columns=rr.Scalars.columns(scalars=b.joint_q[:n, j]))
+            send(f"{base}/{role}_target", indexes=times, columns=rr.Scalars.columns(scalars=b.joint_target[:n, j]))
+        send(f"{scene.SUCTION_PATH}/on", indexes=times,
+             columns=rr.Scalars.columns(scalars=b.suction_on[:n].astype(np.float64)))
+        send(f"{scene.SUCTION_PATH}/holding", indexes=times,
+             columns=rr.Scalars.columns(scalars=(b.held_body[:n] >= 0).astype(np.float64)))
+
+    def _send_events(self) -> None:
+        events, self._events = self._events, []
+        if not events:
+            return
+        events.sort(key=lambda e: e.step)
+        texts = [" ".join(part for part in (e.kind, e.body, e.message) if part) for e in events]
+        self.stream.send_columns(
+            scene.EVENTS_PATH,
+            indexes=_event_times([e.step for e in events], [e.t_ns for e in events]),
+            columns=rr.TextLog.columns(text=texts, level=[scene.EVENT_LEVELS.get(e.kind, "INFO") for e in events]),
+        )
+
+    def _send_commands(self) -> None:
+        commands, self._commands = self._commands, []
+        if not commands:
+            return
+        commands.sort(key=lambda c: c.step)
+        texts = [f"{c.kind} " + " ".join(f"{k}={c.args[k]!r}" for k in sorted(c.args)) for c in commands]
+        steps = [c.step for c in commands]
+        self.stream.send_columns(
+            scene.COMMANDS_PATH,
+            indexes=_event_times(steps, [s * self.config.dt_ns for s in steps]),
+            columns=rr.TextLog.columns(text=texts, level=["DEBUG"] * len(texts)),
+        )
+
+
+def _event_times(steps: list[int], t_ns: list[int]) -> list[rr.TimeColumn]:
+    return [rr.TimeColumn(scene.STEP_TIMELINE, sequence=np.asarray(steps, dtype=np.int64)),
+            rr.TimeColumn(scene.TIME_TIMELINE, duration=np.asarray(t_ns, dtype=np.int64).astype("timedelta64[ns]"))]
+
+
+def write_rrd(recording: Recording, path: str | os.PathLike, *, batch_steps: int = DEFAULT_BATCH_STEPS) -> int:
+    """Draw a loaded recording (e.g. an MCAP file) as an .rrd through the same sink; returns frames written."""
+    urdf = recording.urdf or profile_urdf_text(recording.config.profile)
+    with RerunRecorder(path, recording.config, urdf, batch_steps=batch_steps) as recorder:
+        recorder.on_frames(recording.frames)
+        for command in recording.commands:
+            recorder.on_command(command)
+        for event in recording.events:
+            recorder.on_event(event)
+    return recorder.frames_written

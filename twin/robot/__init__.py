@@ -1,0 +1,1 @@
+"""The robot's geometry: URDF, kinematics (the only FK/IK), profile files."""

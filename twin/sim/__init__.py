@@ -1,0 +1,1 @@
+"""The simulation: the PyBullet world (the only pybullet import), the suction pad, the Twin."""

@@ -1,0 +1,419 @@
+"""Twin: the API that tasks, the keyboard and remote clients call.
+
+Every input becomes a Command stamped with the step it takes effect at; every physics step
+produces a Frame; every discrete happening an Event. All three go to the sinks, in order.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Protocol
+
+from twin.errors import ConfigError, OutOfReach, UnknownName
+from twin.model.config import TwinConfig
+from twin.model.types import NO_BODY, Command, Event, Frame
+from twin.robot import kinematics
+from twin.sim.suction import Suction
+from twin.sim.world import World
+
+SHOULDER, ELBOW, Z, WRIST = range(4)
+SETTLE_TOL = (5e-4, 5e-4, 2e-4, 5e-4)  # rad, rad, m, rad
+SETTLE_SPEED_TOL = (5e-3, 5e-3, 2e-3, 5e-3)
+SETTLE_TIMEOUT_S = 10.0
+
+
+class Sink(Protocol):
+    def on_frame(self, frame: Frame) -> None: ...
+    def on_command(self, command: Command) -> None: ...
+    def on_event(self, event: Event) -> None: ...
+
+
+class Twin:
+    """A headless (or windowed) PyBullet twin of a SCARA robot, advanced in simulated time."""
+
+    def __init__(self, config: TwinConfig | None = None, *, gui: bool = False, sinks: list[Sink] = ()) -> None:
+        self.config = config or TwinConfig()
+        self.profile = self.config.profile
+        self.world = World(self.config, gui=gui)
+        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self.world,
+                                   tuple(o.size_m for o in self.config.objects))
+        self.sinks: list[Sink] = list(sinks)
+        self.step_index = 0
+        self.signals: dict[str, int] = {}
+        self.targets = [0.0, 0.0, 0.0, 0.0]
+        self.max_velocities = list(self.world.max_velocities())
+        self.limits = self.profile.joint_limits()
+        self._suction_wanted = False  # any of the profile's suction signals is non-zero
+        self.key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
+        self._said: Event | None = None  # the Event the last `event` Command emitted
+        self.frame = self._read_frame()
+        self._emit_frame(self.frame)
+
+    # -- time -------------------------------------------------------------------------------
+    @property
+    def t_ns(self) -> int:
+        return self.step_index * self.config.dt_ns
+
+    @property
+    def t_s(self) -> float:
+        return self.t_ns * 1e-9
+
+    def step(self, n: int = 1) -> Frame:
+        """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
+        sinks, pad_model, world = self.sinks, self.suction_pad, self.world
+        for _ in range(n):
+            if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
+                f = self.frame
+                for ev in pad_model.update(self._suction_wanted, f, self._heading(f)):
+                    self._emit(ev.kind, self._body_name(ev.body), ev.message)
+            world.step()
+            self.step_index += 1
+            f = self.frame = self._read_frame()
+            for s in sinks:
+                s.on_frame(f)
+        return self.frame
+
+    def wait(self, seconds: float) -> Frame:
+        """Let simulated time pass (the seeds' sim.wait)."""
+        if _number(seconds, "wait") < 0:
+            raise ConfigError(f"wait of {seconds} s is invalid; expected a finite number >= 0")
+        return self.step(round(seconds * 1e9 / self.config.dt_ns))
+
+    # -- state ------------------------------------------------------------------------------
+    def _read_frame(self) -> Frame:
+        q, qd, effort = self.world.joint_states()
+        pad = kinematics.fk(self.profile, q)
+        half = 0.5 * pad.heading_rad
+        poses = self.world.object_poses()
+        force, torque = self.world.hold_wrench(poses)
+        sp = self.suction_pad
+        step = self.step_index
+        return Frame(
+            step, step * self.config.dt_ns, q, qd, effort, tuple(self.targets),
+            sp.on, sp.sensed, sp.held, force, torque,
+            (pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
+            poses,
+        )
+
+    def _heading(self, f: Frame) -> float:
+        return kinematics.heading(self.profile, f.joint_q)
+
+    def _emit_frame(self, frame: Frame) -> None:
+        for s in self.sinks:
+            s.on_frame(frame)
+
+    def _body_name(self, index: int) -> str:
+        return "" if index == NO_BODY else self.config.objects[index].name
+
+    def object_index(self, name: str) -> int:
+        bare = name.lstrip("/")
+        for i, o in enumerate(self.config.objects):
+            if o.name == bare:
+                return i
+        raise UnknownName(f"unknown object {name!r}; expected one of {[o.name for o in self.config.objects]}")
+
+    def joint_position(self, joint: str | int) -> float:
+        return self.frame.joint_q[self._joint(joint)]
+
+    def pad_position(self) -> tuple[float, float, float]:
+        p = self.frame.pad_pose
+        return (p[0], p[1], p[2])
+
+    def object_pose(self, name: str) -> tuple[float, ...]:
+        return self.frame.object_poses[self.object_index(name)]
+
+    def get_signal(self, name: str) -> int | None:
+        return self.signals.get(name)
+
+    # -- events -----------------------------------------------------------------------------
+    def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
+        """Say something now (a task's phase, a placement report, a client's log line): an `event`
+        Command, so a replay says it again at the same step. Data must be JSON data (numpy values are
+        turned into numbers and lists)."""
+        if not isinstance(kind, str) or not kind:
+            raise ConfigError(f"event kind {kind!r:.40} is invalid; expected a non-empty string")
+        args = {"kind": kind, "body": str(body), "message": str(message), "data": _json_data(kind, data)}
+        self.apply(Command(self.step_index, "event", args))
+        return self._said
+
+    def _emit(self, kind: str, body: str = "", message: str = "", data: dict | None = None) -> Event:
+        """An Event the twin itself raises while stepping or applying a Command (attach, release,
+        joint_limit, ...): replay regenerates these, so they are not Commands."""
+        ev = Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {}))
+        for s in self.sinks:
+            s.on_event(ev)
+        return ev
+
+    def phase(self, name: str) -> None:
+        """Mark a task phase (shown in the log and the viewer)."""
+        self.event("phase", message=name)
+
+    # -- commands ---------------------------------------------------------------------------
+    def apply(self, command: Command) -> None:
+        """Validate and apply one Command now; replay feeds recorded Commands through here."""
+        if command.step != self.step_index:
+            raise ConfigError(f"command for step {command.step} applied at step {self.step_index}")
+        handler = _HANDLERS.get(command.kind)
+        if handler is None:
+            raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(_HANDLERS)}")
+        expected = _ARGS[command.kind]
+        if not isinstance(command.args, dict) or sorted(command.args) != sorted(expected):
+            raise ConfigError(f"{command.kind} command at step {command.step} has arguments {command.args!r:.80}; "
+                              f"expected {', '.join(expected)}")
+        for s in self.sinks:
+            s.on_command(command)
+        try:
+            handler(self, command.args)
+        except (TypeError, ValueError, OverflowError) as err:  # a hand-edited or corrupt recording
+            raise ConfigError(f"{command.kind} command at step {command.step} is malformed: {err}") from err
+
+    def _command(self, kind: str, **args: Any) -> None:
+        self.apply(Command(self.step_index, kind, args))
+
+    def _joint(self, joint: str | int) -> int:
+        if isinstance(joint, bool) or not isinstance(joint, (str, int)):
+            raise UnknownName(f"joint {joint!r} is neither a name nor an index 0..3")
+        if isinstance(joint, int):
+            if not 0 <= joint < 4:
+                raise UnknownName(f"joint index {joint} is out of range; expected 0..3")
+            return joint
+        return self.profile.joint_index(joint)
+
+    def set_joint_target(self, joint: str | int, q: float) -> None:
+        """Drive a joint's motor toward q (rad | m) at its maximum velocity and force."""
+        self._command("joint_target", joint=self.profile.joint_names[self._joint(joint)], q=_number(q, "joint target"))
+
+    def set_joint_targets(self, targets: dict[str, float]) -> None:
+        for joint, q in targets.items():
+            self.set_joint_target(joint, q)
+
+    def set_joint_position(self, joint: str | int, q: float) -> None:
+        """Set a joint's position at once (kinematic), as simxSetJointPosition does."""
+        self._command("joint_position", joint=self.profile.joint_names[self._joint(joint)], q=_number(q, "joint position"))
+
+    def set_joint_max_velocity(self, joint: str | int, v: float) -> None:
+        v = _number(v, "maximum velocity")
+        if v <= 0:
+            raise ConfigError(f"maximum velocity {v} is invalid; expected > 0")
+        self._command("joint_max_velocity", joint=self.profile.joint_names[self._joint(joint)], v=v)
+
+    def set_signal(self, name: str, value: int | None) -> None:
+        """Set (or with None clear) an integer signal; the suction signals switch the pad."""
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"signal name {name!r} is invalid; expected a non-empty string")
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ConfigError(f"signal {name!r} value {value!r} is invalid; expected an integer")
+        self._command("signal", name=name, value=value)
+
+    def suction(self, on: bool) -> None:
+        self.set_signal(self.profile.suction_signals[0], 1 if on else 0)
+
+    def press_key(self, key: str) -> None:
+        """A key press, interpreted by the configured key map (teleop)."""
+        self._command("key", key=str(key))
+
+    # -- motion helpers (tasks) ---------------------------------------------------------------
+    def move_to(self, x_m: float, y_m: float, heading_rad: float | None = None, *, settle: bool = True) -> None:
+        """Move the pad over (x, y), keeping its heading unless one is given; raises OutOfReach."""
+        q = self.frame.joint_q
+        heading = self._heading(self.frame) if heading_rad is None else heading_rad
+        try:
+            sol = kinematics.choose(kinematics.ik(self.profile, x_m, y_m), (q[SHOULDER], q[ELBOW]))
+            wrist = kinematics.wrist_for_heading(self.profile, sol, heading)
+        except OutOfReach as err:
+            self.event("out_of_reach", message=str(err), x_m=x_m, y_m=y_m)
+            raise
+        self.set_joint_target(SHOULDER, sol.shoulder_rad)
+        self.set_joint_target(ELBOW, sol.elbow_rad)
+        self.set_joint_target(WRIST, wrist)
+        if settle:
+            self.settle()
+
+    def z_to(self, z_m: float, *, settle: bool = True) -> None:
+        """Move the pad tip to height z_m with the Z joint."""
+        try:
+            q3 = kinematics.z_joint_for_height(self.profile, z_m)
+        except OutOfReach as err:
+            self.event("out_of_reach", message=str(err), z_m=z_m)
+            raise
+        self.set_joint_target(Z, q3)
+        if settle:
+            self.settle()
+
+    def lower(self) -> None:
+        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z stroke)."""
+        self.set_joint_target(Z, self.profile.z_down())
+        self.settle()
+
+    def raise_(self) -> None:
+        """Raise the pad to the scene's "up" (mtb: the top of the Z stroke)."""
+        self.set_joint_target(Z, self.profile.z_up())
+        self.settle()
+
+    def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
+        """Step until every joint is at its target and still; an Event if it times out."""
+        max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
+        checks = tuple(zip(range(4), self.targets, SETTLE_TOL, SETTLE_SPEED_TOL, strict=True))
+        for _ in range(max_steps):
+            f = self.frame
+            q, qd = f.joint_q, f.joint_qd
+            for j, target, tol, speed_tol in checks:
+                if abs(q[j] - target) > tol or abs(qd[j]) > speed_tol:
+                    break
+            else:
+                return True
+            self.step()
+        self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
+        return False
+
+    def close(self) -> None:
+        self.world.close()
+
+
+def _json_data(kind: str, data: dict) -> dict:
+    """Event data as plain JSON values with sorted keys, exactly what a recording will give back
+    (a non-finite number is null)."""
+    if not data:
+        return {}
+
+    def plain(value: Any) -> Any:
+        tolist = getattr(value, "tolist", None)  # numpy scalars and arrays
+        if callable(tolist):
+            return tolist()
+        raise TypeError(f"a value of type {type(value).__name__!r}")
+
+    try:
+        # NaN and infinities become null, as the recording writes them: memory and file agree
+        return json.loads(json.dumps(data, sort_keys=True, default=plain), parse_constant=lambda _: None)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
+                          "expected numbers, strings, booleans, None, lists and dicts") from err
+
+
+def _number(value: Any, what: str) -> float:
+    try:
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    except OverflowError:  # an int too large for a float
+        ok = False
+    if not ok:
+        raise ConfigError(f"{what} {value!r:.40} is invalid; expected a finite number")
+    return float(value)
+
+
+def _clamped(twin: Twin, joint: int, q: float) -> float:
+    if twin.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
+        now = twin.frame.joint_q[joint]
+        return now + kinematics.wrap_rad(q - now)
+    lo, hi = twin.limits[joint]
+    if lo <= q <= hi:
+        return q
+    clamped = min(hi, max(lo, q))
+    twin._emit("joint_limit", message=f"{twin.profile.joint_names[joint]} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; "
+               f"stopped at {clamped:.6g}", data={"joint": twin.profile.joint_names[joint], "requested": q, "limit": clamped})
+    return clamped
+
+
+def _do_joint_target(twin: Twin, args: dict) -> None:
+    j = twin._joint(args["joint"])
+    q = _clamped(twin, j, float(args["q"]))
+    twin.targets[j] = q
+    twin.world.set_motor(j, q, twin.max_velocities[j])
+
+
+def _do_joint_position(twin: Twin, args: dict) -> None:
+    j = twin._joint(args["joint"])
+    q = _clamped(twin, j, float(args["q"]))
+    twin.targets[j] = q
+    twin.world.reset_joint(j, q)
+    twin.world.set_motor(j, q, twin.max_velocities[j])
+    twin.frame = twin._read_frame()  # the pad moved: later suction sensing must see it
+
+
+def _do_joint_max_velocity(twin: Twin, args: dict) -> None:
+    j = twin._joint(args["joint"])
+    twin.max_velocities[j] = float(args["v"])
+    twin.world.set_motor(j, twin.targets[j], twin.max_velocities[j])
+
+
+def _do_signal(twin: Twin, args: dict) -> None:
+    if args["value"] is None:
+        twin.signals.pop(args["name"], None)
+    else:
+        twin.signals[args["name"]] = int(args["value"])
+    twin._suction_wanted = any(twin.signals.get(s, 0) for s in twin.profile.suction_signals)
+
+
+def _do_event(twin: Twin, args: dict) -> None:
+    """What a task or client said (an `event` Command): emitted as the Event it describes."""
+    kind, body, message, data = args["kind"], args["body"], args["message"], args["data"]
+    if not isinstance(kind, str) or not kind or not isinstance(body, str) or not isinstance(message, str):
+        raise TypeError("kind, body and message must be strings (kind non-empty)")
+    if not isinstance(data, dict):
+        raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
+    twin._said = twin._emit(kind, body, message, data)
+
+
+def _do_key(twin: Twin, args: dict) -> None:
+    """Interpret a key through the key map: a list of actions per key.
+
+    Actions: ["jog", joint, delta] (target += delta), ["jog_keep_heading", joint, delta] (and the
+    wrist turns back by delta so the pad keeps its heading), ["target", joint, value|"min"|"max"|"down"|"up"],
+    ["position", joint, value] (set at once, like sim.setJointPosition), ["add", joint, delta, "target"|"position"]
+    (the map's own variable for the joint, from 0, moves by delta; the joint is sent there),
+    ["diff", joint, a, b] (the joint's variable becomes a's minus b's; its target goes there),
+    ["signal", name, value], ["suction", 0|1].
+    """
+    key = args["key"]
+    actions = twin.config.keymap.get(key)
+    if actions is None:
+        twin._emit("key_unknown", message=f"key {key!r} is not in the key map; ignored", data={"key": key})
+        return
+    for action in actions:
+        op = action[0]
+        if op in ("jog", "jog_keep_heading"):
+            j = twin._joint(action[1])
+            before = twin.targets[j]
+            _do_joint_target(twin, {"joint": j, "q": before + float(action[2])})
+            if op == "jog_keep_heading" and twin.targets[j] != before:  # turn back by what the joint moved
+                _do_joint_target(twin, {"joint": WRIST, "q": twin.targets[WRIST] - (twin.targets[j] - before)})
+        elif op == "target":
+            j = twin._joint(action[1])
+            lo, hi = twin.limits[j]
+            value = {"min": lo, "max": hi, "down": twin.profile.z_down(), "up": twin.profile.z_up()}.get(action[2], action[2])
+            _do_joint_target(twin, {"joint": j, "q": float(value)})
+        elif op == "position":
+            _do_joint_position(twin, {"joint": twin._joint(action[1]), "q": float(action[2])})
+        elif op == "add":
+            j = twin._joint(action[1])
+            twin.key_values[j] = twin.key_values.get(j, 0.0) + float(action[2])
+            send = _do_joint_position if action[3] == "position" else _do_joint_target
+            send(twin, {"joint": j, "q": twin.key_values[j]})
+        elif op == "diff":
+            j, a, b = (twin._joint(name) for name in action[1:4])
+            twin.key_values[j] = twin.key_values.get(a, 0.0) - twin.key_values.get(b, 0.0)
+            _do_joint_target(twin, {"joint": j, "q": twin.key_values[j]})
+        elif op == "signal":
+            _do_signal(twin, {"name": action[1], "value": action[2]})
+        elif op == "suction":
+            _do_signal(twin, {"name": twin.profile.suction_signals[0], "value": int(action[1])})
+        else:
+            raise ConfigError(f"key {key!r}: unknown action {op!r}")
+
+
+_ARGS = {
+    "joint_target": ("joint", "q"),
+    "joint_position": ("joint", "q"),
+    "joint_max_velocity": ("joint", "v"),
+    "signal": ("name", "value"),
+    "key": ("key",),
+    "event": ("kind", "body", "message", "data"),
+}
+_HANDLERS = {
+    "joint_target": _do_joint_target,
+    "joint_position": _do_joint_position,
+    "joint_max_velocity": _do_joint_max_velocity,
+    "signal": _do_signal,
+    "key": _do_key,
+    "event": _do_event,
+}

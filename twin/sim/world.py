@@ -1,0 +1,338 @@
+"""The PyBullet boundary: the only module that imports pybullet.
+
+Builds the scene in one fixed order (floor, robot, objects in scene order), sets every engine
+parameter explicitly, steps with a fixed time step and reads state. Never uses real-time mode,
+never calls getLinkState with computeForwardKinematics (that changes later physics).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import tempfile
+
+from twin.errors import ConfigError
+from twin.model import versions
+from twin.model.config import TwinConfig
+from twin.model.types import NO_BODY
+from twin.robot.urdf import urdf_text
+
+NO_CONSTRAINT = -1
+# The solver's residual threshold is EngineParams.solver_residual_threshold (recorded with the run):
+# at PyBullet's default 1e-7 a resting box creeps (tests/test_long_run.py measures it).
+# The floor is a static box, not a GEOM_PLANE: PyBullet builds a box-on-plane contact one corner per
+# step, so a box set down on a plane slides 0.03-0.33 mm diagonally (more the higher it drops from);
+# on a box floor it lands where it is put.
+FLOOR_HALF_EXTENTS_M = (5.0, 5.0, 0.05)
+_NO_WRENCH = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def _import_pybullet_quietly():
+    """pybullet prints its build time from C at import; keep our stdout/stderr clean of it."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in saved:
+            os.dup2(devnull, fd)
+        import pybullet
+
+        ctypes.CDLL(None).fflush(None)  # C stdio may buffer the message when stdout is a pipe
+    finally:
+        for fd, keep in saved.items():
+            os.dup2(keep, fd)
+            os.close(keep)
+        os.close(devnull)
+    return pybullet
+
+
+pb = _import_pybullet_quietly()
+
+
+class World:
+    """A PyBullet client holding one robot and the scene's objects."""
+
+    def __init__(self, config: TwinConfig, *, gui: bool = False) -> None:
+        self.config = config
+        self.gui = gui
+        if gui:
+            _require_display()
+        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        if self.client < 0:
+            raise ConfigError("cannot open a PyBullet window; run without --gui or under a display")
+        if gui:
+            pb.configureDebugVisualizer(pb.COV_ENABLE_KEYBOARD_SHORTCUTS, 0, physicsClientId=self.client)
+        self.urdf_text = ""
+        self.robot = -1
+        self.joints: tuple[int, ...] = ()
+        self.pad_link = -1
+        self.object_ids: tuple[int, ...] = ()
+        self._constraint = NO_CONSTRAINT
+        self._keys_down: set[int] = set()
+        try:
+            self.build()
+        except pb.error as err:  # e.g. the window was closed (Esc) while the scene was loading
+            self.close()
+            raise ConfigError(f"PyBullet failed while building the scene: {err}") from err
+        except BaseException:
+            self.close()  # a half-built world must not keep its PyBullet client (or window)
+            raise
+
+    # -- building ---------------------------------------------------------------------------
+    def build(self) -> None:
+        """Build the scene in its fixed order: reset, engine parameters, floor, robot, objects (once, at start)."""
+        c = self.client
+        pb.resetSimulation(physicsClientId=c)
+        self._constraint = NO_CONSTRAINT
+        self._overlapping: list[tuple[int, int]] = []  # (link, body) pairs released while touching
+        e = self.config.engine
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=self.config.dt_s,
+            numSolverIterations=e.num_solver_iterations,
+            numSubSteps=0,
+            deterministicOverlappingPairs=e.deterministic_overlapping_pairs,
+            solverResidualThreshold=e.solver_residual_threshold,
+            physicsClientId=c,
+        )
+        pb.setGravity(*e.gravity_m_s2, physicsClientId=c)
+        pb.setRealTimeSimulation(0, physicsClientId=c)
+        floor = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=FLOOR_HALF_EXTENTS_M, physicsClientId=c)
+        pb.createMultiBody(0, floor, -1, (0.0, 0.0, -FLOOR_HALF_EXTENTS_M[2]), physicsClientId=c)  # top at z = 0
+        self._load_robot()
+        self.object_ids = tuple(self._create_object(o) for o in self.config.objects)
+
+    def _load_robot(self) -> None:
+        profile = self.config.profile
+        flags = pb.URDF_USE_INERTIA_FROM_FILE
+        self.urdf_text = urdf_text(profile)
+        if profile.urdf_path:
+            try:
+                self.robot = pb.loadURDF(profile.urdf_path, useFixedBase=True, flags=flags,
+                                         physicsClientId=self.client)
+            except pb.error as err:
+                raise ConfigError(f"PyBullet cannot load the URDF {profile.urdf_path!r} of robot "
+                                  f"{profile.name!r} (a mesh missing or unreadable?): {err}") from err
+        else:
+            fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"twin_{profile.name}_")
+            try:
+                with os.fdopen(fd, "w") as f:
+                    f.write(self.urdf_text)
+                self.robot = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=self.client)
+            finally:
+                os.unlink(path)
+        by_name: dict[str, int] = {}
+        link_by_name: dict[str, int] = {}
+        for j in range(pb.getNumJoints(self.robot, physicsClientId=self.client)):
+            info = pb.getJointInfo(self.robot, j, physicsClientId=self.client)
+            by_name[info[1].decode()] = j
+            link_by_name[info[12].decode()] = j
+        try:
+            self.joints = tuple(by_name[n] for n in profile.joint_names)
+        except KeyError as err:
+            raise ConfigError(f"robot {profile.name!r} URDF lacks joint {err.args[0]!r}") from err
+        self.pad_link = link_by_name.get(profile.pad_link or "suctionPad", self.joints[3])
+        e = self.config.engine
+        for j, v_max, f_max in zip(self.joints, self.max_velocities(), self.max_forces(), strict=True):
+            pb.changeDynamics(self.robot, j, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client)
+            pb.setJointMotorControl2(
+                self.robot, j, pb.POSITION_CONTROL, targetPosition=0.0, force=f_max, maxVelocity=v_max,
+                positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
+            )
+
+    def max_velocities(self) -> tuple[float, ...]:
+        """Each joint's motor speed limit from the profile: rad/s, rad/s, m/s, rad/s."""
+        p = self.config.profile
+        return (p.revolute_max_velocity_rad_s,) * 2 + (p.prismatic_max_velocity_m_s, p.revolute_max_velocity_rad_s)
+
+    def max_forces(self) -> tuple[float, ...]:
+        """Each joint's motor force limit from the profile: N·m, N·m, N, N·m."""
+        p = self.config.profile
+        return (p.revolute_max_torque_nm,) * 2 + (p.prismatic_max_force_n, p.revolute_max_torque_nm)
+
+    def _create_object(self, o) -> int:
+        c = self.client
+        half = [s / 2 for s in o.size_m]
+        col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=list(o.rgba), physicsClientId=c)
+        orn = pb.getQuaternionFromEuler((0.0, 0.0, o.yaw_rad))
+        body = pb.createMultiBody(o.mass_kg, col, vis, list(o.pos_m), orn, physicsClientId=c)
+        pb.changeDynamics(body, -1, lateralFriction=o.friction, physicsClientId=c)
+        return body
+
+    # -- acting -----------------------------------------------------------------------------
+    def set_motor(self, joint: int, target: float, max_velocity: float) -> None:
+        e = self.config.engine
+        pb.setJointMotorControl2(
+            self.robot, self.joints[joint], pb.POSITION_CONTROL, targetPosition=target,
+            force=self.max_forces()[joint], maxVelocity=max_velocity,
+            positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
+        )
+
+    def reset_joint(self, joint: int, q: float) -> None:
+        """Kinematic set (like simxSetJointPosition): position jumps, velocity zero."""
+        pb.resetJointState(self.robot, self.joints[joint], q, 0.0, physicsClientId=self.client)
+
+    def step(self) -> None:
+        pb.stepSimulation(physicsClientId=self.client)
+        if self._overlapping:
+            self._collide_once_apart()
+
+    # -- reading ----------------------------------------------------------------------------
+    def joint_states(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """Positions, velocities and applied motor efforts of the four joints (float64)."""
+        s0, s1, s2, s3 = pb.getJointStates(self.robot, self.joints, physicsClientId=self.client)
+        return (s0[0], s1[0], s2[0], s3[0]), (s0[1], s1[1], s2[1], s3[1]), (s0[3], s1[3], s2[3], s3[3])
+
+    def object_poses(self) -> tuple[tuple[float, ...], ...]:
+        out = []
+        for body in self.object_ids:
+            pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
+            out.append(pos + orn)
+        return tuple(out)
+
+    def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> int:
+        """The scene object (index) a vertical ray going down from z_from_m hits first, or NO_BODY."""
+        body = pb.rayTest((x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client)[0][0]
+        return self.object_ids.index(body) if body in self.object_ids else NO_BODY
+
+    # -- holding ----------------------------------------------------------------------------
+    def attach(self, obj: int, pad_root_pos_m: tuple[float, float, float], pad_yaw_rad: float) -> None:
+        """Fix object `obj` rigidly to the pad where it is now. The pad root's pose comes from the
+        joint angles (exact), not from getLinkState (float32 and one step old)."""
+        c = self.client
+        body = self.object_ids[obj]
+        link_orn = pb.getQuaternionFromEuler((0.0, 0.0, pad_yaw_rad))
+        com_local_pos, com_local_orn = pb.getDynamicsInfo(self.robot, self.pad_link, physicsClientId=c)[3:5]
+        com_pos, com_orn = pb.multiplyTransforms(pad_root_pos_m, link_orn, com_local_pos, com_local_orn)
+        obj_pos, obj_orn = pb.getBasePositionAndOrientation(body, physicsClientId=c)
+        inv_pos, inv_orn = pb.invertTransform(com_pos, com_orn)
+        rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        self._constraint = pb.createConstraint(
+            self.robot, self.pad_link, body, -1, pb.JOINT_FIXED, (0, 0, 0),
+            parentFramePosition=rel_pos, childFramePosition=(0, 0, 0),
+            parentFrameOrientation=rel_orn, childFrameOrientation=(0, 0, 0, 1), physicsClientId=c,
+        )
+        pb.changeConstraint(self._constraint, maxForce=1e4, physicsClientId=c)
+        self._held_body = body
+        self._robot_collides_with(body, False)  # a held object is part of the tool, like its links
+        self._overlapping = [(link, b) for link, b in self._overlapping if b != body]
+
+    def detach(self) -> None:
+        if self._constraint != NO_CONSTRAINT:
+            pb.removeConstraint(self._constraint, physicsClientId=self.client)
+            self._constraint = NO_CONSTRAINT
+            self._restore_collisions(self._held_body)
+
+    def _restore_collisions(self, body: int) -> None:
+        """A released object collides with the robot again, except with links it overlaps now (a box
+        lifted into the arm's volume would be shot out); those pairs wait until they are apart."""
+        links = range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client))
+        self._overlapping.extend((link, body) for link in links)
+        self._collide_once_apart()
+
+    def _collide_once_apart(self) -> None:
+        """Turn collisions back on for the pairs in _overlapping that no longer overlap."""
+        c = self.client
+        still = []
+        for link, body in self._overlapping:
+            if pb.getClosestPoints(self.robot, body, 0.0, linkIndexA=link, physicsClientId=c):
+                still.append((link, body))
+            else:
+                pb.setCollisionFilterPair(self.robot, body, link, -1, 1, physicsClientId=c)
+        self._overlapping = still
+
+    def _robot_collides_with(self, body: int, enable: bool) -> None:
+        for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client)):
+            pb.setCollisionFilterPair(self.robot, body, link, -1, int(enable), physicsClientId=self.client)
+
+    def hold_wrench(self, object_poses: tuple[tuple[float, ...], ...]
+                    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
+        object in the last step, world frame; zeros if nothing is held. A box hanging still gets +m·g in z.
+        object_poses: this step's object_poses() (the held object's orientation turns the torque).
+
+        getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
+        along world axes, the torque along the constraint frame's axes, which are rigid with the object.
+        """
+        if self._constraint == NO_CONSTRAINT:
+            return _NO_WRENCH
+        s = pb.getConstraintState(self._constraint, physicsClientId=self.client)
+        orn = object_poses[self.object_ids.index(self._held_body)][3:7]
+        r = pb.getMatrixFromQuaternion(orn)  # row-major: world = r @ constraint frame
+        tx, ty, tz = -s[3], -s[4], -s[5]
+        torque = (r[0] * tx + r[1] * ty + r[2] * tz, r[3] * tx + r[4] * ty + r[5] * tz,
+                  r[6] * tx + r[7] * ty + r[8] * tz)
+        return (-s[0], -s[1], -s[2]), torque
+
+    # -- the window's keyboard (teleop) -------------------------------------------------------
+    def keyboard_events(self) -> list[str]:
+        """Names of the keys pressed in the PyBullet window since the last call ([] headless)."""
+        if not self.gui:
+            return []
+        return decode_key_events(pb.getKeyboardEvents(physicsClientId=self.client), self._keys_down)
+
+    def connected(self) -> bool:
+        """False once the PyBullet window has been closed."""
+        return bool(pb.isConnected(self.client))
+
+    def close(self) -> None:
+        if pb.isConnected(self.client):
+            pb.disconnect(self.client)
+
+
+def _require_display() -> None:
+    """PyBullet's GUI calls exit() when it cannot reach an X server: check for one first (Linux)."""
+    if not sys.platform.startswith("linux"):
+        return
+    display = os.environ.get("DISPLAY", "")
+    if not display:
+        raise ConfigError("--gui needs a display but DISPLAY is not set; run without --gui or under Xvfb")
+    try:
+        xlib = ctypes.CDLL("libX11.so.6")
+    except OSError as err:
+        raise ConfigError(f"--gui needs libX11 (X11 client library), which cannot be loaded: {err}") from err
+    xlib.XOpenDisplay.restype = ctypes.c_void_p
+    xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    handle = xlib.XOpenDisplay(display.encode())
+    if not handle:
+        raise ConfigError(f"--gui cannot connect to the X display DISPLAY={display!r}; run without --gui or under Xvfb")
+    xlib.XCloseDisplay(handle)
+
+
+_KEY_NAMES = {
+    pb.B3G_UP_ARROW: "up", pb.B3G_DOWN_ARROW: "down", pb.B3G_LEFT_ARROW: "left", pb.B3G_RIGHT_ARROW: "right",
+    pb.B3G_SPACE: "space", pb.B3G_RETURN: "enter", 9: "tab", pb.B3G_BACKSPACE: "backspace",
+    pb.B3G_DELETE: "delete", pb.B3G_INSERT: "insert", pb.B3G_HOME: "home", pb.B3G_END: "end",
+    pb.B3G_PAGE_UP: "pageup", pb.B3G_PAGE_DOWN: "pagedown", 27: "esc",
+    **{pb.B3G_F1 + i: f"f{i + 1}" for i in range(12)},
+}
+
+
+def decode_key_events(events: dict[int, int], keys_down: set[int]) -> list[str]:
+    """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or when
+    only its release arrives (a quick tap may show up only as released). Shift+letter gives the capital
+    when Shift is down, or was pressed, in the same poll."""
+    shift = bool(events.get(pb.B3G_SHIFT, 0) & (pb.KEY_IS_DOWN | pb.KEY_WAS_TRIGGERED))
+    names = []
+    for code, state in sorted(events.items()):
+        name = _KEY_NAMES.get(code) or (chr(code) if 33 <= code <= 126 else None)
+        pressed = False
+        if state & pb.KEY_WAS_TRIGGERED:
+            pressed = code not in keys_down
+            keys_down.add(code)
+        if state & pb.KEY_WAS_RELEASED:
+            pressed = pressed or code not in keys_down
+            keys_down.discard(code)
+        if pressed and name is not None:
+            names.append(name.upper() if shift and len(name) == 1 else name)
+    return names
+
+
+def pybullet_version() -> str:
+    return str(pb.getAPIVersion())
+
+
+versions.ENGINE["pybullet_api"] = pybullet_version()  # for the recordings' twin.versions metadata

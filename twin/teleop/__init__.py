@@ -1,0 +1,1 @@
+"""Keyboard teleoperation: the session, its terminal screen and the key maps."""

@@ -1,0 +1,259 @@
+"""Golden-recording checks: re-run each golden from the current code and diff it against the file.
+
+A golden with a task (run.source == "task") is re-run by resolving its task on the configuration
+in its metadata; one without (teleop, remote) has its commands replayed. Goldens are checked in
+parallel processes; `update` rewrites the ones that differ.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from twin.compare.engine import compare, task_outcome
+from twin.compare.report import first_line, render_text
+from twin.compare.tolerances import Tolerances
+from twin.errors import ConfigError, TwinError
+from twin.model.columns import ColumnCollector
+from twin.model.config import TwinConfig
+from twin.model.recording import Recording
+from twin.sim.twin import Sink, Twin
+from twin.tasks import TimeLimit, resolve, run_task
+from twin.verify.replay import collected, replay, replayed_event_kinds
+
+DEFAULT_DIR = "recordings"
+
+
+def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[Sink] = (),
+                task_dir: str | os.PathLike | None = None, timeout_s: float | None = None) -> Recording:
+    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised);
+    timeout_s bounds it in simulated time, as `twin run --timeout` did."""
+    fn = resolve(_task_path(task, task_dir))
+    collector = ColumnCollector()
+    limit = [TimeLimit(timeout_s)] if timeout_s is not None else []
+    twin = Twin(config, sinks=[collector, *sinks, *limit])
+    try:
+        with contextlib.suppress(TwinError):  # recorded, not raised: the task_error event is part of the run
+            run_task(twin, fn, dict(params))
+    finally:
+        twin.close()
+    return collected(collector, config, {"source": "task", "task": task, "params": dict(params)})
+
+
+def task_run(task: str, params: dict, recording: str | os.PathLike | None) -> dict:
+    """The run description a recording of `task` stores: a built-in task by name; a task file by its
+    path relative to the recording's folder (resolved from there by `twin check`, from any working
+    directory or clone) and the sha256 of its source."""
+    run = {"source": "task", "task": task, "params": dict(params)}
+    if task.endswith(".py") and Path(task).is_file():
+        if recording is not None:
+            folder = Path(os.path.abspath(recording)).parent
+            run["task"] = Path(os.path.relpath(os.path.abspath(task), folder)).as_posix()
+        run["task_sha256"] = hashlib.sha256(Path(task).read_bytes()).hexdigest()
+    return run
+
+
+def _task_path(task: str, task_dir: str | os.PathLike | None) -> str:
+    """A task file as a recording names it: relative to the recording's folder (task_dir); a file
+    recorded before paths were stored that way, relative to the working directory."""
+    if task.endswith(".py") and task_dir is not None and not Path(task).is_absolute():
+        beside = Path(task_dir) / task
+        if beside.is_file():
+            return str(beside)
+    return task
+
+
+def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, frozenset[str] | None]:
+    """Re-run golden from the current code: its task if it has one, else its commands.
+
+    Returns the new run and the event kinds to compare (None: all).
+    """
+    run = golden.run or {}
+    if run.get("source") == "task" and run.get("task"):
+        task_dir = Path(golden.path).parent if golden.path else None
+        new = record_task(golden.config, run["task"], run.get("params") or {}, sinks=sinks, task_dir=task_dir,
+                          timeout_s=run.get("timeout_s"))
+        new.run = dict(run)
+        return new, None
+    return replay(golden, sinks=sinks), replayed_event_kinds(golden)
+
+
+@dataclass
+class Outcome:
+    """What checking one golden gave."""
+
+    path: str
+    status: str  # "match", "differ", "updated", "refused" (differs; the re-run failed, not written), "error"
+    exit_code: int
+    summary: str  # the first divergence or the error, one line
+    report: str  # the full text report ("" on error)
+    frames: int = 0
+    seconds: float = 0.0
+
+
+def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False) -> Outcome:
+    """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a run
+    whose task failed unless allow_error (a crash is not a new golden)."""
+    from twin.record import open_recorders
+    from twin.record.mcap.reader import load
+
+    t0 = time.perf_counter()
+    tmp = Path(path).with_name(Path(path).name + ".tmp")
+    try:
+        golden = load(path)
+        if update:
+            with open_recorders(golden.config, _updated_run(golden), mcap_path=str(tmp), rate=_rate(golden)) as sinks:
+                new, kinds = rerun(golden, sinks=sinks)
+        else:
+            new, kinds = rerun(golden)
+        result = compare(golden, new, tolerances, event_kinds=kinds)
+        result.notes += _task_changed(golden)
+        report = render_text(result)
+        if result.match:
+            return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
+        summary = first_line(result.first)
+        if update and task_outcome(new) != "ok" and not allow_error:
+            why = next((e.message for e in new.events if e.kind == "task_error"), task_outcome(new))
+            return Outcome(path, "refused", 1, f"not rewritten: the re-run's task failed ({why}); the golden is "
+                           "left as it was (--allow-error writes it anyway)", report, len(golden.frames),
+                           time.perf_counter() - t0)
+        if update:
+            os.replace(tmp, path)
+            return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, len(golden.frames),
+                           time.perf_counter() - t0)
+        return Outcome(path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0)
+    except TwinError as err:
+        return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+    finally:
+        tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+
+
+def _task_changed(golden: Recording) -> list[str]:
+    """A note when the golden's task file is no longer the source it was recorded with."""
+    run = golden.run or {}
+    recorded = run.get("task_sha256")
+    if not recorded or not golden.path:
+        return []
+    path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
+    now = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "missing"
+    if now == recorded:
+        return []
+    return [(f"the task file {run.get('task')!r} changed since the golden was recorded "
+             f"(sha256 {recorded[:12]}... then, {now[:12]}... now)")]
+
+
+def _updated_run(golden: Recording) -> dict:
+    """golden's run description for its rewrite: the task file's sha256 as it is now."""
+    run = dict(golden.run or {})
+    if run.get("task_sha256") and golden.path:
+        path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
+        if path.is_file():
+            run["task_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return run
+
+
+def _rate(rec: Recording) -> int:
+    try:
+        return max(1, int(rec.meta.get("twin.recording", {}).get("rate_steps", 1)))
+    except (TypeError, ValueError):
+        return 1
+
+
+def golden_paths(paths: Sequence[str]) -> list[str]:
+    """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped), each file
+    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden would
+    race on its temporary file."""
+    if not paths:
+        if not Path(DEFAULT_DIR).is_dir():
+            raise ConfigError(f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap files or folders")
+        paths = [DEFAULT_DIR]
+    out: list[str] = []
+    for p in paths:
+        path = Path(p)
+        if path.is_dir():
+            found = sorted(str(f) for f in path.glob("*.mcap") if not f.name.endswith(".obtained.mcap"))
+            if not found:
+                raise ConfigError(f"folder {p!r} holds no .mcap recordings")
+            out += found
+        elif path.exists():
+            out.append(str(path))
+        else:
+            raise ConfigError(f"golden {p!r} does not exist; expected an .mcap file or a folder of them")
+    return _each_file_once(out)
+
+
+def _each_file_once(paths: list[str]) -> list[str]:
+    """paths without a second name of a file already listed (same device and inode), in their order."""
+    seen: set[tuple[int, int]] = set()
+    out = []
+    for p in paths:
+        st = os.stat(p)
+        if (st.st_dev, st.st_ino) not in seen:
+            seen.add((st.st_dev, st.st_ino))
+            out.append(p)
+    return out
+
+
+class Progress:
+    """A progress bar on a terminal; one plain line per golden elsewhere (CI logs)."""
+
+    def __init__(self, total: int, stream: TextIO | None = None) -> None:
+        self.total, self.done, self.stream = total, 0, stream or sys.stderr
+        self.tty = self.stream.isatty()
+
+    def __call__(self, outcome: Outcome) -> None:
+        self.done += 1
+        name = Path(outcome.path).name
+        if self.tty:
+            width = 30
+            filled = width * self.done // self.total
+            self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} {name:<40.40}")
+            if self.done == self.total:
+                self.stream.write("\n")
+        else:
+            self.stream.write(f"[{self.done}/{self.total}] {name}: {outcome.status} ({outcome.seconds:.2f} s)\n")
+        self.stream.flush()
+
+
+def check_all(paths: Sequence[str], tolerances: Tolerances, *, update: bool = False, jobs: int = 1,
+              progress: Callable[[Outcome], None] | None = None, allow_error: bool = False) -> list[Outcome]:
+    """Check every golden, in `jobs` processes; outcomes in the order of paths."""
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
+    results: dict[str, Outcome] = {}
+    if jobs == 1 or len(paths) <= 1:
+        for p in paths:
+            results[p] = check_one(p, tolerances, update, allow_error)
+            if progress:
+                progress(results[p])
+    else:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
+            futures = {pool.submit(check_one, p, tolerances, update, allow_error): p for p in paths}
+            for fut in as_completed(futures):
+                outcome = fut.result()
+                results[futures[fut]] = outcome
+                if progress:
+                    progress(outcome)
+    return [results[p] for p in paths]
+
+
+def summary_table(outcomes: list[Outcome]) -> str:
+    rows = [("golden", "status", "frames", "time", "detail")] + [
+        (o.path, o.status, str(o.frames), f"{o.seconds:.2f} s", o.summary) for o in outcomes]
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4] for r in rows]
+    counts = {s: sum(o.status == s for o in outcomes) for s in ("match", "differ", "updated", "refused", "error")}
+    lines.append(", ".join(f"{n} {s}" for s, n in counts.items() if n) or "nothing checked")
+    return "\n".join(lines) + "\n"
+
+
+def exit_code(outcomes: list[Outcome]) -> int:
+    return max((o.exit_code for o in outcomes), default=0)

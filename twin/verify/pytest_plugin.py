@@ -1,0 +1,84 @@
+"""pytest integration: the `golden` fixture asserts that a run matches a golden recording.
+
+    def test_pick_place(golden):
+        run = record_task(TwinConfig(), "pick_place", {"cycles": 1})
+        golden.check(run, "pick_place_one_cycle")             # exact by default
+        golden.check(run, "pick_place_one_cycle", tolerance="physical", tol=["hold=inf"])
+
+Goldens live in the `twin_goldens_dir` ini folder (default `recordings/`, relative to the rootdir).
+A missing golden is written and the test fails (review it, then commit it); `--update-goldens`
+rewrites goldens that differ, but never with a run whose task failed (`allow_error=True` says so). On a mismatch NAME.obtained.mcap and NAME.report.md are left beside
+the golden, and the failure message is the diff's text report.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import pytest
+
+from twin.compare.engine import DiffResult, compare, task_outcome
+from twin.compare.report import render_text, write_report
+from twin.compare.tolerances import Tolerances
+from twin.model.recording import Recording
+
+
+class GoldenChecker:
+    """What the `golden` fixture gives a test."""
+
+    def __init__(self, directory: Path, update: bool) -> None:
+        self.directory = directory
+        self.update = update
+
+    def path(self, name: str) -> Path:
+        return self.directory / f"{name}.mcap"
+
+    def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = "exact",
+              tol: Sequence[str] = (), event_window_steps: int | None = None,
+              event_kinds: frozenset[str] | None = None, allow_error: bool = False) -> DiffResult:
+        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff."""
+        from twin.record.mcap.reader import load
+        from twin.verify.replay import save
+
+        candidate = run if isinstance(run, Recording) else load(run)
+        tolerances = Tolerances.from_preset(tolerance).with_overrides(list(tol)).with_event_window(event_window_steps)
+        golden_path = self.path(name)
+        obtained = golden_path.with_name(f"{name}.obtained.mcap")
+        report = golden_path.with_name(f"{name}.report.md")
+        if not golden_path.exists():
+            golden_path.parent.mkdir(parents=True, exist_ok=True)
+            save(candidate, golden_path)
+            pytest.fail(f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
+                        pytrace=False)
+        golden = load(golden_path)
+        result = compare(golden, candidate, tolerances, event_kinds=event_kinds)
+        if result.match:
+            for stale in (obtained, report):
+                stale.unlink(missing_ok=True)
+            return result
+        if self.update and (allow_error or task_outcome(candidate) == "ok"):
+            save(candidate, golden_path)
+            for stale in (obtained, report):
+                stale.unlink(missing_ok=True)
+            return result
+        save(candidate, obtained)
+        write_report(result, report)
+        pytest.fail(f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
+                    f"{report.name}; rerun with --update-goldens to accept)\n{render_text(result)}", pytrace=False)
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("twin", "twin golden recordings")
+    group.addoption("--update-goldens", action="store_true", default=False,
+                    help="rewrite golden recordings that differ from the run (twin's `golden` fixture)")
+    parser.addini("twin_goldens_dir", "folder of golden recordings for the `golden` fixture", default="recordings")
+
+
+@pytest.fixture
+def golden(request: pytest.FixtureRequest) -> GoldenChecker:
+    """Compare runs with golden recordings: golden.check(recording_or_path, "name")."""
+    config = request.config
+    directory = Path(config.rootpath) / config.getini("twin_goldens_dir")
+    return GoldenChecker(directory, bool(config.getoption("--update-goldens")))

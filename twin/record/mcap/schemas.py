@@ -89,8 +89,10 @@ def _json_schema(properties: dict, required: list[str]) -> bytes:
 COMMAND_SCHEMA = _json_schema(
     {
         "step": {"type": "integer", "minimum": 0, "description": "physics step the command takes effect at"},
-        "kind": {"type": "string", "enum": ["joint_target", "joint_position", "joint_max_velocity", "signal", "key"]},
-        "args": {"type": "object", "description": "kind-specific arguments (joint, q, v, name, value, key)"},
+        "kind": {"type": "string",
+                 "enum": ["joint_target", "joint_position", "joint_max_velocity", "signal", "key", "event"]},
+        "args": {"type": "object", "description": "kind-specific arguments (joint, q, v, name, value, key; for an "
+                                                  "event, what a task or client said: kind, body, message, data)"},
     },
     ["step", "kind", "args"],
 )

@@ -19,11 +19,12 @@ from twin.compare.events import EventDiff, match_events
 from twin.compare.metrics import REVOLUTE, abs_error, differs, discrete_error, joint_error, norm_error, quat_angle
 from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
 from twin.errors import RecordingError, TwinError
+from twin.model.fields import COMPARED
 from twin.model.recording import META_FINALIZED, Recording
 from twin.model.types import Command
 
-JOINT_UNITS = {"position": ("rad", "m"), "target": ("rad", "m"), "velocity": ("rad/s", "m/s"),
-               "effort": ("N·m", "N")}
+# a joint field's unit for a revolute joint, and for the prismatic Z joint ("rad|m" in model.fields)
+JOINT_UNITS = {c.name: tuple(c.unit.split("|")) for f, c in COMPARED if f.shape == "joint"}
 
 
 class NotComparable(TwinError):
@@ -122,22 +123,11 @@ class DiffResult:
         return clean(out)
 
 
-# field -> (column, component slice, metric, element kind)
-_SPECS = {
-    "joints.position": ("joint_q", None, joint_error, "joint"),
-    "joints.velocity": ("joint_qd", None, abs_error, "joint"),
-    "joints.effort": ("joint_effort", None, abs_error, "joint"),
-    "joints.target": ("joint_target", None, joint_error, "joint"),
-    "suction.on": ("suction_on", None, discrete_error, ""),
-    "suction.sensed": ("sensed_body", None, discrete_error, ""),
-    "suction.held": ("held_body", None, discrete_error, ""),
-    "hold.force": ("hold_force_n", None, norm_error, ""),
-    "hold.torque": ("hold_torque_nm", None, norm_error, ""),
-    "pad.position": ("pad_pose", slice(0, 3), norm_error, ""),
-    "pad.orientation": ("pad_pose", slice(3, 7), quat_angle, ""),
-    "objects.position": ("object_poses", slice(0, 3), norm_error, "object"),
-    "objects.orientation": ("object_poses", slice(3, 7), quat_angle, "object"),
-}
+# field -> (column, component slice, metric, element kind), from model.fields
+_METRICS = {"joint": joint_error, "abs": abs_error, "discrete": discrete_error, "norm": norm_error,
+            "angle": quat_angle}
+_SPECS = {c.name: (f.name, c.components, _METRICS[c.metric], {"joint": "joint", "object_pose": "object"}.get(
+    f.shape, "")) for f, c in COMPARED}
 
 
 def _shaped(values: np.ndarray, components: slice | None, kind: str) -> np.ndarray:
@@ -294,7 +284,7 @@ def _field_stat(name: str, a: np.ndarray, b: np.ndarray, metric, tolerance: floa
         k = int(np.argmax(over[i]))
         channel, fld = name.split(".")
         if channel == "joints":
-            unit = JOINT_UNITS[fld][0 if REVOLUTE[k] else 1]
+            unit = JOINT_UNITS[name][0 if REVOLUTE[k] else 1]
         stat.first = Divergence(int(steps[i]), int(t_ns[i]) * 1e-9, channel, fld, elements[k], _values(a[i, k]),
                                 _values(b[i, k]), float(err[i, k]), tolerance, unit)
     elif tolerance == INF:

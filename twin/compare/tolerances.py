@@ -13,24 +13,14 @@ import math
 from dataclasses import dataclass, field, replace
 
 from twin.errors import ConfigError
+from twin.model.fields import COMPARED
 
 INF = math.inf
 
-# name -> (unit, what it is). The order is the report's order.
+# name -> (unit, what it is). The order is the report's order: the Frame's fields as model.fields
+# describes them, then what is judged on the whole run.
 FIELDS: dict[str, tuple[str, str]] = {
-    "joints.position": ("rad|m", "joint angle (wrapped) or Z travel"),
-    "joints.velocity": ("rad/s|m/s", "joint velocity"),
-    "joints.effort": ("N·m|N", "motor torque or force"),
-    "joints.target": ("rad|m", "motor target (wrapped)"),
-    "suction.on": ("", "pad switched on (exact or off)"),
-    "suction.sensed": ("", "object the pad's sensor sees (exact or off)"),
-    "suction.held": ("", "object the pad holds (exact or off)"),
-    "hold.force": ("N", "norm of the hold force difference"),
-    "hold.torque": ("N·m", "norm of the hold torque difference"),
-    "pad.position": ("m", "distance between pad tips"),
-    "pad.orientation": ("rad", "angle between pad orientations"),
-    "objects.position": ("m", "distance between object positions, every step"),
-    "objects.orientation": ("rad", "angle between object orientations, every step"),
+    **{c.name: (c.unit, c.what) for _, c in COMPARED},
     "final.position": ("m", "distance between final object positions"),
     "final.orientation": ("rad", "angle between final object orientations"),
     "run.length": ("steps", "difference in the last step"),

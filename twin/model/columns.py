@@ -9,24 +9,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from twin.model.fields import FRAME_FIELDS
 from twin.model.types import Frame
 
-# field name -> (dtype, trailing shape given (n_joints, n_objects))
-FIELD_SPECS = {
-    "step": (np.int64, lambda j, b: ()),
-    "t_ns": (np.int64, lambda j, b: ()),
-    "joint_q": (np.float64, lambda j, b: (j,)),
-    "joint_qd": (np.float64, lambda j, b: (j,)),
-    "joint_effort": (np.float64, lambda j, b: (j,)),
-    "joint_target": (np.float64, lambda j, b: (j,)),
-    "suction_on": (np.bool_, lambda j, b: ()),
-    "sensed_body": (np.int32, lambda j, b: ()),
-    "held_body": (np.int32, lambda j, b: ()),
-    "hold_force_n": (np.float64, lambda j, b: (3,)),
-    "hold_torque_nm": (np.float64, lambda j, b: (3,)),
-    "pad_pose": (np.float64, lambda j, b: (7,)),
-    "object_poses": (np.float64, lambda j, b: (b, 7)),
-}
+# field name -> (dtype, trailing shape given (n_joints, n_objects)), from the one field description
+FIELD_SPECS = {f.name: (f.dtype, f.trailing) for f in FRAME_FIELDS}
 
 
 @dataclass
@@ -66,17 +53,7 @@ class FrameColumns:
         return FrameColumns(**cols)
 
     def frame(self, i: int) -> Frame:
-        def t(a: np.ndarray) -> tuple:
-            return tuple(a.tolist())
-
-        return Frame(
-            step=int(self.step[i]), t_ns=int(self.t_ns[i]),
-            joint_q=t(self.joint_q[i]), joint_qd=t(self.joint_qd[i]),
-            joint_effort=t(self.joint_effort[i]), joint_target=t(self.joint_target[i]),
-            suction_on=bool(self.suction_on[i]), sensed_body=int(self.sensed_body[i]), held_body=int(self.held_body[i]),
-            hold_force_n=t(self.hold_force_n[i]), hold_torque_nm=t(self.hold_torque_nm[i]),
-            pad_pose=t(self.pad_pose[i]), object_poses=tuple(t(p) for p in self.object_poses[i]),
-        )
+        return Frame(*(_PLAIN[f.shape](getattr(self, f.name)[i]) for f in FRAME_FIELDS))
 
     def slice(self, start: int, stop: int) -> FrameColumns:
         return FrameColumns(**{f.name: getattr(self, f.name)[start:stop] for f in fields(self)})
@@ -92,6 +69,18 @@ class FrameColumns:
             and getattr(self, f.name).tobytes() == getattr(other, f.name).tobytes()
             for f in fields(self)
         )
+
+
+def _tuple(a: np.ndarray) -> tuple:
+    return tuple(a.tolist())
+
+
+# a column's row back to the Frame's plain Python value, by the field's shape
+_PLAIN = {"frame": lambda v: v.item(), "joint": _tuple, "xyz": _tuple, "pose": _tuple,
+          "object_pose": lambda a: tuple(_tuple(p) for p in a)}
+# Frame, FrameColumns and model.fields name the same fields in the same order
+if Frame._fields != tuple(FIELD_SPECS) or tuple(f.name for f in fields(FrameColumns)) != tuple(FIELD_SPECS):
+    raise ImportError("twin.model: Frame, FrameColumns and model.fields.FRAME_FIELDS disagree")
 
 
 class FrameCollector:

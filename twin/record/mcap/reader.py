@@ -17,6 +17,7 @@ import numpy as np
 from mcap.records import Attachment, Channel, Footer, Header, Metadata, Schema
 
 from twin.errors import RecordingError
+from twin.model import fields as F
 from twin.model.columns import FrameColumns
 from twin.model.recording import Recording
 from twin.model.types import Command, Event
@@ -231,36 +232,36 @@ def _columns(messages: list[Message], spec: list[tuple[int, str]], where: str, t
 
 def decode_frames(joints: list[Message], suction: list[Message], poses: list[Message], n_objects: int,
                   where: str) -> FrameColumns:
-    """FrameColumns from the three block channels; RecordingError if they disagree."""
-    step, t_ns, q, qd, effort, target = _columns(joints, [
-        (S.STEP, "<i8"), (S.T_NS, "<i8"), (S.J_POSITION, "<f8"), (S.J_VELOCITY, "<f8"),
-        (S.J_EFFORT, "<f8"), (S.J_TARGET, "<f8")], where, S.JOINTS.topic)
-    s_step, on, sensed, held, force, torque = _columns(suction, [
-        (S.STEP, "<i8"), (S.S_ON, "|u1"), (S.S_SENSED, "<i4"), (S.S_HELD, "<i4"),
-        (S.S_FORCE, "<f8"), (S.S_TORQUE, "<f8")], where, S.SUCTION.topic)
-    p_step, pad, objects = _columns(poses, [(S.STEP, "<i8"), (S.P_PAD, "<f8"), (S.P_OBJECTS, "<f8")],
-                                    where, S.POSES.topic)
+    """FrameColumns from the three block channels (model.fields says which field is where); RecordingError
+    if they disagree."""
+    n_joints = 4
+    columns: dict[str, np.ndarray] = {}
+    steps = []
+    for block, messages, topic in zip(F.BLOCKS, (joints, suction, poses), (S.JOINTS.topic, S.SUCTION.topic,
+                                                                          S.POSES.topic), strict=True):
+        fields = [f for f in F.block_fields(block) if f.name == "step" or f.name not in columns]
+        arrays = _columns(messages, [(f.number, f.wire) for f in fields], where, topic)
+        for f, array in zip(fields, arrays, strict=True):
+            if f.name == "step":
+                steps.append(array)
+            else:
+                columns[f.name] = array
+    step = columns["step"] = steps[0]
     n = len(step)
-    if not (np.array_equal(step, s_step) and np.array_equal(step, p_step)):
+    if not all(np.array_equal(step, other) for other in steps[1:]):
         raise RecordingError(f"recording {where!r}: the joint, suction and pose channels cover different steps "
-                             f"({n}, {len(s_step)}, {len(p_step)} frames)")
+                             f"({', '.join(str(len(s)) for s in steps)} frames)")
     if n > 1 and not np.all(np.diff(step) > 0):
         raise RecordingError(f"recording {where!r}: frame steps are not increasing")
-    expected = {"t_ns": (t_ns, n), "position": (q, 4 * n), "velocity": (qd, 4 * n), "effort": (effort, 4 * n),
-                "target": (target, 4 * n), "on": (on, n), "sensed_body": (sensed, n), "held_body": (held, n),
-                "hold_force_n": (force, 3 * n), "hold_torque_nm": (torque, 3 * n), "pad_pose": (pad, 7 * n),
-                "object_poses": (objects, 7 * n_objects * n)}
-    for name, (array, size) in expected.items():
-        if array.size != size:
-            raise RecordingError(f"recording {where!r}: field {name} holds {array.size} values for {n} frames; "
-                                 f"expected {size}")
+    for f in F.FRAME_FIELDS:
+        shape = (n, *f.trailing(n_joints, n_objects))
+        size = int(np.prod(shape, dtype=np.int64))
+        if columns[f.name].size != size:
+            raise RecordingError(f"recording {where!r}: field {f.proto_name} holds {columns[f.name].size} values "
+                                 f"for {n} frames; expected {size}")
+        columns[f.name] = columns[f.name].reshape(shape).astype(f.dtype, copy=False)
+    t_ns = columns["t_ns"]
     if n and not (0 <= step[0] and step[-1] <= S.MAX_STEP and 0 <= t_ns.min() and t_ns.max() <= S.MAX_T_NS):
         raise RecordingError(f"recording {where!r}: frame steps or times out of range (steps {step[0]}..{step[-1]}); "
                              f"expected steps 0..{S.MAX_STEP} and times 0..{S.MAX_T_NS} ns")
-    return FrameColumns(
-        step=step, t_ns=t_ns, joint_q=q.reshape(n, 4), joint_qd=qd.reshape(n, 4),
-        joint_effort=effort.reshape(n, 4), joint_target=target.reshape(n, 4),
-        suction_on=on.astype(np.bool_), sensed_body=sensed.astype(np.int32), held_body=held.astype(np.int32),
-        hold_force_n=force.reshape(n, 3), hold_torque_nm=torque.reshape(n, 3), pad_pose=pad.reshape(n, 7),
-        object_poses=objects.reshape(n, n_objects, 7),
-    )
+    return FrameColumns(**columns)

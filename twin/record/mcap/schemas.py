@@ -14,34 +14,27 @@ from functools import cache
 
 from google.protobuf import descriptor_pb2
 
+from twin.model import fields as F
 from twin.model.recording import META_FINALIZED  # noqa: F401 - one name for it, shared with compare
 
 BLOCKS_PROTO = "twin/blocks.proto"
 
-# field numbers, shared by the writer's encoder and the reader's fast path
-STEP, T_NS, NAMES = 1, 2, 3
-J_POSITION, J_VELOCITY, J_EFFORT, J_TARGET = 4, 5, 6, 7
-S_ON, S_SENSED, S_HELD, S_FORCE, S_TORQUE = 4, 5, 6, 7, 8
-P_PAD, P_OBJECTS = 4, 5
+# field numbers, shared by the writer's encoder and the reader's fast path (model.fields holds them)
+STEP, T_NS, NAMES = F.BY_NAME["step"].number, F.BY_NAME["t_ns"].number, F.NAMES_FIELD
 
 _F = descriptor_pb2.FieldDescriptorProto
-_BLOCK_FIELDS: dict[str, list[tuple[str, int, int]]] = {
-    "JointBlock": [
-        ("step", STEP, _F.TYPE_SFIXED64), ("t_ns", T_NS, _F.TYPE_SFIXED64), ("joint_names", NAMES, _F.TYPE_STRING),
-        ("position", J_POSITION, _F.TYPE_DOUBLE), ("velocity", J_VELOCITY, _F.TYPE_DOUBLE),
-        ("effort", J_EFFORT, _F.TYPE_DOUBLE), ("target", J_TARGET, _F.TYPE_DOUBLE),
-    ],
-    "SuctionBlock": [
-        ("step", STEP, _F.TYPE_SFIXED64), ("t_ns", T_NS, _F.TYPE_SFIXED64), ("object_names", NAMES, _F.TYPE_STRING),
-        ("on", S_ON, _F.TYPE_BOOL), ("sensed_body", S_SENSED, _F.TYPE_SFIXED32),
-        ("held_body", S_HELD, _F.TYPE_SFIXED32), ("hold_force_n", S_FORCE, _F.TYPE_DOUBLE),
-        ("hold_torque_nm", S_TORQUE, _F.TYPE_DOUBLE),
-    ],
-    "PoseBlock": [
-        ("step", STEP, _F.TYPE_SFIXED64), ("t_ns", T_NS, _F.TYPE_SFIXED64), ("object_names", NAMES, _F.TYPE_STRING),
-        ("pad_pose", P_PAD, _F.TYPE_DOUBLE), ("object_poses", P_OBJECTS, _F.TYPE_DOUBLE),
-    ],
-}
+_PROTO_TYPES = {"<f8": _F.TYPE_DOUBLE, "<i8": _F.TYPE_SFIXED64, "<i4": _F.TYPE_SFIXED32, "|u1": _F.TYPE_BOOL}
+
+
+def _block_fields(block: str) -> list[tuple[str, int, int]]:
+    """(name, number, protobuf type) of a block message's fields: step, t_ns, its names, then its Frame fields."""
+    step, t_ns, *rest = F.block_fields(block)
+    return ([(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in (step, t_ns)]
+            + [(F.NAMES_FIELD_NAME[block], F.NAMES_FIELD, _F.TYPE_STRING)]
+            + [(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in rest])
+
+
+_BLOCK_FIELDS: dict[str, list[tuple[str, int, int]]] = {block: _block_fields(block) for block in F.BLOCKS}
 
 
 @cache

@@ -17,7 +17,7 @@ import pyarrow as pa
 import rerun as rr
 
 from twin.errors import RecordingError
-from twin.model.columns import FrameColumns
+from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.model.types import Command, Event, Frame
@@ -52,17 +52,15 @@ def finish_file(stream: rr.RecordingStream, partial: Path, target: Path) -> None
 
 
 class _Buffers:
-    """Preallocated columns for the frames of one batch."""
+    """Preallocated columns (dtypes and shapes from model.fields) for the frames of one batch: the
+    fields the view draws."""
+
+    DRAWN = ("step", "t_ns", "joint_q", "joint_target", "suction_on", "held_body", "pad_pose", "object_poses")
 
     def __init__(self, capacity: int, n_objects: int) -> None:
-        self.step = np.empty(capacity, dtype=np.int64)
-        self.t_ns = np.empty(capacity, dtype=np.int64)
-        self.joint_q = np.empty((capacity, 4), dtype=np.float64)
-        self.joint_target = np.empty((capacity, 4), dtype=np.float64)
-        self.suction_on = np.empty(capacity, dtype=np.bool_)
-        self.held_body = np.empty(capacity, dtype=np.int32)
-        self.pad_pose = np.empty((capacity, 7), dtype=np.float64)
-        self.object_poses = np.empty((capacity, n_objects, 7), dtype=np.float64)
+        for name in self.DRAWN:
+            dtype, shape = FIELD_SPECS[name]
+            setattr(self, name, np.empty((capacity, *shape(4, n_objects)), dtype=dtype))
 
 
 class RerunRecorder:

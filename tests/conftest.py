@@ -1,0 +1,41 @@
+"""Shared by every test folder (they mirror twin's packages): tests/ on sys.path for the `support`
+helpers, and the pick_place recordings that many modules only read, made once per session."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TESTS = Path(__file__).resolve().parent
+sys.path.insert(0, str(TESTS))  # `import support...` from any folder, whatever pytest's import mode
+
+from support.runs import collect_pick_place
+
+ROOT = TESTS.parent  # the checkout: README.md, recordings/, tools/
+FIXTURES = TESTS / "fixtures"
+
+
+@pytest.fixture(scope="session")
+def pick_place_mcap(tmp_path_factory):
+    """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector of
+    what the twin sent beside it: (path, collector). Read it; copy it before changing it."""
+    path = tmp_path_factory.mktemp("pick_place_mcap") / "pick.mcap"
+    return path, collect_pick_place(path)
+
+
+@pytest.fixture(scope="session")
+def pick_place_cli(tmp_path_factory):
+    """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own process:
+    {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing them."""
+    tmp = tmp_path_factory.mktemp("pick_place_cli")
+    mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
+    env = {**os.environ, "HOME": str(tmp)}  # the rerun SDK may write its analytics config under HOME
+    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "1", "--record",
+                           str(mcap), "--rrd", str(rrd)], capture_output=True, text=True, env=env, timeout=300,
+                          check=False)
+    assert done.returncode == 0, done.stderr
+    return {"tmp": tmp, "mcap": mcap, "rrd": rrd}

@@ -1,0 +1,143 @@
+"""Recording in a recorder process: the same files as in-process writers, errors at once, and a
+run whose process dies leaves a recoverable, unfinalized file."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+from support.runs import record_pick_place
+
+from twin.errors import ConfigError, RecordingError
+from twin.model.config import TwinConfig
+from twin.record import open_recorders
+from twin.record.mcap import schemas as S
+from twin.record.mcap.reader import load, scan
+from twin.record.mcap.recover import recover
+from twin.record.outputs import partial_path
+from twin.sim.twin import Twin
+from twin.tasks import TASKS, run_task
+
+RUN = {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
+
+
+def _record(path, *, background: bool, data=None) -> None:
+    """One pick_place cycle recorded to path; with data, a note event carrying it comes first."""
+    if data is None:
+        record_pick_place(path, background=background)
+        return
+    config = TwinConfig()
+    with open_recorders(config, RUN, mcap_path=path, background=background) as sinks:
+        twin = Twin(config, sinks=sinks)
+        twin.event("note", message="odd data", value=data)
+        run_task(twin, TASKS["pick_place"], {"cycles": 1})
+        twin.close()
+
+
+def test_background_and_in_process_writers_make_the_same_bytes(tmp_path):
+    _record(tmp_path / "bg.mcap", background=True)
+    _record(tmp_path / "fg.mcap", background=False)
+    assert (tmp_path / "bg.mcap").read_bytes() == (tmp_path / "fg.mcap").read_bytes()
+    assert load(tmp_path / "bg.mcap").finalized
+
+
+def test_event_data_marshal_cannot_carry_still_arrives(tmp_path):
+    _record(tmp_path / "np.mcap", background=True, data=np.float64(0.25))
+    notes = [e for e in load(tmp_path / "np.mcap").events if e.kind == "note"]
+    assert len(notes) == 1 and notes[0].data["value"] == 0.25
+
+
+def test_a_writer_that_cannot_start_fails_at_once_in_one_line(tmp_path):
+    (tmp_path / "a_file").write_text("not a folder")
+    impossible = tmp_path / "a_file" / "x.mcap"
+    with pytest.raises(RecordingError) as err, open_recorders(TwinConfig(), RUN, mcap_path=impossible):
+        pytest.fail("the block must not run when the recorder cannot start")
+    assert "a_file" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
+    path = tmp_path / "killed.mcap"
+    script = textwrap.dedent(f"""
+        import os, signal
+        from twin.model.config import TwinConfig
+        from twin.record import open_recorders
+        from twin.sim.twin import Twin
+        config = TwinConfig()
+        with open_recorders(config, {RUN!r}, mcap_path={str(path)!r}) as sinks:
+            twin = Twin(config, sinks=sinks)
+            twin.move_to(0.3, 0.3)
+            twin.wait(5.0)
+            os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    partial = partial_path(path)  # the file is renamed to path only when finalized
+    _wait_until_settled(partial)  # the orphaned recorder writes what it got once it sees the pipe close
+    assert not path.exists()
+    kept = scan(partial, strict=False)
+    assert not kept.complete and S.META_FINALIZED not in kept.metadata
+    fixed = tmp_path / "fixed.mcap"
+    recover(path, fixed)
+    frames = load(fixed).frames
+    assert frames.t_ns[-1] * 1e-9 >= twin_seconds(path) - 1.0  # all but at most the last second
+
+
+def twin_seconds(_path) -> float:
+    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run shows."""
+    twin = Twin()
+    twin.move_to(0.3, 0.3)
+    twin.wait(5.0)
+    return twin.t_s
+
+
+def _wait_until_settled(path, timeout_s: float = 10.0) -> None:
+    deadline, last, stable = time.monotonic() + timeout_s, -1, 0
+    while time.monotonic() < deadline and stable < 5:
+        size = path.stat().st_size if path.exists() else -1
+        stable = stable + 1 if size == last and size > 0 else 0
+        last = size
+        time.sleep(0.05)
+    assert stable >= 5, f"{path} kept changing or never appeared"
+
+
+def test_a_writer_error_mid_run_is_one_line_and_keeps_what_came_before(tmp_path):
+    """A full disk, for real: the recorder may write only so many bytes (RLIMIT_FSIZE), then gets EFBIG."""
+    path = tmp_path / "full.mcap"
+    script = textwrap.dedent(f"""
+        import resource, signal, sys
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, resource.RLIM_INFINITY))
+        from twin.cli import main
+        sys.exit(main(["run", "pick_place", "--cycles", "4", "--record", {str(path)!r}]))
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
+    assert "recording stopped by a writer error" in done.stderr
+    fixed = tmp_path / "fixed.mcap"
+    recover(path, fixed)
+    assert len(load(fixed).frames) > 100  # the part written before the disk filled up
+
+
+def test_twin_events_carry_plain_json_data_and_refuse_the_rest():
+    twin = Twin()
+    event = twin.event("measure", value=np.float64(0.25), point=np.array([1.0, 2.0]), pair=(1, 2))
+    assert event.data == {"pair": [1, 2], "point": [1.0, 2.0], "value": 0.25}
+    assert type(event.data["value"]) is float
+    with pytest.raises(ConfigError, match="'set'"):
+        twin.event("measure", tags={"a", "b"})  # a set's order varies between runs
+
+
+def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
+    from twin.record.mcap.writer import McapRecorder
+
+    path = tmp_path / "keep.mcap"
+    path.write_bytes(b"an earlier recording")
+    with pytest.raises(RecordingError, match="no_such_mesh.stl"):
+        McapRecorder(path, TwinConfig(), RUN, urdf="<robot/>", meshes=[tmp_path / "no_such_mesh.stl"])
+    assert path.read_bytes() == b"an earlier recording"

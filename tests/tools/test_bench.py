@@ -1,0 +1,60 @@
+"""tools/bench.py: the framework runs a section against the measured baseline and prints one table."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
+
+BENCH = Path(__file__).resolve().parents[2] / "tools" / "bench.py"
+
+
+def _bench(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(BENCH), *args], capture_output=True, text=True, timeout=120,
+                          check=False)
+
+
+def test_only_twin_prints_the_baseline_and_the_twins_ratio():
+    done = _bench("--only", "twin", "--repeats", "1", "--physics-steps", "2000")
+    assert done.returncode == 0, done.stderr
+    rows = {tuple(c.strip() for c in line.split("|")[:2]): line.split("|")[2].strip()
+            for line in done.stdout.splitlines() if line.count("|") == 2}
+    physics = float(rows[("physics", "physics-only steps/s (median of 1)")].split()[0].replace(",", ""))
+    assert physics > 0
+    rate, ratio = re.match(r"([\d,]+) \(([\d.]+)x idle",
+                           rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")]).groups()
+    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006  # measured against that baseline
+    motion = float(rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")].split()[0]
+                   .replace(",", ""))
+    assert physics > motion > 0  # a moving arm with contacts costs more than an idle one
+    assert not any(section in ("record", "diff", "remote") for section, _ in rows)  # --only selected
+
+
+def test_list_names_every_section_and_unknown_sections_are_refused():
+    listed = _bench("--list").stdout.split()
+    assert "twin" in listed and listed == sorted(listed)
+    done = _bench("--only", "nope")
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.strip().startswith("bench: error: unknown section 'nope'") and done.stderr.count("\n") == 1
+
+
+def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
+    import json
+
+    out = tmp_path / "bench.json"
+    done = _bench("--only", "twin", "--only", "record", "--repeats", "1", "--physics-steps", "2000", "--json", str(out))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(out.read_text())
+    for key in ("record_both_vs_motion", "record_both_vs_idle", "record_mcap_vs_motion", "twin_vs_motion",
+                "mcap_mb_per_sim_min", "physics_steps_per_s", "motion_physics_steps_per_s"):
+        assert isinstance(data[key], float) and data[key] > 0, key
+    assert abs(data["record_both_vs_motion"] - data["record_both_steps_per_s"] / data["motion_physics_steps_per_s"]) < 1e-5
+    assert any(r["section"] == "total" and r["measure"] == "wall time" for r in data["rows"])
+    assert len(data["rows"]) == sum(1 for line in done.stdout.splitlines() if line.count("|") == 2) - 1
+    bad = _bench("--only", "twin", "--json", str(tmp_path / "no" / "b.json"))
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "does not exist" in bad.stderr

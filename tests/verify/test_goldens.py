@@ -1,0 +1,104 @@
+"""Every golden in recordings/ re-runs to an exact match; the `golden` pytest fixture works."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+from twin.compare.tolerances import Tolerances
+from twin.model.profiles import PROFILES
+from twin.record.mcap.reader import load
+from twin.verify.check import check_all
+
+ROOT = Path(__file__).resolve().parents[2]
+RECORDINGS = ROOT / "recordings"
+GOLDENS = sorted(p for p in RECORDINGS.glob("*.mcap") if not p.name.endswith(".obtained.mcap"))
+
+pytest_plugins = ["pytester"]
+
+
+def _regen_module():
+    spec = importlib.util.spec_from_file_location("regen_goldens", ROOT / "tools" / "regen_goldens.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_golden_rerun_matches_exactly():
+    assert GOLDENS, "recordings/ holds no goldens"
+    outcomes = check_all([str(p) for p in GOLDENS], Tolerances.from_preset("exact"), jobs=2)
+    bad = {Path(o.path).name: o.summary for o in outcomes if o.status != "match"}
+    assert not bad, "\n".join(f"{name}: {why}" for name, why in bad.items()) + (
+        "\n(if the change is intended: python tools/regen_goldens.py, then review `twin diff` old vs new)")
+
+
+@pytest.mark.parametrize("path", GOLDENS, ids=lambda p: p.stem)
+def test_every_golden_replays_to_an_exact_match_with_every_event(path, tmp_path):
+    """Replay feeds the file's commands (what the task said included) back: nothing may differ."""
+    from twin.compare.engine import compare
+    from twin.verify.replay import replay, replayed_event_kinds
+
+    golden = load(path)
+    assert replayed_event_kinds(golden) is None  # annotations are Commands: every event compares
+    result = compare(golden, replay(golden), Tolerances.from_preset("exact"))
+    assert result.match, result.first
+    assert result.events_matched == len(golden.events)
+
+
+def test_the_goldens_are_the_documented_set():
+    regen = _regen_module()
+    made = {g.name for g in [*regen.goldens(), *regen.sessions()]}
+    assert {p.stem for p in GOLDENS} == made
+    readme = (RECORDINGS / "README.md").read_text()
+    assert all(f"{name}.mcap" in readme for name in made)
+    profiles = {load(p).config.profile.name for p in GOLDENS}
+    assert profiles == set(PROFILES)
+    assert sum(p.stat().st_size for p in GOLDENS) < 5e6
+
+
+def test_a_golden_holds_a_suction_break():
+    rec = load(RECORDINGS / "pick_place_break_mtb.mcap")
+    assert not rec.config.suction.infinite_strength
+    assert any(e.kind == "break" for e in rec.events)
+    assert rec.run == {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
+
+
+PLUGIN_TEST = """
+import os
+from twin.verify.check import record_task
+from twin.model.config import TwinConfig
+
+def test_run(golden):
+    run = record_task(TwinConfig(), "pick_place", {"cycles": 1})
+    if os.environ.get("TWIN_TAMPER"):
+        run.frames.object_poses[400:, 0, 1] += 0.003
+    golden.check(run, "one_cycle", tolerance=os.environ.get("TWIN_TOL", "exact"))
+"""
+
+
+def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch):
+    pytester.makeini("[pytest]\ntwin_goldens_dir = goldens\n")
+    pytester.makepyfile(test_plugin=PLUGIN_TEST)
+    goldens = pytester.path / "goldens"
+
+    first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    first.assert_outcomes(failed=1)
+    assert "did not exist; wrote it" in first.stdout.str() and (goldens / "one_cycle.mcap").exists()
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+
+    monkeypatch.setenv("TWIN_TAMPER", "1")
+    failed = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    failed.assert_outcomes(failed=1)
+    assert "step 400" in failed.stdout.str()
+    assert (goldens / "one_cycle.obtained.mcap").exists() and (goldens / "one_cycle.report.md").exists()
+    monkeypatch.setenv("TWIN_TOL", "outcome")
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)  # lands within 5 mm
+    monkeypatch.delenv("TWIN_TOL")
+
+    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
+    assert not (goldens / "one_cycle.obtained.mcap").exists()
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)

@@ -14,6 +14,7 @@ from twin.cli.record import add_record_commands, add_record_options, record_path
 from twin.cli.serve import add_serve_command
 from twin.cli.view import add_view_command
 from twin.errors import TwinError
+from twin.model.sink import Sink
 from twin.signals import Terminated, stop_signals_raise
 from twin.sim.twin import Twin
 from twin.tasks import TimeLimit, accepted_params, resolve, run_task
@@ -49,7 +50,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-class _Summary:
+class _Summary(Sink):
     """A sink that keeps the events for the closing summary."""
 
     def __init__(self) -> None:

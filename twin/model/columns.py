@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from twin.model.fields import FRAME_FIELDS
+from twin.model.sink import Sink
 from twin.model.types import Frame
 
 # field name -> (dtype, trailing shape given (n_joints, n_objects)), from the one field description
@@ -83,7 +84,7 @@ if Frame._fields != tuple(FIELD_SPECS) or tuple(f.name for f in fields(FrameColu
     raise ImportError("twin.model: Frame, FrameColumns and model.fields.FRAME_FIELDS disagree")
 
 
-class FrameCollector:
+class FrameCollector(Sink):
     """A sink that keeps every Frame, Command and Event in memory (tests, comparisons)."""
 
     def __init__(self) -> None:
@@ -104,7 +105,7 @@ class FrameCollector:
         return FrameColumns.from_frames(self.frames)
 
 
-class ColumnCollector:
+class ColumnCollector(Sink):
     """A sink that keeps Frames as numpy columns, converted in chunks: about a fifth of the memory
     of Frame tuples, for long runs (replay, check). Commands and Events are kept as they come."""
 

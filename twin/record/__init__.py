@@ -8,6 +8,7 @@ from pathlib import Path
 
 from twin.errors import TwinError
 from twin.model.config import TwinConfig
+from twin.model.sink import Sink
 from twin.robot.urdf import mesh_paths, urdf_text
 from twin.signals import Terminated
 
@@ -59,7 +60,7 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
         raise failure
 
 
-class _TaskErrors:
+class _TaskErrors(Sink):
     """A sink that remembers the first task_error, so a run whose task raised is never finalized as ok,
     even when the caller caught the exception (twin check records a crashing task as a run to compare)."""
 
@@ -79,9 +80,6 @@ class _TaskErrors:
     def outcome(self) -> tuple[str, str]:
         return ("error", self.error) if self.error else ("ok", "")
 
-    def close(self) -> None:
-        pass
-
 
 def _error_text(err: BaseException) -> str:
     """The exception as the finalized marker's one line; even one whose __str__ itself raises."""
@@ -94,16 +92,10 @@ def _error_text(err: BaseException) -> str:
 
 def _close_all(sinks: list, outcome: str, error: str) -> Exception | None:
     """Close every sink even if one fails; return the first failure."""
-    from twin.record.mcap.writer import McapRecorder
-    from twin.record.process import RecorderProcess
-
     first: Exception | None = None
-    for sink in sinks:
+    for sink in sinks:  # every sink closes the same way (model.sink.Sink)
         try:
-            if isinstance(sink, McapRecorder | RecorderProcess):
-                sink.close(outcome=outcome, error=error)
-            else:
-                sink.close()
+            sink.close(outcome=outcome, error=error)
         except Exception as err:  # noqa: BLE001 - keep closing the others
             first = first or err
     return first

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from twin.errors import RecordingError
 from twin.model.config import TwinConfig
+from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 
 BATCH_S = 32 / 240  # simulated time per pipe write: 32 frames at 240 Hz
@@ -30,7 +31,7 @@ _BATCH, _CLOSE = b"B", b"C"
 _COMMAND, _EVENT = 0, 1
 
 
-class RecorderProcess:
+class RecorderProcess(Sink):
     """A sink (on_frame/on_command/on_event) whose writers run in a child process."""
 
     def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
@@ -142,17 +143,16 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _TWINS_SIGNALS)
     from twin.record.mcap.writer import McapRecorder  # already loaded by the parent
 
-    mcap, sinks = None, []
+    sinks = []
     try:
         if mcap_path is not None:
-            mcap = McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes, rate=rate)
-            sinks.append(mcap)
+            sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes, rate=rate))
         if rrd_path is not None:
             from twin.record.rerun.writer import RerunRecorder
 
             sinks.append(RerunRecorder(rrd_path, config, urdf))
     except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
-        _close_all(sinks, mcap, "error", "recording could not start")
+        _close_all(sinks, "error", "recording could not start")
         conn.send_bytes(str(err).encode())
         os._exit(0)
     conn.send_bytes(b"OK")
@@ -167,7 +167,7 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
         tag, body = message[:1], message[1:]
         if tag == _CLOSE:
             if not failure:
-                failure = _close_all(sinks, mcap, *marshal.loads(body))
+                failure = _close_all(sinks, *marshal.loads(body))
             conn.send_bytes(failure.encode() if failure else b"OK")
             os._exit(0)
         if not failure:  # after a failure: drain until the twin closes, it learns of the failure then
@@ -196,12 +196,12 @@ def _feed(items: list[tuple], sinks: list) -> None:
                 sink.on_frame(frame)
 
 
-def _close_all(sinks: list, mcap, outcome: str, error: str) -> str:
-    """Finish every writer (the MCAP one with the run's outcome); the first failure, or ''."""
+def _close_all(sinks: list, outcome: str, error: str) -> str:
+    """Finish every writer with the run's outcome; the first failure, or ''."""
     failure = ""
     for sink in sinks:
         try:
-            sink.close(outcome=outcome, error=error) if sink is mcap else sink.close()
+            sink.close(outcome=outcome, error=error)
         except Exception as err:  # noqa: BLE001 - keep closing the others, report the first
             failure = failure or str(err)
     return failure

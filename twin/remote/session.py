@@ -14,6 +14,7 @@ from typing import Any
 
 from twin.errors import ConfigError, TwinError
 from twin.model.config import TwinConfig
+from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.sim.twin import Twin
 
@@ -25,7 +26,7 @@ SIMULATION_ADVANCING_RUNNING = 0x11
 MAX_PENDING_COMMANDS = 10_000
 
 
-class _Relay:
+class _Relay(Sink):
     """The twin's one sink: holds what happens while stopped, forwards it to the recorders once the
     run starts (so Commands given before startSimulation are in the run's recording). Past
     MAX_PENDING_COMMANDS held Commands it refuses the next one before the twin applies it."""

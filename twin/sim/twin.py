@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Protocol
+from typing import Any
 
 from twin.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.config import TwinConfig
+from twin.model.sink import Sink
 from twin.model.types import NO_BODY, Command, Event, Frame
 from twin.robot import kinematics
 from twin.sim.suction import Suction
@@ -21,12 +22,6 @@ SHOULDER, ELBOW, Z, WRIST = range(4)
 SETTLE_TOL = (5e-4, 5e-4, 2e-4, 5e-4)  # rad, rad, m, rad
 SETTLE_SPEED_TOL = (5e-3, 5e-3, 2e-3, 5e-3)
 SETTLE_TIMEOUT_S = 10.0
-
-
-class Sink(Protocol):
-    def on_frame(self, frame: Frame) -> None: ...
-    def on_command(self, command: Command) -> None: ...
-    def on_event(self, event: Event) -> None: ...
 
 
 class Twin:

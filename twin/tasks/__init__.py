@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from twin.errors import ConfigError, TaskError, TaskTimeout, TwinError
+from twin.model.sink import Sink
 from twin.tasks import pick_place, seed000, seed001, seed002
 
 TaskFn = Callable[..., None]
@@ -76,7 +77,7 @@ def _text(err: Exception) -> str:
         return f"<unprintable: its __str__ raised {type(inner).__name__}>"
 
 
-class TimeLimit:
+class TimeLimit(Sink):
     """A sink that ends a task run at the first frame past `limit_s` of simulated time (`--timeout`):
     an endless task would otherwise record until the disk is full. Put it after the recorders, so
     they hold that frame too; it raises again on every later frame, so a task that catches the

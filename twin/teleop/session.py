@@ -20,6 +20,7 @@ from typing import Protocol
 from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
 from twin.model.keymaps import WAIT, keymap_for, parse_keys, quit_keys
+from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.robot.profile_files import get_profile
 from twin.sim.twin import Twin
@@ -39,7 +40,7 @@ class KeyPress:
     known: bool  # False: not in the key map, ignored (a key_unknown Event)
 
 
-class EventLog:
+class EventLog(Sink):
     """A sink keeping the latest events worth showing on screen and counting every kind."""
 
     def __init__(self, size: int = 6) -> None:

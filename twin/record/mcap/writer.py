@@ -24,6 +24,7 @@ from mcap.writer import CompressionType, Writer
 from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.config import TwinConfig
+from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire
@@ -63,7 +64,7 @@ def _plain(value: object) -> object:
     raise TypeError(f"{type(value).__name__} value {value!r} is not JSON data")
 
 
-class McapRecorder:
+class McapRecorder(Sink):
     """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized marker)."""
 
     def __init__(self, path: str | Path, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path] = (),

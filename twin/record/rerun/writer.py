@@ -20,6 +20,7 @@ from twin.errors import RecordingError
 from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
+from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.outputs import partial_path, publish
 from twin.record.rerun import scene
@@ -63,7 +64,7 @@ class _Buffers:
             setattr(self, name, np.empty((capacity, *shape(4, n_objects)), dtype=dtype))
 
 
-class RerunRecorder:
+class RerunRecorder(Sink):
     """A sink (on_frame/on_command/on_event) that writes what it receives to a Rerun recording."""
 
     def __init__(self, path: str | os.PathLike, config: TwinConfig, urdf_text: str, *,
@@ -147,8 +148,9 @@ class RerunRecorder:
     def on_event(self, event: Event) -> None:
         self._events.append(event)
 
-    def close(self) -> None:
-        """Send what is buffered and finish the file (fsynced and renamed into place)."""
+    def close(self, outcome: str = "ok", error: str = "") -> None:
+        """Send what is buffered and finish the file (fsynced and renamed into place); the view keeps no
+        outcome (the MCAP file's finalized record does)."""
         if self.closed:
             return
         self.closed = True

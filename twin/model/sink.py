@@ -1,0 +1,25 @@
+"""The one thing every receiver of a run is: a Sink gets each Frame, Command and Event as the run
+produces them, then close(outcome, error) once when it ends. The methods here do nothing: a sink
+overrides what it uses (a recorder all of them, an event log only on_event)."""
+
+from __future__ import annotations
+
+from twin.model.types import Command, Event, Frame
+
+OUTCOMES = ("ok", "error", "interrupted")  # how a run ended, as close() is told
+
+
+class Sink:
+    """A receiver of a run. close(): outcome is one of OUTCOMES; error says what went wrong."""
+
+    def on_frame(self, frame: Frame) -> None:
+        pass
+
+    def on_command(self, command: Command) -> None:
+        pass
+
+    def on_event(self, event: Event) -> None:
+        pass
+
+    def close(self, outcome: str = "ok", error: str = "") -> None:
+        pass

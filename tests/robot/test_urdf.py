@@ -57,7 +57,7 @@ def test_profile_file_yields_the_geometry_of_the_urdf(user_robot):
 def test_the_stl_meshes_are_loaded_and_scaled_from_millimetres(user_robot):
     twin = Twin(TwinConfig(profile=get_profile(str(user_robot))))
     try:
-        w = twin.world
+        w = twin._world  # the engine, looked at directly (white-box)
         arm1 = w.joints[0]
         lo, hi = pb.getAABB(w.robot, arm1, physicsClientId=w.client)
         assert hi[0] - lo[0] == pytest.approx(0.547, abs=0.01)  # 507 + 40 mm: the mesh, not a default shape
@@ -77,7 +77,7 @@ def test_twin_moves_the_users_pad_to_the_point(user_robot, x_m, y_m):
         assert math.hypot(x - x_m, y - y_m) < 1e-3
         assert z == pytest.approx(0.1, abs=3e-4)
         # the simulated pad link agrees with the geometry the profile derived from the URDF
-        w = twin.world
+        w = twin._world  # the engine, looked at directly (white-box)
         root = pb.getLinkState(w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client)[4]
         assert math.hypot(root[0] - x, root[1] - y) < 1e-4
         assert root[2] - PAD_LENGTH_M == pytest.approx(z, abs=1e-4)

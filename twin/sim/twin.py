@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any
 
 from twin.errors import ConfigError, OutOfReach, UnknownName
@@ -30,20 +32,51 @@ class Twin:
     def __init__(self, config: TwinConfig | None = None, *, gui: bool = False, sinks: list[Sink] = ()) -> None:
         self.config = config or TwinConfig()
         self.profile = self.config.profile
-        self.world = World(self.config, gui=gui)
-        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self.world,
+        self._world = World(self.config, gui=gui)
+        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self._world,
                                    tuple(o.size_m for o in self.config.objects))
         self.sinks: list[Sink] = list(sinks)
         self.step_index = 0
-        self.signals: dict[str, int] = {}
-        self.targets = [0.0, 0.0, 0.0, 0.0]
-        self.max_velocities = list(self.world.max_velocities())
-        self.limits = self.profile.joint_limits()
+        self._signals: dict[str, int] = {}
+        self._targets = [0.0, 0.0, 0.0, 0.0]
+        self._max_velocities = list(self._world.max_velocities())
+        self._limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
         self.key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
         self._said: Event | None = None  # the Event the last `event` Command emitted
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
+
+    # -- read-only views: the twin changes only through Commands (apply), so every input is recorded --
+    @property
+    def targets(self) -> tuple[float, ...]:
+        """Each joint's motor target (rad | m), in profile joint order."""
+        return tuple(self._targets)
+
+    @property
+    def signals(self) -> Mapping[str, int]:
+        return MappingProxyType(self._signals)
+
+    @property
+    def max_velocities(self) -> tuple[float, ...]:
+        return tuple(self._max_velocities)
+
+    @property
+    def limits(self) -> tuple[tuple[float, float], ...]:
+        return tuple(self._limits)
+
+    @property
+    def gui(self) -> bool:
+        """True when the twin draws a PyBullet window."""
+        return self._world.gui
+
+    def window_open(self) -> bool:
+        """False once the user has closed the PyBullet window (always True headless)."""
+        return self._world.connected()
+
+    def window_keys(self) -> list[str]:
+        """Keys typed into the PyBullet window since the last call (teleop --gui)."""
+        return self._world.keyboard_events()
 
     # -- time -------------------------------------------------------------------------------
     @property
@@ -56,7 +89,7 @@ class Twin:
 
     def step(self, n: int = 1) -> Frame:
         """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
-        sinks, pad_model, world = self.sinks, self.suction_pad, self.world
+        sinks, pad_model, world = self.sinks, self.suction_pad, self._world
         for _ in range(n):
             if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
                 f = self.frame
@@ -77,15 +110,15 @@ class Twin:
 
     # -- state ------------------------------------------------------------------------------
     def _read_frame(self) -> Frame:
-        q, qd, effort = self.world.joint_states()
+        q, qd, effort = self._world.joint_states()
         pad = kinematics.fk(self.profile, q)
         half = 0.5 * pad.heading_rad
-        poses = self.world.object_poses()
-        force, torque = self.world.hold_wrench(poses)
+        poses = self._world.object_poses()
+        force, torque = self._world.hold_wrench(poses)
         sp = self.suction_pad
         step = self.step_index
         return Frame(
-            step, step * self.config.dt_ns, q, qd, effort, tuple(self.targets),
+            step, step * self.config.dt_ns, q, qd, effort, tuple(self._targets),
             sp.on, sp.sensed, sp.held, force, torque,
             (pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
             poses,
@@ -119,7 +152,7 @@ class Twin:
         return self.frame.object_poses[self.object_index(name)]
 
     def get_signal(self, name: str) -> int | None:
-        return self.signals.get(name)
+        return self._signals.get(name)
 
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
@@ -249,7 +282,7 @@ class Twin:
     def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
         """Step until every joint is at its target and still; an Event if it times out."""
         max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
-        checks = tuple(zip(range(4), self.targets, SETTLE_TOL, SETTLE_SPEED_TOL, strict=True))
+        checks = tuple(zip(range(4), self._targets, SETTLE_TOL, SETTLE_SPEED_TOL, strict=True))
         for _ in range(max_steps):
             f = self.frame
             q, qd = f.joint_q, f.joint_qd
@@ -263,7 +296,7 @@ class Twin:
         return False
 
     def close(self) -> None:
-        self.world.close()
+        self._world.close()
 
 
 def _json_data(kind: str, data: dict) -> dict:
@@ -300,7 +333,7 @@ def _clamped(twin: Twin, joint: int, q: float) -> float:
     if twin.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
         now = twin.frame.joint_q[joint]
         return now + kinematics.wrap_rad(q - now)
-    lo, hi = twin.limits[joint]
+    lo, hi = twin._limits[joint]
     if lo <= q <= hi:
         return q
     clamped = min(hi, max(lo, q))
@@ -312,31 +345,31 @@ def _clamped(twin: Twin, joint: int, q: float) -> float:
 def _do_joint_target(twin: Twin, args: dict) -> None:
     j = twin._joint(args["joint"])
     q = _clamped(twin, j, float(args["q"]))
-    twin.targets[j] = q
-    twin.world.set_motor(j, q, twin.max_velocities[j])
+    twin._targets[j] = q
+    twin._world.set_motor(j, q, twin._max_velocities[j])
 
 
 def _do_joint_position(twin: Twin, args: dict) -> None:
     j = twin._joint(args["joint"])
     q = _clamped(twin, j, float(args["q"]))
-    twin.targets[j] = q
-    twin.world.reset_joint(j, q)
-    twin.world.set_motor(j, q, twin.max_velocities[j])
+    twin._targets[j] = q
+    twin._world.reset_joint(j, q)
+    twin._world.set_motor(j, q, twin._max_velocities[j])
     twin.frame = twin._read_frame()  # the pad moved: later suction sensing must see it
 
 
 def _do_joint_max_velocity(twin: Twin, args: dict) -> None:
     j = twin._joint(args["joint"])
-    twin.max_velocities[j] = float(args["v"])
-    twin.world.set_motor(j, twin.targets[j], twin.max_velocities[j])
+    twin._max_velocities[j] = float(args["v"])
+    twin._world.set_motor(j, twin._targets[j], twin._max_velocities[j])
 
 
 def _do_signal(twin: Twin, args: dict) -> None:
     if args["value"] is None:
-        twin.signals.pop(args["name"], None)
+        twin._signals.pop(args["name"], None)
     else:
-        twin.signals[args["name"]] = int(args["value"])
-    twin._suction_wanted = any(twin.signals.get(s, 0) for s in twin.profile.suction_signals)
+        twin._signals[args["name"]] = int(args["value"])
+    twin._suction_wanted = any(twin._signals.get(s, 0) for s in twin.profile.suction_signals)
 
 
 def _do_event(twin: Twin, args: dict) -> None:
@@ -368,13 +401,13 @@ def _do_key(twin: Twin, args: dict) -> None:
         op = action[0]
         if op in ("jog", "jog_keep_heading"):
             j = twin._joint(action[1])
-            before = twin.targets[j]
+            before = twin._targets[j]
             _do_joint_target(twin, {"joint": j, "q": before + float(action[2])})
-            if op == "jog_keep_heading" and twin.targets[j] != before:  # turn back by what the joint moved
-                _do_joint_target(twin, {"joint": WRIST, "q": twin.targets[WRIST] - (twin.targets[j] - before)})
+            if op == "jog_keep_heading" and twin._targets[j] != before:  # turn back by what the joint moved
+                _do_joint_target(twin, {"joint": WRIST, "q": twin._targets[WRIST] - (twin._targets[j] - before)})
         elif op == "target":
             j = twin._joint(action[1])
-            lo, hi = twin.limits[j]
+            lo, hi = twin._limits[j]
             value = {"min": lo, "max": hi, "down": twin.profile.z_down(), "up": twin.profile.z_up()}.get(action[2], action[2])
             _do_joint_target(twin, {"joint": j, "q": float(value)})
         elif op == "position":

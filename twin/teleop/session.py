@@ -108,7 +108,7 @@ class Session:
         try:
             self.twin.step(steps)
         except Exception:
-            if self.twin.world.gui and not self.twin.world.connected():
+            if self.twin.gui and not self.twin.window_open():
                 self.ended_by = "window closed"
                 return False
             raise
@@ -163,9 +163,9 @@ class WindowKeys:
     def read(self, timeout_s: float) -> list[str]:
         if timeout_s > 0:
             time.sleep(timeout_s)
-        if not self.twin.world.connected():
+        if not self.twin.window_open():
             return ["esc"]
-        return self.twin.world.keyboard_events()
+        return self.twin.window_keys()
 
 
 @dataclass

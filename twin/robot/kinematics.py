@@ -13,6 +13,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+
 from twin.errors import OutOfReach
 from twin.model.profiles import RobotProfile
 
@@ -51,6 +53,14 @@ def link_angles(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> tu
 def heading(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> float:
     """The pad's heading (rad, counter-clockwise from +x, not wrapped) for joint values q."""
     return link_angles(profile, q)[1] + profile.axis_signs[3] * q[3]
+
+
+def elbow_and_wrist_xy(profile: RobotProfile, q) -> tuple[tuple, tuple]:
+    """Where the elbow and the wrist axis stand in the plane (m), for joint values q: a tuple, or numpy
+    columns (q[j] an array over frames), which give arrays."""
+    t1, t12 = link_angles(profile, q)
+    ex, ey = profile.link1_m * np.cos(t1), profile.link1_m * np.sin(t1)
+    return (ex, ey), (ex + profile.link2_m * np.cos(t12), ey + profile.link2_m * np.sin(t12))
 
 
 def fk(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> PadPose:

@@ -18,6 +18,7 @@ from twin.compare.tolerances import FIELDS
 from twin.model.recording import Recording
 from twin.record.outputs import check_output, partial_path
 from twin.record.rerun.writer import finish_file
+from twin.robot import kinematics
 
 STEP, TIME = "step", "sim_time"
 GHOST_ALPHA = 110
@@ -35,9 +36,8 @@ def arm_points(rec: Recording) -> np.ndarray:
     """(n, 5, 3): floor, shoulder, elbow, wrist axis, pad tip of every frame (a SCARA as a polyline)."""
     p, q, pad = rec.config.profile, rec.frames.joint_q, rec.frames.pad_pose
     n = len(rec.frames)
-    a1, a12 = q[:, 0], q[:, 0] + q[:, 1]
-    elbow = np.stack([p.link1_m * np.cos(a1), p.link1_m * np.sin(a1)], axis=1)
-    wrist = elbow + np.stack([p.link2_m * np.cos(a12), p.link2_m * np.sin(a12)], axis=1)
+    elbow_xy, wrist_xy = kinematics.elbow_and_wrist_xy(p, q.T)  # in the profile's own frame
+    elbow, wrist = np.stack(elbow_xy, axis=1), np.stack(wrist_xy, axis=1)
     out = np.zeros((n, 5, 3))
     out[:, 1, 2] = p.shoulder_height_m
     out[:, 2, :2], out[:, 2, 2] = elbow, p.elbow_height_m

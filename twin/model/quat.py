@@ -1,8 +1,11 @@
-"""Quaternion arithmetic on (x, y, z, w) tuples: pure math, shared by the recorders and the remote API."""
+"""Quaternion arithmetic on (x, y, z, w): tuples, and numpy columns of them (quat_mul_columns). The one
+place for rotation math, shared by the recorders, the viewer and the remote API."""
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 Quat = tuple[float, float, float, float]
 
@@ -33,3 +36,15 @@ def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, 
     """The vector v turned by the unit quaternion q."""
     x, y, z, _ = quat_mul(quat_mul(q, (v[0], v[1], v[2], 0.0)), (-q[0], -q[1], -q[2], q[3]))
     return (x, y, z)
+
+
+def quat_mul_columns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """quat_mul over arrays of quaternions (x, y, z, w), broadcast over leading axes."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b), -1, 0)
+    return np.stack([
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ], axis=-1)

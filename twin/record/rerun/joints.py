@@ -12,24 +12,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.errors import RecordingError
-from twin.model.quat import quat_from_rpy, rotate
+from twin.model.quat import quat_from_rpy, quat_mul_columns, rotate
 
 if TYPE_CHECKING:
     from rerun.urdf import UrdfJoint
 
 MOVING_TYPES = ("revolute", "continuous", "prismatic")
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (x, y, z, w), broadcast over leading axes (twin.quat's, vectorized)."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -70,4 +58,4 @@ class JointMotion:
             return translations, quaternions
         half = 0.5 * values[:, None]
         about_axis = np.concatenate([np.sin(half) * self.axis, np.cos(half)], axis=1)
-        return np.broadcast_to(self.origin_xyz, (n, 3)), quat_mul(self.origin_quat, about_axis)
+        return np.broadcast_to(self.origin_xyz, (n, 3)), quat_mul_columns(self.origin_quat, about_axis)

@@ -80,12 +80,16 @@ def ik_branches(profile: RobotProfile, x_m: float, y_m: float) -> list[ArmSoluti
     ignoring joint limits; [] if outside the outer circle."""
     l1, l2 = profile.link1_m, profile.link2_m
     s1, s2 = profile.axis_signs[0], profile.axis_signs[1]
-    r2 = x_m * x_m + y_m * y_m
-    c2 = (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
-    if c2 > 1.0 + 1e-12 or c2 < -1.0 - 1e-12:
+    r = math.hypot(x_m, y_m)
+    c2 = (r * r - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)  # cosine of the elbow's bend
+    # 1 + c2 and 1 - c2 as products, not from c2: near a folded or straight arm c2 rounds to -1 or 1 and
+    # its sine would vanish (a target 2 nm from the base of equal links came back 2 nm off)
+    one_plus = (r - abs(l1 - l2)) * (r + abs(l1 - l2)) / (2.0 * l1 * l2)
+    one_minus = (l1 + l2 - r) * (l1 + l2 + r) / (2.0 * l1 * l2)
+    if one_minus < -1e-12 or one_plus < -1e-12:
         return []
     c2 = min(1.0, max(-1.0, c2))
-    s2_abs = math.sqrt(max(0.0, 1.0 - c2 * c2))
+    s2_abs = math.sqrt(max(0.0, one_plus * one_minus))
     out = []
     for sign in (1, -1):  # the sign of the elbow's joint value
         bend = math.atan2(sign * s2 * s2_abs, c2)  # the elbow's geometric angle on this branch

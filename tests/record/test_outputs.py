@@ -8,7 +8,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -18,17 +17,8 @@ import twin
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
-TWIN = [shutil.which("twin")] if shutil.which("twin") else [sys.executable, "-m", "twin.cli"]
-
-ENDLESS = '''
-def run(twin):
-    i = 0
-    while True:
-        twin.move_to(*[(0.5, 0.2), (0.3, 0.6)][i % 2], settle=False)
-        twin.wait(0.25)
-        print(f"t_s={twin.t_s!r}", flush=True)
-        i += 1
-'''
+from support.cli import ENDLESS_TASK as ENDLESS
+from support.cli import TWIN
 
 
 def _twin(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:

@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import mmap
 import os
-import shutil
 import signal
 import struct
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,17 +20,8 @@ from twin.record.mcap import schemas as S
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
-TWIN = [shutil.which("twin")] if shutil.which("twin") else [sys.executable, "-m", "twin.cli"]
-
-ENDLESS = '''
-def run(twin):
-    i = 0
-    while True:
-        twin.move_to(*[(0.5, 0.2), (0.3, 0.6)][i % 2], settle=False)
-        twin.wait(0.25)
-        print(f"t_s={twin.t_s!r}", flush=True)
-        i += 1
-'''
+from support.cli import ENDLESS_TASK as ENDLESS
+from support.cli import TWIN
 
 # The simulated time every 2 steps into a shared page (no system call): after a kill -9 it says how
 # far the twin had come.

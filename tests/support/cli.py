@@ -2,9 +2,25 @@
 
 from __future__ import annotations
 
+import shutil
 import socket
+import sys
 
 from twin.cli import main
+
+# the installed `twin` executable, or the same command through this interpreter
+TWIN = [shutil.which("twin")] if shutil.which("twin") else [sys.executable, "-m", "twin.cli"]
+
+# a task file that never ends (signals, --timeout, re-record kills): it moves and reports simulated time
+ENDLESS_TASK = '''
+def run(twin):
+    i = 0
+    while True:
+        twin.move_to(*[(0.5, 0.2), (0.3, 0.6)][i % 2], settle=False)
+        twin.wait(0.25)
+        print(f"t_s={twin.t_s!r}", flush=True)
+        i += 1
+'''
 
 
 def twin(capsys, *argv) -> tuple[int, str, str]:

@@ -54,6 +54,13 @@ class BenchContext:
             samples.append(count / (time.perf_counter() - t0))
         return statistics.median(samples)
 
+    def rate_figures(self, name: str, steps_per_s: float) -> None:
+        """NAME_steps_per_s and its ratios to both baselines (NAME_vs_idle, NAME_vs_motion) for --json."""
+        self.figures[f"{name}_steps_per_s"] = steps_per_s
+        self.figures[f"{name}_vs_idle"] = steps_per_s / self.physics_steps_per_s
+        if self.motion_physics_steps_per_s:
+            self.figures[f"{name}_vs_motion"] = steps_per_s / self.motion_physics_steps_per_s
+
     def ratio(self, steps_per_s: float) -> str:
         """A step rate with its ratios to both physics-only baselines, e.g. '31,250 (0.45x idle, 0.78x motion)'."""
         text = f"{steps_per_s:,.0f} ({steps_per_s / self.physics_steps_per_s:.2f}x idle"

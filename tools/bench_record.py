@@ -77,14 +77,6 @@ def _have_rerun_writer() -> bool:
     return True
 
 
-def _figures(ctx, name: str, steps_per_s: float) -> None:
-    """NAME_steps_per_s and its ratios to both baselines (NAME_vs_idle, NAME_vs_motion) for --json."""
-    ctx.figures[f"{name}_steps_per_s"] = steps_per_s
-    ctx.figures[f"{name}_vs_idle"] = steps_per_s / ctx.physics_steps_per_s
-    if ctx.motion_physics_steps_per_s:
-        ctx.figures[f"{name}_vs_motion"] = steps_per_s / ctx.motion_physics_steps_per_s
-
-
 def bench(ctx) -> list[tuple[str, str]]:
     repeats = max(1, int(ctx.repeats))
     modes = {"twin, no recording": (False, False), "twin + MCAP": (True, False)}
@@ -108,13 +100,13 @@ def bench(ctx) -> list[tuple[str, str]]:
             rows.append((f"{name}: steps/s (ratio to physics-only)",
                          f"{ctx.ratio(rates[name])}; CPU {cpu_us[name]:.1f} us/step"))
         plain, with_mcap = rates["twin, no recording"], rates["twin + MCAP"]
-        _figures(ctx, "record_mcap", with_mcap)
+        ctx.rate_figures("record_mcap", with_mcap)
         rows.append(("twin + MCAP: speed relative to no recording (wall; CPU)",
                      f"{with_mcap / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP']:.2f}x"))
         rows.append(("MCAP recorder cost per step (wall, in the run)", f"{(1 / with_mcap - 1 / plain) * 1e6:.2f} us"))
         if "twin + MCAP + Rerun" in rates:
             both = rates["twin + MCAP + Rerun"]
-            _figures(ctx, "record_both", both)
+            ctx.rate_figures("record_both", both)
             rows.append(("twin + MCAP + Rerun: speed relative to no recording (wall; CPU)",
                          f"{both / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"))
             rows.append(("MCAP + Rerun recorders cost per step (wall, in the run)",

@@ -68,9 +68,7 @@ def bench(ctx) -> list[tuple[str, str]]:
     idle_rate = statistics.median(_idle_rate() for _ in range(repeats))
     build_ms = statistics.median(_build_ms() for _ in range(repeats))
     sim_s = steps * TwinConfig().dt_ns * 1e-9
-    ctx.figures.update(twin_steps_per_s=run_rate, twin_vs_idle=run_rate / physics)
-    if ctx.motion_physics_steps_per_s:
-        ctx.figures["twin_vs_motion"] = run_rate / ctx.motion_physics_steps_per_s
+    ctx.rate_figures("twin", run_rate)
     return [
         (f"pick_place {CYCLES} cycles, no recording: steps/s (ratio to physics-only)",
          ctx.ratio(run_rate)),

@@ -3,6 +3,15 @@
 from __future__ import annotations
 
 
+def exception_text(err: BaseException) -> str:
+    """str(err), or a stand-in when the exception cannot print itself (a user's class whose __str__
+    raises, or a message holding a value too large to print). Never raises."""
+    try:
+        return str(err)
+    except Exception as inner:  # noqa: BLE001 - any failure of __str__
+        return f"<unprintable: its __str__ raised {type(inner).__name__}>"
+
+
 class TwinError(Exception):
     """Base of every error the twin reports to a user (the CLI prints it as one line)."""
 

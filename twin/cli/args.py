@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 
 from twin.model.config import TwinConfig, dt_ns_from_hz
@@ -32,6 +33,22 @@ def whole_number(minimum: int = 1) -> Callable[[str], int]:
             value = minimum - 1
         if value < minimum:
             raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= {minimum}")
+        return value
+
+    return parse
+
+
+def seconds(name: str, *, allow_zero: bool) -> Callable[[str], float]:
+    """An argparse type: a finite number of seconds of simulated time, > 0 (or >= 0 with allow_zero)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = -1.0
+        if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+            raise argparse.ArgumentTypeError(f"{name} {text!r} is invalid; expected seconds of simulated time "
+                                             f"{'>=' if allow_zero else '>'} 0")
         return value
 
     return parse

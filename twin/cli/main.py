@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
 
-from twin.cli.args import add_twin_options, twin_config, whole_number
+from twin.cli.args import add_twin_options, seconds, twin_config, whole_number
 from twin.cli.compare import add_compare_commands
 from twin.cli.record import add_record_commands, add_record_options, record_paths
 from twin.cli.serve import add_serve_command
@@ -55,12 +54,6 @@ class _Summary(Sink):
 
     def __init__(self) -> None:
         self.events = []
-
-    def on_frame(self, frame) -> None:
-        pass
-
-    def on_command(self, command) -> None:
-        pass
 
     def on_event(self, event) -> None:
         self.events.append(event)
@@ -115,16 +108,6 @@ def _add_teleop_parser(sub) -> None:
     p.set_defaults(func=cmd_teleop)
 
 
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"--timeout {text!r} is invalid; expected seconds of simulated time > 0")
-    return value
-
-
 class _OneLineErrors(argparse.ArgumentParser):
     """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit it."""
 
@@ -139,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("task")
     add_twin_options(p)
     p.add_argument("--cycles", type=whole_number(1), default=2, help="pick-and-place cycles (default 2)")
-    p.add_argument("--timeout", type=_positive_seconds, metavar="SECONDS",
+    p.add_argument("--timeout", type=seconds("--timeout", allow_zero=False), metavar="SECONDS",
                    help="end the task with an error (exit 1) once it passes this much simulated time")
     add_record_options(p)
     p.set_defaults(func=cmd_run)

@@ -6,6 +6,7 @@ import argparse
 
 from twin.cli.args import add_twin_options, port, twin_config
 from twin.cli.record import add_record_options, record_paths
+from twin.remote import DEFAULT_STEP_GRACE_S, STEP_GRACE_RANGE_S
 
 SERVE_HELP = """\
 Serve CoppeliaSim's ZeroMQ remote API (protocol v2) so its official Python client
@@ -35,9 +36,10 @@ def add_serve_command(sub) -> None:
                       help="advance only on sim.step()")
     p.set_defaults(mode="realtime")
     p.add_argument("--speed", type=float, default=1.0, help="--realtime: simulated seconds per wall second (default 1)")
-    p.add_argument("--step-grace", type=float, default=10.0, metavar="SECONDS",
+    low, high = STEP_GRACE_RANGE_S
+    p.add_argument("--step-grace", type=float, default=DEFAULT_STEP_GRACE_S, metavar="SECONDS",
                    help="a stepping client silent this long no longer holds back the others' sim.step() "
-                        "(default 10; 0.01..3600)")
+                        f"(default {DEFAULT_STEP_GRACE_S:g}; {low:g}..{high:g})")
     p.add_argument("--start", action="store_true", help="start the simulation at launch, like pressing Play")
     add_record_options(p, record_by_default=True)
     p.set_defaults(func=cmd_serve)

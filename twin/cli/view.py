@@ -3,21 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 
-from twin.cli.args import port
+from twin.cli.args import port, seconds
 from twin.record.outputs import check_output
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"time {text!r} is invalid; expected seconds of simulated time >= 0")
-    return value
 
 
 def add_view_command(sub: argparse._SubParsersAction) -> None:
@@ -34,7 +23,7 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
                    help="web viewer (HTTP) port with --web (default: a free one)")
     p.add_argument("--grpc-port", type=port(allow_any=True), default=0,
                    help="port of the viewer's gRPC server, which streams the recording (default: a free one)")
-    p.add_argument("--at", type=_seconds, metavar="SECONDS",
+    p.add_argument("--at", type=seconds("time", allow_zero=True), metavar="SECONDS",
                    help="with --screenshot: the simulated time to show (default: the end of the first hold)")
     p.set_defaults(func=cmd_view)
 

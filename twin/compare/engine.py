@@ -20,7 +20,7 @@ from twin.compare.metrics import REVOLUTE, abs_error, differs, discrete_error, j
 from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
 from twin.errors import RecordingError, TwinError
 from twin.model.fields import COMPARED
-from twin.model.recording import META_FINALIZED, Recording
+from twin.model.recording import Recording
 from twin.model.types import Command
 
 # a joint field's unit for a revolute joint, and for the prismatic Z joint ("rad|m" in model.fields)
@@ -368,17 +368,8 @@ def likely_cause(commands: list[Command], step: int) -> str:
     return _command_text(max(before, key=lambda c: c.step)) if before else ""
 
 
-def task_outcome(rec: Recording) -> str:
-    """How the run's task ended: the finalized outcome in its file (ok, error, interrupted), and error
-    whenever a task_error event says so (a run kept in memory has only its events)."""
-    outcome = str((rec.meta.get(META_FINALIZED) or {}).get("outcome", "ok"))
-    if any(e.kind == "task_error" for e in rec.events) and outcome == "ok":
-        outcome = "error"
-    return outcome
-
-
 def _task_stat(golden: Recording, candidate: Recording, tolerance: float, last_step: int, dt_ns: int) -> FieldStat:
-    a, b = task_outcome(golden), task_outcome(candidate)
+    a, b = golden.outcome, candidate.outcome
     stat = FieldStat("outcome.task", "", tolerance, float(a != b), last_step, "", float(a != b),
                      int(a != b and tolerance != INF))
     if a != b and tolerance != INF:
@@ -402,22 +393,10 @@ def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) 
     return stats
 
 
-def recorded_rate(rec: Recording) -> int:
-    """Every how many physics steps the file keeps a frame (1: every step)."""
-    try:
-        rate = int((rec.meta.get("twin.recording") or {}).get("rate_steps", 1))
-    except (TypeError, ValueError):
-        rate = 1
-    steps = rec.frames.step
-    if rate <= 1 and len(steps) > 2:
-        rate = int(np.min(np.diff(steps[:-1]))) if len(steps) > 2 else 1
-    return max(1, rate)
-
-
 def _decimation_notes(golden: Recording, candidate: Recording, compared: int) -> list[str]:
     notes = []
     for name, rec in (("golden", golden), ("candidate", candidate)):
-        rate = recorded_rate(rec)
+        rate = rec.rate_steps
         if rate > 1:
             notes.append(f"the {name} is decimated (a frame every {rate} steps): frames compare on the {compared} "
                          "steps both files keep; commands, events and final poses compare at every step")

@@ -9,6 +9,7 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 
 from twin.errors import ConfigError
+from twin.model.json_values import all_finite
 from twin.model.keymaps import validate_keymap
 from twin.model.profiles import PROFILES, RobotProfile
 
@@ -197,17 +198,6 @@ def _record(value: object, schema: dict, where: str) -> dict:
     return out
 
 
-def _finite_json(value: object) -> bool:
-    """No NaN or infinity anywhere inside (free-form fields: extra, keymap)."""
-    if isinstance(value, float):
-        return math.isfinite(value)
-    if isinstance(value, dict):
-        return all(_finite_json(v) for v in value.values())
-    if isinstance(value, list):
-        return all(_finite_json(v) for v in value)
-    return True
-
-
 def _field(value: object, spec: Field, where: str) -> object:
     kind = spec.kind
     if isinstance(kind, dict):
@@ -240,7 +230,7 @@ def _field(value: object, spec: Field, where: str) -> object:
             raise _bad(where, value, spec)
         return value
     if kind == "dict":
-        if not isinstance(value, dict) or not _finite_json(value):
+        if not isinstance(value, dict) or not all_finite(value):
             raise _bad(where, value, spec)
         return value
     if isinstance(value, bool) or not isinstance(value, int if kind == "int" else (int, float)):

@@ -171,19 +171,13 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
             raise _bad(src, key, action, f"signal value {value!r} is invalid; expected an integer")
         return [op, name, value]
     joint_name = action[1]
-    try:
-        joint = profile.joint_index(joint_name) if isinstance(joint_name, str) else -1
-    except UnknownName:
-        joint = -1
-    if joint < 0:
-        raise _bad(src, key, action, f"unknown joint {joint_name!r}; expected one of {', '.join(ROLES)} "
-                                     f"or {', '.join(profile.joint_names)}")
+    joint = _joint(src, key, action, joint_name, profile)
     if op == "jog_keep_heading" and ROLES[joint] not in ("shoulder", "elbow"):
         raise _bad(src, key, action, f"keeping the heading needs the shoulder or elbow, not {joint_name!r}")
     if op == "target" and (action[2] in ("min", "max") or action[2] in ("down", "up") and ROLES[joint] == "z"):
         return [op, ROLES[joint], action[2]]
     if op == "diff":
-        return [op, ROLES[joint], *(_role(src, key, action, name, profile) for name in action[2:4])]
+        return [op, ROLES[joint], *(ROLES[_joint(src, key, action, name, profile)] for name in action[2:4])]
     if op == "add":
         if action[3] not in HOW:
             raise _bad(src, key, action, f"how {action[3]!r} is invalid; expected one of {', '.join(HOW)}")
@@ -191,14 +185,15 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
     return [op, ROLES[joint], _value(src, key, action, action[2], joint)]
 
 
-def _role(src: str, key: str, action: list, name: object, profile: RobotProfile) -> str:
-    """The role of a joint named in a "diff" action."""
+def _joint(src: str, key: str, action: list, name: object, profile: RobotProfile) -> int:
+    """The role index of a joint an action names (by role or by the profile's own name)."""
     try:
         if isinstance(name, str):
-            return ROLES[profile.joint_index(name)]
+            return profile.joint_index(name)
     except UnknownName:
         pass
-    raise _bad(src, key, action, f"unknown joint {name!r}; expected one of {', '.join(ROLES)}")
+    raise _bad(src, key, action, f"unknown joint {name!r}; expected one of {', '.join(ROLES)} "
+                                 f"or {', '.join(profile.joint_names)}")
 
 
 def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in)") -> dict:

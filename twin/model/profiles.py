@@ -102,11 +102,6 @@ class RobotProfile:
         """The Z joint value of the scene's "down": the pad on a 50 mm box standing on the floor."""
         return float(self.z_down_m)
 
-    def z_bottom(self) -> float:
-        """The Z joint value at the stroke's lowering end (the pad as low as it goes)."""
-        lo, hi = self.joint_limits()[2]
-        return hi if self.axis_signs[2] > 0 else lo
-
     def z_up(self) -> float:
         """The Z joint value of the scene's "up" (the arm travels there)."""
         return float(self.z_up_m)

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.types import Command, Event
 
 META_FINALIZED = "twin.finalized"  # the metadata record a cleanly closed file ends with (outcome, error)
+META_RECORDING = "twin.recording"  # the recording's layout: rate_steps, block_frames, ...
 
 
 @dataclass
@@ -29,3 +32,25 @@ class Recording:
     urdf: str = ""
     path: str = ""
     assets: dict[str, bytes] = field(default_factory=dict)  # attachments: robot.urdf and meshes, by name
+
+    @property
+    def outcome(self) -> str:
+        """How the run's task ended: the finalized outcome in its file (ok, error, interrupted), and
+        error whenever a task_error event says so (a run kept in memory has only its events)."""
+        outcome = str((self.meta.get(META_FINALIZED) or {}).get("outcome", "ok"))
+        if outcome == "ok" and any(e.kind == "task_error" for e in self.events):
+            outcome = "error"
+        return outcome
+
+    @property
+    def rate_steps(self) -> int:
+        """Every how many physics steps the file keeps a frame (1: every step): its layout metadata,
+        or, without it, the frames' own spacing."""
+        try:
+            rate = int((self.meta.get(META_RECORDING) or {}).get("rate_steps", 1))
+        except (TypeError, ValueError):
+            rate = 1
+        steps = self.frames.step
+        if rate <= 1 and len(steps) > 2:
+            rate = int(np.min(np.diff(steps[:-1])))
+        return max(1, rate)

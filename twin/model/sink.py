@@ -23,3 +23,14 @@ class Sink:
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         pass
+
+
+def close_all(sinks, outcome: str, error: str) -> Exception | None:
+    """Close every sink with the run's outcome, even when one fails; the first failure, or None."""
+    first: Exception | None = None
+    for sink in sinks:
+        try:
+            sink.close(outcome=outcome, error=error)
+        except Exception as err:  # noqa: BLE001 - keep closing the others
+            first = first or err
+    return first

@@ -34,6 +34,17 @@ class Frame(NamedTuple):
     object_poses: tuple[Pose, ...]  # per scene object, in scene order
 
 
+# Each Command kind and its arguments (the Twin applies these; a recording's JSON Schema names them)
+COMMAND_ARGS: dict[str, tuple[str, ...]] = {
+    "joint_target": ("joint", "q"),
+    "joint_position": ("joint", "q"),
+    "joint_max_velocity": ("joint", "v"),
+    "signal": ("name", "value"),
+    "key": ("key",),
+    "event": ("kind", "body", "message", "data"),  # what a task or client said
+}
+
+
 @dataclass(frozen=True, slots=True)
 class Command:
     """An input, applied before the physics step that starts at `step`.

@@ -6,9 +6,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.errors import TwinError
+from twin.errors import TwinError, exception_text
 from twin.model.config import TwinConfig
-from twin.model.sink import Sink
+from twin.model.sink import close_all
 from twin.robot.urdf import mesh_paths, urdf_text
 from twin.signals import Terminated
 
@@ -42,63 +42,26 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
 
             sinks.append(RerunRecorder(rrd_path, config, urdf))
     except BaseException as err:
-        _note(err, _close_all(sinks, "error", "recording could not start"))
+        _note(err, close_all(sinks, "error", "recording could not start"))
         raise
-    said = _TaskErrors()
-    sinks.append(said)
     try:
         yield sinks
     except (KeyboardInterrupt, Terminated) as err:
         why = str(err) if isinstance(err, Terminated) else "KeyboardInterrupt"  # SIGTERM, SIGHUP
-        _note(err, _close_all(sinks, "interrupted", why))
+        _note(err, close_all(sinks, "interrupted", why))
         raise
     except BaseException as err:
-        _note(err, _close_all(sinks, "error", _error_text(err)))
+        _note(err, close_all(sinks, "error", _error_text(err)))
         raise
-    failure = _close_all(sinks, *said.outcome())  # a task error the caller suppressed is still an error
+    failure = close_all(sinks, "ok", "")  # a task error the caller suppressed: the MCAP writer says error
     if failure is not None:
         raise failure
 
 
-class _TaskErrors(Sink):
-    """A sink that remembers the first task_error, so a run whose task raised is never finalized as ok,
-    even when the caller caught the exception (twin check records a crashing task as a run to compare)."""
-
-    def __init__(self) -> None:
-        self.error = ""
-
-    def on_frame(self, frame) -> None:
-        pass
-
-    def on_command(self, command) -> None:
-        pass
-
-    def on_event(self, event) -> None:
-        if event.kind == "task_error" and not self.error:
-            self.error = event.message or "task error"
-
-    def outcome(self) -> tuple[str, str]:
-        return ("error", self.error) if self.error else ("ok", "")
-
-
 def _error_text(err: BaseException) -> str:
-    """The exception as the finalized marker's one line; even one whose __str__ itself raises."""
-    try:
-        text = str(err)
-    except Exception as inner:  # noqa: BLE001 - a user's exception class may be broken
-        text = f"<unprintable: its __str__ raised {type(inner).__name__}>"
+    """The exception as the finalized marker's one line, its type named unless it is one of ours."""
+    text = exception_text(err)
     return text if isinstance(err, TwinError) else f"{type(err).__name__}: {text}"
-
-
-def _close_all(sinks: list, outcome: str, error: str) -> Exception | None:
-    """Close every sink even if one fails; return the first failure."""
-    first: Exception | None = None
-    for sink in sinks:  # every sink closes the same way (model.sink.Sink)
-        try:
-            sink.close(outcome=outcome, error=error)
-        except Exception as err:  # noqa: BLE001 - keep closing the others
-            first = first or err
-    return first
 
 
 def _note(err: BaseException, failure: Exception | None) -> None:

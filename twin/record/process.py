@@ -20,7 +20,7 @@ from pathlib import Path
 
 from twin.errors import RecordingError
 from twin.model.config import TwinConfig
-from twin.model.sink import Sink
+from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
 
 BATCH_S = 32 / 240  # simulated time per pipe write: 32 frames at 240 Hz
@@ -197,14 +197,9 @@ def _feed(items: list[tuple], sinks: list) -> None:
 
 
 def _close_all(sinks: list, outcome: str, error: str) -> str:
-    """Finish every writer with the run's outcome; the first failure, or ''."""
-    failure = ""
-    for sink in sinks:
-        try:
-            sink.close(outcome=outcome, error=error)
-        except Exception as err:  # noqa: BLE001 - keep closing the others, report the first
-            failure = failure or str(err)
-    return failure
+    """Finish every writer with the run's outcome; the first failure as text, or ''."""
+    failure = close_all(sinks, outcome, error)
+    return str(failure) if failure is not None else ""
 
 
 def _abandon(sinks: list) -> None:

@@ -15,6 +15,8 @@ from typing import Any
 
 import cbor2
 
+from twin.errors import exception_text
+
 PROTOCOL_VERSION = 2
 # Limits on what a client may send (README, "Remote control"); over each, the client gets an error reply.
 MAX_REQUEST_BYTES = 1 << 20  # a real request is a few hundred bytes; 1 MiB is generous
@@ -148,11 +150,7 @@ def _check_item_count(raw: bytes) -> None:
 
 def safe_str(err: BaseException, limit: int = 200) -> str:
     """An exception's message, escaped and cut to `limit` characters; never raises."""
-    try:
-        text = str(err)
-    except Exception:  # noqa: BLE001 - e.g. a message holding a value too large to print
-        return "(message not printable)"
-    return printable(text, limit)
+    return printable(exception_text(err), limit)
 
 
 def printable(text: str, limit: int = MAX_TEXT_CHARS) -> str:

@@ -26,6 +26,7 @@ from zmq.utils.monitor import parse_monitor_message
 
 from twin.errors import ConfigError, TwinError
 from twin.model.config import TwinConfig
+from twin.remote import DEFAULT_STEP_GRACE_S, STEP_GRACE_RANGE_S
 from twin.remote.protocol import (
     EMPTY_REPLY,
     MAX_FRAME_BYTES,
@@ -51,8 +52,6 @@ MODES = ("realtime", "stepped")
 IDLE_POLL_S = 0.1
 MAX_LAG_S = 0.25  # simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
 DEFAULT_CLIENT_TIMEOUT_S = 600.0
-DEFAULT_STEP_GRACE_S = 10.0  # a stepping client silent this long no longer holds the others back
-STEP_GRACE_RANGE_S = (0.01, 3600.0)
 WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
 MAX_CLIENTS = 64  # uuids served at once; a client is forgotten when its connection closes or it times out
 MAX_CLIENTS_PER_CONNECTION = 4  # the official client sends one uuid per connection

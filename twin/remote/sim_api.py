@@ -196,7 +196,7 @@ class SimApi:
         j = self._joint(handle)
         q = self.scene.twin.frame.joint_q[j]
         if self.scene.twin.profile.revolute_cyclic and ROLES[j] != "z":
-            q = math.remainder(q, 2.0 * math.pi)
+            q = kinematics.wrap_rad(q)
         return q
 
     def get_joint_target_position(self, handle: int) -> float:

@@ -27,7 +27,7 @@ class SuctionEvent:
 
 class Suction:
     def __init__(self, params: SuctionParams, pad_length_m: float, world: World,
-                 object_sizes_m: tuple[tuple[float, float, float], ...] = ()) -> None:
+                 object_sizes_m: tuple[tuple[float, float, float], ...]) -> None:
         self.params = params
         self.world = world
         self.pad_length_m = pad_length_m
@@ -76,7 +76,7 @@ class Suction:
 
     def _inside(self, frame: Frame, point: tuple[float, float, float]) -> int:
         """The first scene object (a box) whose volume holds point, or NO_BODY."""
-        for i, (half, pose) in enumerate(zip(self.object_half_m, frame.object_poses, strict=False)):
+        for i, (half, pose) in enumerate(zip(self.object_half_m, frame.object_poses, strict=True)):
             conj = (-pose[3], -pose[4], -pose[5], pose[6])
             local = rotate(conj, (point[0] - pose[0], point[1] - pose[1], point[2] - pose[2]))
             if all(abs(c) <= h for c, h in zip(local, half, strict=True)):

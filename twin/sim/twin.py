@@ -15,7 +15,7 @@ from typing import Any
 from twin.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.config import TwinConfig
 from twin.model.sink import Sink
-from twin.model.types import NO_BODY, Command, Event, Frame
+from twin.model.types import COMMAND_ARGS, NO_BODY, Command, Event, Frame
 from twin.robot import kinematics
 from twin.sim.suction import Suction
 from twin.sim.world import World
@@ -42,7 +42,7 @@ class Twin:
         self._max_velocities = list(self._world.max_velocities())
         self._limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
-        self.key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
+        self._key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
         self._said: Event | None = None  # the Event the last `event` Command emitted
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
@@ -168,7 +168,9 @@ class Twin:
     def _emit(self, kind: str, body: str = "", message: str = "", data: dict | None = None) -> Event:
         """An Event the twin itself raises while stepping or applying a Command (attach, release,
         joint_limit, ...): replay regenerates these, so they are not Commands."""
-        ev = Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {}))
+        return self._send(Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {})))
+
+    def _send(self, ev: Event) -> Event:
         for s in self.sinks:
             s.on_event(ev)
         return ev
@@ -185,7 +187,7 @@ class Twin:
         handler = _HANDLERS.get(command.kind)
         if handler is None:
             raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(_HANDLERS)}")
-        expected = _ARGS[command.kind]
+        expected = COMMAND_ARGS[command.kind]
         if not isinstance(command.args, dict) or sorted(command.args) != sorted(expected):
             raise ConfigError(f"{command.kind} command at step {command.step} has arguments {command.args!r:.80}; "
                               f"expected {', '.join(expected)}")
@@ -379,7 +381,8 @@ def _do_event(twin: Twin, args: dict) -> None:
         raise TypeError("kind, body and message must be strings (kind non-empty)")
     if not isinstance(data, dict):
         raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
-    twin._said = twin._emit(kind, body, message, data)
+    # data is plain JSON already: made so by event(), or read from a recording
+    twin._said = twin._send(Event(twin.step_index, twin.t_ns, kind, body, message, data))
 
 
 def _do_key(twin: Twin, args: dict) -> None:
@@ -414,13 +417,13 @@ def _do_key(twin: Twin, args: dict) -> None:
             _do_joint_position(twin, {"joint": twin._joint(action[1]), "q": float(action[2])})
         elif op == "add":
             j = twin._joint(action[1])
-            twin.key_values[j] = twin.key_values.get(j, 0.0) + float(action[2])
+            twin._key_values[j] = twin._key_values.get(j, 0.0) + float(action[2])
             send = _do_joint_position if action[3] == "position" else _do_joint_target
-            send(twin, {"joint": j, "q": twin.key_values[j]})
+            send(twin, {"joint": j, "q": twin._key_values[j]})
         elif op == "diff":
             j, a, b = (twin._joint(name) for name in action[1:4])
-            twin.key_values[j] = twin.key_values.get(a, 0.0) - twin.key_values.get(b, 0.0)
-            _do_joint_target(twin, {"joint": j, "q": twin.key_values[j]})
+            twin._key_values[j] = twin._key_values.get(a, 0.0) - twin._key_values.get(b, 0.0)
+            _do_joint_target(twin, {"joint": j, "q": twin._key_values[j]})
         elif op == "signal":
             _do_signal(twin, {"name": action[1], "value": action[2]})
         elif op == "suction":
@@ -429,15 +432,7 @@ def _do_key(twin: Twin, args: dict) -> None:
             raise ConfigError(f"key {key!r}: unknown action {op!r}")
 
 
-_ARGS = {
-    "joint_target": ("joint", "q"),
-    "joint_position": ("joint", "q"),
-    "joint_max_velocity": ("joint", "v"),
-    "signal": ("name", "value"),
-    "key": ("key",),
-    "event": ("kind", "body", "message", "data"),
-}
-_HANDLERS = {
+_HANDLERS = {  # one per COMMAND_ARGS kind
     "joint_target": _do_joint_target,
     "joint_position": _do_joint_position,
     "joint_max_velocity": _do_joint_max_velocity,
@@ -445,3 +440,6 @@ _HANDLERS = {
     "key": _do_key,
     "event": _do_event,
 }
+
+if set(_HANDLERS) != set(COMMAND_ARGS):
+    raise ImportError("twin.sim.twin: a Command kind without a handler, or a handler without a kind")

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from twin.errors import ConfigError, TaskError, TaskTimeout, TwinError
+from twin.errors import ConfigError, TaskError, TaskTimeout, TwinError, exception_text
 from twin.model.sink import Sink
 from twin.tasks import pick_place, seed000, seed001, seed002
 
@@ -59,22 +59,14 @@ def run_task(twin, fn: TaskFn, params: dict) -> None:
         twin.event("task_error", message=f"{type(err).__name__}: {err}")
         raise
     except SystemExit as err:
-        text = f"the task called sys.exit({_text(err)}) instead of returning"
+        text = f"the task called sys.exit({exception_text(err)}) instead of returning"
         twin.event("task_error", message=f"SystemExit: {text}")
         raise TaskError(text) from err
     except Exception as err:
-        text = f"{type(err).__name__}: {_text(err)}"
+        text = f"{type(err).__name__}: {exception_text(err)}"
         twin.event("task_error", message=text)
         raise TaskError(f"task raised {text}") from err
     twin.event("task_end")
-
-
-def _text(err: Exception) -> str:
-    """str(err), or a stand-in when the task's exception class cannot print itself (its __str__ raises)."""
-    try:
-        return str(err)
-    except Exception as inner:  # noqa: BLE001 - any failure of a user's __str__
-        return f"<unprintable: its __str__ raised {type(inner).__name__}>"
 
 
 class TimeLimit(Sink):
@@ -91,9 +83,3 @@ class TimeLimit(Sink):
         if frame.t_ns > self._limit_ns:
             raise TaskTimeout(f"task ran past --timeout {self.limit_s:g} s of simulated time "
                               f"(stopped at t = {frame.t_ns * 1e-9:.3f} s)")
-
-    def on_command(self, command) -> None:
-        pass
-
-    def on_event(self, event) -> None:
-        pass

@@ -21,7 +21,7 @@ from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
 from twin.model.keymaps import WAIT, keymap_for, parse_keys, quit_keys
 from twin.model.sink import Sink
-from twin.model.types import Command, Event, Frame
+from twin.model.types import Event
 from twin.robot.profile_files import get_profile
 from twin.sim.twin import Twin
 
@@ -46,12 +46,6 @@ class EventLog(Sink):
     def __init__(self, size: int = 6) -> None:
         self.recent: deque[Event] = deque(maxlen=size)
         self.counts: dict[str, int] = {}
-
-    def on_frame(self, frame: Frame) -> None:
-        pass
-
-    def on_command(self, command: Command) -> None:
-        pass
 
     def on_event(self, event: Event) -> None:
         self.counts[event.kind] = self.counts.get(event.kind, 0) + 1

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from twin.compare.engine import compare, task_outcome
+from twin.compare.engine import compare
 from twin.compare.report import first_line, render_text
 from twin.compare.tolerances import Tolerances
 from twin.errors import ConfigError, TwinError
@@ -57,7 +57,7 @@ def task_run(task: str, params: dict, recording: str | os.PathLike | None) -> di
         if recording is not None:
             folder = Path(os.path.abspath(recording)).parent
             run["task"] = Path(os.path.relpath(os.path.abspath(task), folder)).as_posix()
-        run["task_sha256"] = hashlib.sha256(Path(task).read_bytes()).hexdigest()
+        run["task_sha256"] = _sha256(task)
     return run
 
 
@@ -109,19 +109,25 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
     tmp = Path(path).with_name(Path(path).name + ".tmp")
     try:
         golden = load(path)
+        recorded_sha, sha_now = (golden.run or {}).get("task_sha256"), _task_sha256_now(golden)
         if update:
-            with open_recorders(golden.config, _updated_run(golden), mcap_path=str(tmp), rate=_rate(golden)) as sinks:
+            run = dict(golden.run or {})
+            if sha_now not in (None, "missing"):
+                run["task_sha256"] = sha_now  # the rewrite holds the task file's source as it is now
+            with open_recorders(golden.config, run, mcap_path=str(tmp), rate=golden.rate_steps) as sinks:
                 new, kinds = rerun(golden, sinks=sinks)
         else:
             new, kinds = rerun(golden)
         result = compare(golden, new, tolerances, event_kinds=kinds)
-        result.notes += _task_changed(golden)
+        if sha_now is not None and sha_now != recorded_sha:
+            result.notes.append(f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
+                                f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)")
         report = render_text(result)
         if result.match:
             return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
         summary = first_line(result.first)
-        if update and task_outcome(new) != "ok" and not allow_error:
-            why = next((e.message for e in new.events if e.kind == "task_error"), task_outcome(new))
+        if update and new.outcome != "ok" and not allow_error:
+            why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
             return Outcome(path, "refused", 1, f"not rewritten: the re-run's task failed ({why}); the golden is "
                            "left as it was (--allow-error writes it anyway)", report, len(golden.frames),
                            time.perf_counter() - t0)
@@ -136,35 +142,18 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
         tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
 
 
-def _task_changed(golden: Recording) -> list[str]:
-    """A note when the golden's task file is no longer the source it was recorded with."""
+def _task_sha256_now(golden: Recording) -> str | None:
+    """The sha256 of the golden's task file as it is now ("missing" if it is gone); None when the
+    golden does not name a task file's hash."""
     run = golden.run or {}
-    recorded = run.get("task_sha256")
-    if not recorded or not golden.path:
-        return []
+    if not run.get("task_sha256") or not golden.path:
+        return None
     path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
-    now = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "missing"
-    if now == recorded:
-        return []
-    return [(f"the task file {run.get('task')!r} changed since the golden was recorded "
-             f"(sha256 {recorded[:12]}... then, {now[:12]}... now)")]
+    return _sha256(path) if path.is_file() else "missing"
 
 
-def _updated_run(golden: Recording) -> dict:
-    """golden's run description for its rewrite: the task file's sha256 as it is now."""
-    run = dict(golden.run or {})
-    if run.get("task_sha256") and golden.path:
-        path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
-        if path.is_file():
-            run["task_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return run
-
-
-def _rate(rec: Recording) -> int:
-    try:
-        return max(1, int(rec.meta.get("twin.recording", {}).get("rate_steps", 1)))
-    except (TypeError, ValueError):
-        return 1
+def _sha256(path: str | os.PathLike) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def golden_paths(paths: Sequence[str]) -> list[str]:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from twin.compare.engine import DiffResult, compare, task_outcome
+from twin.compare.engine import DiffResult, compare
 from twin.compare.report import render_text, write_report
 from twin.compare.tolerances import Tolerances
 from twin.model.recording import Recording
@@ -58,7 +58,7 @@ class GoldenChecker:
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)
             return result
-        if self.update and (allow_error or task_outcome(candidate) == "ok"):
+        if self.update and (allow_error or candidate.outcome == "ok"):
             save(candidate, golden_path)
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)

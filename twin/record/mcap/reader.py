@@ -143,8 +143,7 @@ def load(path: str | Path) -> Recording:
 def recording_from_scan(s: Scan) -> Recording:
     config = located_config(parse_config(s.metadata, repr(s.path)), s.path)
     topics = s.by_topic()
-    frames = decode_frames(topics.get(S.JOINTS.topic, []), topics.get(S.SUCTION.topic, []),
-                           topics.get(S.POSES.topic, []), len(config.objects), s.path)
+    frames = decode_frames(*(topics.get(t, []) for t in S.BLOCK_TOPICS.values()), len(config.objects), s.path)
     commands = [parse_command(m.data, s.path) for m in topics.get(S.COMMANDS.topic, [])]
     events = [parse_event(m.data, s.path) for m in topics.get(S.EVENTS.topic, [])]
     urdf = ""
@@ -156,7 +155,8 @@ def recording_from_scan(s: Scan) -> Recording:
     meta = {name: dict(record) for name, record in sorted(s.metadata.items())
             if name not in (S.META_CONFIG, S.META_RUN)}
     return Recording(config=config, frames=frames, commands=commands, events=events,
-                     run=parse_run(s.metadata, repr(s.path)), meta=meta, finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
+                     run=parse_run(s.metadata, repr(s.path)), meta=meta,
+                     finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
                      assets={a.name: a.data for a in s.attachments})
 
 
@@ -237,8 +237,7 @@ def decode_frames(joints: list[Message], suction: list[Message], poses: list[Mes
     n_joints = 4
     columns: dict[str, np.ndarray] = {}
     steps = []
-    for block, messages, topic in zip(F.BLOCKS, (joints, suction, poses), (S.JOINTS.topic, S.SUCTION.topic,
-                                                                          S.POSES.topic), strict=True):
+    for (block, topic), messages in zip(S.BLOCK_TOPICS.items(), (joints, suction, poses), strict=True):
         fields = [f for f in F.block_fields(block) if f.name == "step" or f.name not in columns]
         arrays = _columns(messages, [(f.number, f.wire) for f in fields], where, topic)
         for f, array in zip(fields, arrays, strict=True):

@@ -22,7 +22,7 @@ from twin.record.mcap.reader import Scan, block_steps, parse_command, parse_even
 from twin.record.metadata import parse_config
 from twin.record.outputs import check_output, final_path, partial_path, publish
 
-BLOCK_TOPICS = (S.JOINTS.topic, S.SUCTION.topic, S.POSES.topic)
+BLOCK_TOPICS = tuple(S.BLOCK_TOPICS.values())
 
 
 @dataclass

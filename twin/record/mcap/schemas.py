@@ -15,7 +15,8 @@ from functools import cache
 from google.protobuf import descriptor_pb2
 
 from twin.model import fields as F
-from twin.model.recording import META_FINALIZED  # noqa: F401 - one name for it, shared with compare
+from twin.model.recording import META_FINALIZED, META_RECORDING  # noqa: F401 - named once, in the model
+from twin.model.types import COMMAND_ARGS
 
 BLOCKS_PROTO = "twin/blocks.proto"
 
@@ -82,8 +83,7 @@ def _json_schema(properties: dict, required: list[str]) -> bytes:
 COMMAND_SCHEMA = _json_schema(
     {
         "step": {"type": "integer", "minimum": 0, "description": "physics step the command takes effect at"},
-        "kind": {"type": "string",
-                 "enum": ["joint_target", "joint_position", "joint_max_velocity", "signal", "key", "event"]},
+        "kind": {"type": "string", "enum": list(COMMAND_ARGS)},
         "args": {"type": "object", "description": "kind-specific arguments (joint, q, v, name, value, key; for an "
                                                   "event, what a task or client said: kind, body, message, data)"},
     },
@@ -131,11 +131,12 @@ ROBOT_DESCRIPTION = ChannelSpec("/robot_description", "std_msgs/String", "jsonsc
 
 # registration order fixes the schema and channel ids in every file
 CHANNELS = (ROBOT_DESCRIPTION, JOINTS, SUCTION, POSES, TF, LOG, EVENTS, COMMANDS)
+# block message -> its channel's topic, in model.fields' block order
+BLOCK_TOPICS = {block: next(c.topic for c in CHANNELS if c.schema_name == f"twin.{block}") for block in F.BLOCKS}
 
 # metadata record names
 META_CONFIG = "twin.config"
 META_RUN = "twin.run"
-META_RECORDING = "twin.recording"
 META_VERSIONS = "twin.versions"
 META_RECOVERED = "twin.recovered"
 LIBRARY = "twin-record 1"  # fixed: identical runs give byte-identical files

@@ -8,7 +8,8 @@ damaged. Deep nesting (a RecursionError in json) is refused the same way: one Va
 from __future__ import annotations
 
 import json
-import math
+
+from twin.model.json_values import all_finite
 
 
 def _no_constant(name: str) -> None:
@@ -20,19 +21,9 @@ def loads(text: str | bytes, *, constants: bool = False) -> object:
     constants: let NaN and infinities through, for a caller whose schema then names the field."""
     try:
         value = json.loads(text) if constants else json.loads(text, parse_constant=_no_constant)
-        if not constants:
-            _check_finite(value)
+        if not constants and not all_finite(value):
+            raise ValueError("a number in it is not finite (NaN or infinity)")
     except RecursionError as err:
         raise ValueError("JSON nested too deeply") from err
     return value
 
-
-def _check_finite(value: object) -> None:
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ValueError(f"number {value!r} is not finite")
-    if isinstance(value, dict):
-        for v in value.values():
-            _check_finite(v)
-    elif isinstance(value, list):
-        for v in value:
-            _check_finite(v)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import math
 import operator
 import os
 import struct
@@ -24,6 +23,7 @@ from mcap.writer import CompressionType, Writer
 from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.config import TwinConfig
+from twin.model.json_values import finite_or_null
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
@@ -46,17 +46,7 @@ def _json(value: object) -> bytes:
     try:
         return json.dumps(value, sort_keys=True, separators=(",", ":"), default=_plain, allow_nan=False).encode()
     except ValueError:
-        return json.dumps(_finite_or_null(value), sort_keys=True, separators=(",", ":"), default=_plain).encode()
-
-
-def _finite_or_null(value: object) -> object:
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite_or_null(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite_or_null(v) for v in value]
-    return value
+        return json.dumps(finite_or_null(value), sort_keys=True, separators=(",", ":"), default=_plain).encode()
 
 
 def _plain(value: object) -> object:
@@ -94,15 +84,16 @@ class McapRecorder(Sink):
         self._float_row = _row_packer(sum(s.stop - s.start for s in self._offsets.values()))
         self._int_fields = tuple(f.name for f in F.FRAME_FIELDS if f.wire != "<f8")
         self._ints_of = operator.attrgetter(*self._int_fields)
-        names = {"JointBlock": self._joint_names, "SuctionBlock": self._object_names, "PoseBlock": self._object_names}
-        topics = {"JointBlock": S.JOINTS.topic, "SuctionBlock": S.SUCTION.topic, "PoseBlock": S.POSES.topic}
-        self._blocks = tuple((topics[b], names[b], F.block_fields(b)[2:]) for b in F.BLOCKS)
+        names = {"JointBlock": self._joint_names}  # every other block names the scene's objects
+        self._blocks = tuple((topic, names.get(b, self._object_names), F.block_fields(b)[2:])
+                             for b, topic in S.BLOCK_TOPICS.items())
         self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
         self._last_frame: Frame | None = None
         self._last_written_step = -1
         self._last_flush_ns = 0
         self._sequence: dict[int, int] = {}
         self.frames_written = 0
+        self._task_error = ""  # the first task_error it saw: such a run is never finalized as ok
         self.closed = False
         if self.path.is_dir():
             raise RecordingError(f"cannot write recording {str(self.path)!r}: it is a folder; expected an .mcap path")
@@ -155,6 +146,8 @@ class McapRecorder(Sink):
         self._pending.append((command.step * self.config.dt_ns, self._channel[S.COMMANDS.topic], body))
 
     def on_event(self, event: Event) -> None:
+        if event.kind == "task_error" and not self._task_error:
+            self._task_error = event.message or "task error"
         full = _json({"step": event.step, "t_ns": event.t_ns, "kind": event.kind, "body": event.body,
                       "message": event.message, "data": event.data})
         self._pending.append((event.t_ns, self._channel[S.EVENTS.topic], full))
@@ -224,10 +217,13 @@ class McapRecorder(Sink):
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Write what is buffered (and the final frame, whatever the rate), the finalized marker, the
-        summary; fsync the file and rename it into place. Idempotent."""
+        summary; fsync the file and rename it into place. Idempotent. A run whose task raised is
+        finalized as error even when its caller went on (twin check records a crashing task)."""
         if self.closed:
             return
         self.closed = True
+        if outcome == "ok" and self._task_error:
+            outcome, error = "error", self._task_error
         try:
             last = self._last_frame
             if last is not None and last.step != self._last_written_step and (

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from collections.abc import Callable
 
+from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
 from twin.robot.profile_files import get_profile
 
@@ -21,6 +23,40 @@ def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
 def twin_config(args: argparse.Namespace) -> TwinConfig:
     """The twin configuration the --robot and --rate-hz options ask for."""
     return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
+
+
+def add_param_option(p: argparse.ArgumentParser) -> None:
+    """--param NAME=VALUE (repeatable): a task parameter, checked against the task function's signature."""
+    p.add_argument("--param", action="append", type=param_pair, default=[], metavar="NAME=VALUE",
+                   help="a task parameter (repeatable); VALUE as JSON when it parses (1, 0.5, true, "
+                        '"text"), else a string')
+
+
+def param_pair(text: str) -> tuple[str, object]:
+    """An argparse type: NAME=VALUE, VALUE parsed as JSON when it parses (numbers, true/false, null,
+    lists), else kept as a string; NaN and infinities are refused."""
+    name, sep, raw = text.partition("=")
+    if not sep or not name.isidentifier():
+        raise argparse.ArgumentTypeError(f"--param {text!r} is invalid; expected NAME=VALUE, NAME a Python identifier")
+    try:
+        value = json.loads(raw, parse_constant=_no_constant)
+    except ValueError:
+        value = raw
+    return name, value
+
+
+def _no_constant(name: str) -> object:
+    raise ValueError(f"{name} is not a finite number")
+
+
+def params_dict(pairs: list[tuple[str, object]]) -> dict:
+    """The --param pairs as a dict; a name given twice is an error."""
+    out: dict = {}
+    for name, value in pairs:
+        if name in out:
+            raise ConfigError(f"--param {name} is given twice; expected each parameter once")
+        out[name] = value
+    return out
 
 
 def whole_number(minimum: int = 1) -> Callable[[str], int]:

@@ -7,16 +7,18 @@ import os
 import sys
 import time
 
-from twin.cli.args import add_twin_options, seconds, twin_config, whole_number
+from twin.cli.args import add_param_option, add_twin_options, params_dict, seconds, twin_config, whole_number
 from twin.cli.compare import add_compare_commands
 from twin.cli.record import add_record_commands, add_record_options, record_paths
 from twin.cli.serve import add_serve_command
 from twin.cli.view import add_view_command
-from twin.errors import TwinError
+from twin.errors import ConfigError, TwinError
 from twin.model.sink import Sink
 from twin.signals import Terminated, stop_signals_raise
 from twin.sim.twin import Twin
-from twin.tasks import TimeLimit, accepted_params, resolve, run_task
+from twin.tasks import TimeLimit, check_params, resolve, run_task, task_params
+
+DEFAULT_CYCLES = 2
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -27,7 +29,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     fn = resolve(args.task)
     config = twin_config(args)
-    params = accepted_params(fn, {"cycles": args.cycles})
+    params = run_params(fn, args)
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
     run = task_run(args.task, params, mcap_path)  # a task file by its path relative to the recording
     if args.timeout is not None:
@@ -47,6 +49,20 @@ def cmd_run(args: argparse.Namespace) -> int:
         if path is not None:
             print(f"recorded {path}")
     return 0
+
+
+def run_params(fn, args: argparse.Namespace) -> dict:
+    """The task parameters of `twin run`: --param pairs and --cycles, checked against the task's
+    signature (an unknown name is an error, exit 2). A task that takes `cycles` gets 2 when neither
+    names it, as before --param existed."""
+    params = params_dict(args.param)
+    if args.cycles is not None:
+        if "cycles" in params:
+            raise ConfigError("--cycles and --param cycles=... are both given; expected one of them")
+        params["cycles"] = args.cycles
+    elif "cycles" not in params and "cycles" in (task_params(fn) or {}):
+        params["cycles"] = DEFAULT_CYCLES
+    return check_params(fn, params, args.task)
 
 
 class _Summary(Sink):
@@ -121,7 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a task (built-in name or path/to/task.py)")
     p.add_argument("task")
     add_twin_options(p)
-    p.add_argument("--cycles", type=whole_number(1), default=2, help="pick-and-place cycles (default 2)")
+    p.add_argument("--cycles", type=whole_number(1), default=None,
+                   help=f"pick-and-place cycles (default {DEFAULT_CYCLES} for a task that takes cycles)")
+    add_param_option(p)
     p.add_argument("--timeout", type=seconds("--timeout", allow_zero=False), metavar="SECONDS",
                    help="end the task with an error (exit 1) once it passes this much simulated time")
     add_record_options(p)

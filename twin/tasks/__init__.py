@@ -48,6 +48,27 @@ def accepted_params(fn: TaskFn, params: dict) -> dict:
     return {k: v for k, v in params.items() if k in sig.parameters}
 
 
+def task_params(fn: TaskFn) -> dict[str, inspect.Parameter] | None:
+    """The keyword parameters a task takes after `twin` (name -> Parameter); None when it takes **params."""
+    sig = inspect.signature(fn)
+    if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+        return None
+    return {name: p for name, p in list(sig.parameters.items())[1:]
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+
+
+def check_params(fn: TaskFn, params: dict, task: str) -> dict:
+    """params, each one checked against the task's signature: a name the task does not take is a
+    ConfigError (exit 2) naming it and the ones it takes, never silently dropped."""
+    known = task_params(fn)
+    if known is not None:
+        for name in params:
+            if name not in known:
+                takes = ", ".join(known) or "none"
+                raise ConfigError(f"task {task!r} takes no parameter {name!r}; its parameters: {takes}")
+    return dict(params)
+
+
 def run_task(twin, fn: TaskFn, params: dict) -> None:
     """Run a task; any exception becomes a task_error Event and a TaskError (a TwinError such as
     OutOfReach passes as it is). A task that calls sys.exit has failed too, whatever the code:

@@ -9,6 +9,7 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 
 from twin.errors import ConfigError
+from twin.model.images import CameraSpec
 from twin.model.json_values import all_finite
 from twin.model.keymaps import validate_keymap
 from twin.model.profiles import PROFILES, RobotProfile
@@ -64,6 +65,7 @@ class TwinConfig:
     engine: EngineParams = field(default_factory=EngineParams)
     suction: SuctionParams = field(default_factory=SuctionParams)
     keymap: dict = field(default_factory=dict)  # key -> list of actions (teleop); empty: no keys
+    cameras: tuple[CameraSpec, ...] = ()  # rendered into every recording of the run (model/images.py)
 
     def __post_init__(self) -> None:
         if not isinstance(self.dt_ns, int) or not 100_000 <= self.dt_ns <= 100_000_000:
@@ -71,13 +73,20 @@ class TwinConfig:
         names = [o.name for o in self.objects]
         if len(set(names)) != len(names):
             raise ConfigError(f"scene object names must be unique, got {names}")
+        cameras = [c.name for c in self.cameras]
+        if len(set(cameras)) != len(cameras):
+            raise ConfigError(f"camera names must be unique, got {cameras}")
 
     @property
     def dt_s(self) -> float:
         return self.dt_ns * 1e-9
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """As stored in a recording; without cameras the record has no `cameras` field (as before cameras)."""
+        out = asdict(self)
+        if not self.cameras:
+            del out["cameras"]
+        return out
 
     @staticmethod
     def from_dict(data: object) -> TwinConfig:
@@ -89,7 +98,8 @@ class TwinConfig:
             validate_keymap(data["keymap"], profile, "twin.config keymap")  # checked; kept as recorded
         return TwinConfig(profile=profile, objects=tuple(SceneObject(**o) for o in data["objects"]),
                           dt_ns=data["dt_ns"], engine=EngineParams(**data["engine"]),
-                          suction=SuctionParams(**data["suction"]), keymap=data["keymap"])
+                          suction=SuctionParams(**data["suction"]), keymap=data["keymap"],
+                          cameras=tuple(CameraSpec(**c) for c in data["cameras"]))
 
 
 # -- the schema of a stored configuration ----------------------------------------------------------
@@ -156,10 +166,15 @@ SUCTION_SCHEMA = {
     "sensor_offset_m": _f(0, 1), "sensor_range_m": _f(0, 1, open_lo=True), "infinite_strength": Field("bool"),
     "max_pull_force_n": _f(0, 1e9), "max_shear_force_n": _f(0, 1e9), "max_peel_torque_nm": _f(0, 1e9),
 }
+CAMERA_SCHEMA = {
+    "name": Field("str"), **dict.fromkeys(("width_px", "height_px"), _f(16, 4096, kind="int")),
+    "rate_hz": _f(0.1, 1000), "fov_deg": _f(1, 170), **dict.fromkeys(("near_m", "far_m"), _f(0, 1e3, open_lo=True)),
+    "mount": Field("str"), **dict.fromkeys(("eye_m", "target_m", "up"), _f(-1e3, 1e3, count=3)), "format": Field("str"),
+}
 CONFIG_SCHEMA = {
     "profile": Field(PROFILE_SCHEMA), "objects": Field([OBJECT_SCHEMA]),
     "dt_ns": _f(100_000, 100_000_000, kind="int"), "engine": Field(ENGINE_SCHEMA), "suction": Field(SUCTION_SCHEMA),
-    "keymap": Field("dict"),
+    "keymap": Field("dict"), "cameras": Field([CAMERA_SCHEMA]),
 }
 
 
@@ -170,7 +185,7 @@ def _defaults(cls: type) -> dict:
 # A missing field takes the dataclass's default; one without a default is required.
 _DEFAULTS = {id(PROFILE_SCHEMA): _defaults(RobotProfile), id(OBJECT_SCHEMA): _defaults(SceneObject),
              id(ENGINE_SCHEMA): _defaults(EngineParams), id(SUCTION_SCHEMA): _defaults(SuctionParams),
-             id(CONFIG_SCHEMA): {"keymap": {}}}
+             id(CAMERA_SCHEMA): _defaults(CameraSpec), id(CONFIG_SCHEMA): {"keymap": {}, "cameras": []}}
 
 
 def _bad(where: str, value: object, spec: Field) -> ConfigError:

@@ -8,6 +8,7 @@ import numpy as np
 
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
+from twin.model.images import CameraTrack
 from twin.model.types import Command, Event
 
 META_FINALIZED = "twin.finalized"  # the metadata record a cleanly closed file ends with (outcome, error)
@@ -32,6 +33,7 @@ class Recording:
     urdf: str = ""
     path: str = ""
     assets: dict[str, bytes] = field(default_factory=dict)  # attachments: robot.urdf and meshes, by name
+    cameras: dict[str, CameraTrack] = field(default_factory=dict)  # each camera's pictures, by camera name
 
     @property
     def outcome(self) -> str:

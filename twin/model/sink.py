@@ -4,6 +4,7 @@ overrides what it uses (a recorder all of them, an event log only on_event)."""
 
 from __future__ import annotations
 
+from twin.model.images import CameraImage
 from twin.model.types import Command, Event, Frame
 
 OUTCOMES = ("ok", "error", "interrupted")  # how a run ended, as close() is told
@@ -20,6 +21,9 @@ class Sink:
 
     def on_event(self, event: Event) -> None:
         pass
+
+    def on_image(self, image: CameraImage) -> None:
+        """A camera's picture of the frame at image.step (it arrives after that frame)."""
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         pass

@@ -44,6 +44,7 @@ class Twin:
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
         self._key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
         self._said: Event | None = None  # the Event the last `event` Command emitted
+        self._camera_renderer = self._add_cameras()
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
 
@@ -297,7 +298,20 @@ class Twin:
         self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
         return False
 
+    def _add_cameras(self) -> Sink | None:
+        """The configuration's cameras render as the last sink: each picture reaches every other sink
+        after the frame it shows (twin.sim.camera)."""
+        if not self.config.cameras:
+            return None
+        from twin.sim.camera import CameraRenderer
+
+        renderer = CameraRenderer(self.config, self.sinks)
+        self.sinks.append(renderer)
+        return renderer
+
     def close(self) -> None:
+        if self._camera_renderer is not None:
+            self._camera_renderer.close()
         self._world.close()
 
 

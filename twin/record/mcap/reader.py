@@ -19,6 +19,7 @@ from mcap.records import Attachment, Channel, Footer, Header, Metadata, Schema
 from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.columns import FrameColumns
+from twin.model.images import CameraTrack
 from twin.model.recording import Recording
 from twin.model.types import Command, Event
 from twin.record.mcap import scan as mcap_scan
@@ -157,7 +158,35 @@ def recording_from_scan(s: Scan) -> Recording:
     return Recording(config=config, frames=frames, commands=commands, events=events,
                      run=parse_run(s.metadata, repr(s.path)), meta=meta,
                      finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
-                     assets={a.name: a.data for a in s.attachments})
+                     assets={a.name: a.data for a in s.attachments}, cameras=camera_tracks(config, topics, s.path))
+
+
+def camera_tracks(config, topics: dict[str, list[Message]], where: str) -> dict[str, CameraTrack]:
+    """Each configured camera's pictures from its foxglove.CompressedImage channel (bytes as stored,
+    decoded only by CameraTrack.rgb); a picture's step is its time over the time step."""
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from google.protobuf.message import DecodeError
+
+    tracks = {}
+    for spec in config.cameras:
+        topic = S.image_channel(spec.name).topic
+        steps, times, data = [], [], []
+        for m in topics.get(topic, []):
+            picture = CompressedImage()
+            try:
+                picture.ParseFromString(m.data)
+            except DecodeError as err:
+                raise RecordingError(f"recording {where!r}: a {topic} message is not a CompressedImage: {err}") from err
+            t_ns = picture.timestamp.seconds * 1_000_000_000 + picture.timestamp.nanos
+            if picture.format != spec.format or t_ns % config.dt_ns or not 0 <= t_ns <= S.MAX_T_NS:
+                raise RecordingError(f"recording {where!r}: a {topic} picture at {t_ns} ns in {picture.format!r}; "
+                                     f"expected {spec.format!r} at a whole step of {config.dt_ns} ns")
+            steps.append(t_ns // config.dt_ns)
+            times.append(t_ns)
+            data.append(picture.data)
+        tracks[spec.name] = CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
+                                        np.array(steps, dtype=np.int64), np.array(times, dtype=np.int64), data)
+    return tracks
 
 
 def _json_message(data: bytes, what: str, where: str) -> dict:

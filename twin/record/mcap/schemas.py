@@ -131,6 +131,18 @@ ROBOT_DESCRIPTION = ChannelSpec("/robot_description", "std_msgs/String", "jsonsc
 
 # registration order fixes the schema and channel ids in every file
 CHANNELS = (ROBOT_DESCRIPTION, JOINTS, SUCTION, POSES, TF, LOG, EVENTS, COMMANDS)
+
+# A camera's channels, registered after CHANNELS for each of the configuration's cameras (a recording
+# without cameras has none): its pictures and, with each one, its calibration (Foxglove projects with it).
+IMAGE_SCHEMA, CALIBRATION_SCHEMA = "foxglove.CompressedImage", "foxglove.CameraCalibration"
+
+
+def image_channel(camera: str) -> ChannelSpec:
+    return ChannelSpec(f"/camera/{camera}/image", IMAGE_SCHEMA, "protobuf", "protobuf")
+
+
+def calibration_channel(camera: str) -> ChannelSpec:
+    return ChannelSpec(f"/camera/{camera}/calibration", CALIBRATION_SCHEMA, "protobuf", "protobuf")
 # block message -> its channel's topic, in model.fields' block order
 BLOCK_TOPICS = {block: next(c.topic for c in CHANNELS if c.schema_name == f"twin.{block}") for block in F.BLOCKS}
 

@@ -17,18 +17,22 @@ import struct
 from pathlib import Path
 
 import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.Log_pb2 import Log
 from mcap.writer import CompressionType, Writer
 
 from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.config import TwinConfig
+from twin.model.images import CameraImage
 from twin.model.json_values import finite_or_null
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire
-from twin.record.mcap.scene_tf import SceneTransforms
+from twin.record.mcap.scene_tf import WORLD, SceneTransforms
 from twin.record.metadata import check_run, portable_config, run_metadata
 from twin.record.outputs import partial_path, publish
 
@@ -116,6 +120,7 @@ class McapRecorder(Sink):
         for spec in S.CHANNELS:
             schema_id = self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
             self._channel[spec.topic] = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id)
+        self._register_cameras(config)
         extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
                  "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
         # a user URDF by its path relative to the recording: no absolute path in the file
@@ -152,6 +157,43 @@ class McapRecorder(Sink):
                       "message": event.message, "data": event.data})
         self._pending.append((event.t_ns, self._channel[S.EVENTS.topic], full))
         self._pending.append((event.t_ns, self._channel[S.LOG.topic], _log_message(event)))
+
+    def on_image(self, image: CameraImage) -> None:
+        """A camera's picture as foxglove.CompressedImage, its calibration, and the camera's pose on /tf
+        (world -> its frame_id), all at the picture's time."""
+        channels = self._camera_channels.get(image.camera)
+        if channels is None:
+            raise RecordingError(f"a picture from camera {image.camera!r}, which the configuration does not have; "
+                                 f"expected one of {sorted(self._camera_channels)}")
+        spec = self._cameras[image.camera]
+        picture = CompressedImage(frame_id=spec.frame_id, data=image.data, format=image.format)
+        calibration = CameraCalibration(frame_id=spec.frame_id, width=spec.width_px, height=spec.height_px,
+                                        distortion_model="plumb_bob", D=[0.0] * 5, K=spec.intrinsics(),
+                                        R=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), P=spec.projection())
+        pose = FrameTransforms()
+        t = pose.transforms.add(parent_frame_id=WORLD, child_frame_id=spec.frame_id)
+        t.translation.x, t.translation.y, t.translation.z = image.pose[:3]
+        t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w = image.pose[3:7]
+        seconds, nanos = divmod(image.t_ns, 1_000_000_000)
+        for message in (picture, calibration, t):
+            message.timestamp.seconds, message.timestamp.nanos = seconds, nanos
+        for channel_id, message in zip((*channels, self._channel[S.TF.topic]), (picture, calibration, pose),
+                                       strict=True):
+            self._pending.append((image.t_ns, channel_id, message.SerializeToString(deterministic=True)))
+
+    def _register_cameras(self, config: TwinConfig) -> None:
+        """Each camera's image and calibration channels, after the fixed ones (none without cameras)."""
+        self._cameras = {c.name: c for c in config.cameras}
+        self._camera_channels: dict[str, tuple[int, int]] = {}
+        if not config.cameras:
+            return
+        image_schema, calibration_schema = (
+            self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
+            for spec in (S.image_channel(""), S.calibration_channel("")))
+        for c in config.cameras:
+            self._camera_channels[c.name] = (
+                self._writer.register_channel(S.image_channel(c.name).topic, "protobuf", image_schema),
+                self._writer.register_channel(S.calibration_channel(c.name).topic, "protobuf", calibration_schema))
 
     # -- writing --------------------------------------------------------------------------------
     def _add(self, topic: str, t_ns: int, data: bytes) -> None:

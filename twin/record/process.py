@@ -20,6 +20,7 @@ from pathlib import Path
 
 from twin.errors import RecordingError
 from twin.model.config import TwinConfig
+from twin.model.images import CameraImage
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
 
@@ -29,6 +30,8 @@ _ACK = b"+"  # the recorder took in one batch
 _TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _BATCH, _CLOSE = b"B", b"C"
 _COMMAND, _EVENT = 0, 1
+_IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
+_HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}  # item kind -> the sinks' method
 
 
 class RecorderProcess(Sink):
@@ -80,6 +83,9 @@ class RecorderProcess(Sink):
 
     def on_event(self, event: Event) -> None:
         self._items.append((_EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
+
+    def on_image(self, image: CameraImage) -> None:
+        self._items.append((_IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
 
     # -- plumbing -----------------------------------------------------------------------------
     def _send(self) -> None:
@@ -189,7 +195,7 @@ def _feed(items: list[tuple], sinks: list) -> None:
         if len(item) == 2:
             message = pickle.loads(item[1])
             for sink in sinks:
-                (sink.on_command if item[0] == _COMMAND else sink.on_event)(message)
+                getattr(sink, _HANDLERS[item[0]])(message)
         else:
             frame = Frame._make(item)
             for sink in sinks:

@@ -7,8 +7,17 @@ import os
 import sys
 import time
 
-from twin.cli.args import add_param_option, add_twin_options, params_dict, seconds, twin_config, whole_number
+from twin.cli.args import (
+    add_param_option,
+    add_twin_options,
+    camera_specs,
+    params_dict,
+    seconds,
+    twin_config,
+    whole_number,
+)
 from twin.cli.compare import add_compare_commands
+from twin.cli.export import add_export_command
 from twin.cli.record import add_record_commands, add_record_options, record_paths
 from twin.cli.serve import add_serve_command
 from twin.cli.view import add_view_command
@@ -103,7 +112,7 @@ def cmd_teleop(args: argparse.Namespace) -> int:
     session = run_teleop(TeleopOptions(
         robot=args.robot, rate_hz=args.rate_hz, gui=args.gui, keymap_path=args.keymap or "", keys=args.keys,
         key_interval_s=args.key_interval, record_path=str(mcap) if mcap else None,
-        rrd_path=str(rrd) if rrd else None, record_rate=args.rate,
+        rrd_path=str(rrd) if rrd else None, record_rate=args.rate, cameras=camera_specs(args),
     ))
     for line in summary_lines(session):
         print(line)
@@ -149,6 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_record_commands(sub)
     add_serve_command(sub)
     add_view_command(sub)
+    add_export_command(sub)
     return parser
 
 

@@ -44,6 +44,24 @@ class Recording:
             outcome = "error"
         return outcome
 
+    def to_arrow(self, table: str = "frames"):
+        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per scalar,
+        units in the names), "events" or "commands"; the columns are described in model.tables."""
+        from twin.model import tables
+
+        builders = {"frames": tables.frames_table, "events": tables.events_table, "commands": tables.commands_table}
+        if table not in builders:
+            raise ValueError(f"table {table!r} is unknown; expected one of {', '.join(builders)}")
+        return builders[table](self)
+
+    def to_pandas(self, table: str = "frames"):
+        """to_arrow(table) as a pandas DataFrame (pandas is optional: `pip install pandas`)."""
+        try:
+            import pandas  # noqa: F401 - only to say clearly that it is missing
+        except ImportError:
+            raise ImportError("Recording.to_pandas needs the pandas package: pip install pandas") from None
+        return self.to_arrow(table).to_pandas()
+
     @property
     def rate_steps(self) -> int:
         """Every how many physics steps the file keeps a frame (1: every step): its layout metadata,

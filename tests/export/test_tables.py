@@ -124,7 +124,7 @@ def test_export_parquet_of_a_decimated_run(tmp_path, capsys):
 ])
 def test_bad_table_exports_are_one_line_exit_2(tmp_path, capsys, monkeypatch, argv, expected):
     monkeypatch.chdir(tmp_path)
-    code, out, err = twin(capsys, "export", GOLDEN, *argv)
+    code, _, err = twin(capsys, "export", GOLDEN, *argv)
     assert code == 2 and err.count("\n") == 1 and err.startswith("twin: error: ") and expected in err, err
     assert list(tmp_path.iterdir()) == []
 

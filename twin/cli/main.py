@@ -20,6 +20,7 @@ from twin.cli.compare import add_compare_commands
 from twin.cli.export import add_export_command
 from twin.cli.record import add_record_commands, add_record_options, record_paths
 from twin.cli.serve import add_serve_command
+from twin.cli.sweep import add_sweep_command
 from twin.cli.view import add_view_command
 from twin.errors import ConfigError, TwinError
 from twin.model.sink import Sink
@@ -157,6 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_compare_commands(sub)
     add_record_commands(sub)
     add_serve_command(sub)
+    add_sweep_command(sub)
     add_view_command(sub)
     add_export_command(sub)
     return parser

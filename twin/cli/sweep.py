@@ -1,0 +1,226 @@
+"""The `twin sweep` command: argument parsing, progress and printing only (the work is twin.sweep)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from twin.cli.args import add_param_option, params_dict, whole_number
+from twin.errors import ConfigError, TwinError
+
+
+class BelowThreshold(TwinError):
+    """--fail-under: the success rate is below the rate asked for."""
+
+    exit_code = 1
+
+
+def rate(text: str) -> float:
+    """An argparse type: a success rate 0..1 (or a percentage such as 95%)."""
+    try:
+        value = float(text[:-1]) / 100 if text.endswith("%") else float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"--fail-under {text!r} is invalid; expected a rate 0..1 or a percentage")
+    return value
+
+
+def only_list(text: str) -> list[int]:
+    """An argparse type: scenario indices, e.g. 7 or 3,7,12."""
+    try:
+        out = [int(t) for t in text.split(",")]
+    except ValueError:
+        out = [-1]
+    if not out or min(out) < 0:
+        raise argparse.ArgumentTypeError(f"--only {text!r} is invalid; expected scenario numbers such as 7 or 3,7")
+    return out
+
+
+def add_sweep_command(sub) -> None:
+    p = sub.add_parser("sweep", help="run a task over many seeded scenarios (varied scene, pad, robot, task values) "
+                                     "and report statistics",
+                       description="Scenario i's values depend only on (--seed, i); its run is the same whatever "
+                                   "the executor or job count. Writes DIR/results.parquet, DIR/summary.json, "
+                                   "DIR/sweep.toml and DIR/failures/scenario-<i>.mcap. Exit 0 done, 1 under "
+                                   "--fail-under, 2 bad input, 130 Ctrl-C (the results so far are written).")
+    p.add_argument("task", help="a built-in task, path/to/task.py, or a sweep definition NAME.toml")
+    p.add_argument("--robot", default=None, help="profile: mtb (default), seed000..seed003, or a profile file")
+    p.add_argument("--rate-hz", type=float, default=None, help="physics rate (default 240 Hz)")
+    p.add_argument("--scenarios", type=whole_number(1), default=None, metavar="N", help="how many scenarios")
+    p.add_argument("--seed", type=whole_number(0), default=None, metavar="S", help="the sweep's seed (default 0)")
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=DIST",
+                   help="a varied value (repeatable): KEY box.x_m, box.y_m, box.yaw_rad, box.mass_kg, box.friction "
+                        "(any scene object), pad.<suction field>, robot.revolute_max_velocity_rad_s, "
+                        "robot.prismatic_max_velocity_m_s, engine.<field>, task.<parameter>; DIST uniform(a,b), "
+                        "normal(mu,sigma), choice(v1,v2,...) or a value")
+    add_param_option(p)
+    p.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                   help="a scenario whose task runs past this much simulated time fails")
+    p.add_argument("--jobs", "-j", type=whole_number(1), default=os.cpu_count() or 1, metavar="N",
+                   help=f"worker processes (default: every core, {os.cpu_count()})")
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="local: a process pool on this machine (default); dask: Dask's distributed scheduler")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 (default: a "
+                        "LocalCluster of --jobs workers on 127.0.0.1)")
+    p.add_argument("--batch", type=whole_number(1), default=None, metavar="N",
+                   help="scenarios per task sent to a worker (default: about 4 tasks per worker, at most 16)")
+    p.add_argument("--out", required=True, metavar="DIR", help="the output folder (created; its parent must exist)")
+    p.add_argument("--save", choices=("failures", "all", "none"), default="failures",
+                   help="which scenarios to record as MCAP (default failures: DIR/failures/scenario-<i>.mcap; "
+                        "all: also DIR/scenarios/scenario-<i>.mcap)")
+    p.add_argument("--only", type=only_list, default=None, metavar="I[,J...]",
+                   help="re-run only these scenarios (recorded per --save; results.parquet is left alone)")
+    p.add_argument("--fail-under", type=rate, default=None, metavar="RATE",
+                   help="exit 1 when the success rate is below RATE (0..1, or 95%%): a CI gate")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar; only the summary")
+    p.set_defaults(func=cmd_sweep)
+
+
+def sweep_spec(args: argparse.Namespace):
+    """The definition the arguments ask for: TASK.toml's (with --scenarios/--seed overriding it), or one
+    built from --robot, --scenarios, --seed, --vary and --param."""
+    from twin.sweep.spec import SweepSpec, load_spec, parse_vary
+
+    if args.task.endswith(".toml"):
+        if args.vary or args.param or args.robot or args.rate_hz or args.timeout is not None:
+            raise ConfigError(f"{args.task} defines the sweep; --vary, --param, --robot, --rate-hz and --timeout "
+                              "go into the file (only --scenarios and --seed override it)")
+        spec = load_spec(args.task)
+        overrides = {k: v for k, v in (("scenarios", args.scenarios), ("seed", args.seed)) if v is not None}
+        return SweepSpec(**{**spec.__dict__, **overrides}) if overrides else spec
+    if args.scenarios is None:
+        raise ConfigError("--scenarios N is missing; expected how many scenarios to run")
+    return SweepSpec(task=args.task, scenarios=args.scenarios, robot=args.robot or "mtb", seed=args.seed or 0,
+                     vary=parse_vary(args.vary), params=params_dict(args.param), rate_hz=args.rate_hz or 240.0,
+                     timeout_s=args.timeout)
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from twin.sweep.executors import make_executor
+    from twin.sweep.results import write_definition, write_results
+    from twin.sweep.runner import run_sweep
+    from twin.sweep.spec import prepare
+    from twin.sweep.worker import Job
+
+    spec = sweep_spec(args)
+    prepare(spec)  # every key, distribution and parameter checked before anything runs
+    scenarios = args.only if args.only is not None else list(range(spec.scenarios))
+    if args.only is not None and max(args.only) >= spec.scenarios:
+        raise ConfigError(f"--only {max(args.only)} is out of range; the sweep has scenarios 0..{spec.scenarios - 1}")
+    out = _out_dir(args.out, clear=args.only is None)
+    if args.only is None:
+        write_definition(out, spec)
+    executor = make_executor(args.executor, min(args.jobs, len(scenarios)) if args.executor == "local" else args.jobs,
+                             args.scheduler)
+    progress = Progress(len(scenarios), quiet=args.quiet)
+    done = run_sweep(Job(spec, str(out), args.save), scenarios, executor, batch_size=args.batch, on_rows=progress)
+    progress.close()
+    if args.only is not None:
+        _print_only(done.rows, out, args.save)
+    else:
+        summary = write_results(out, spec, done.rows, planned=done.planned)
+        for line in summary_lines(spec, summary, done, executor, out, args.save):
+            print(line)
+        print(f"wrote {out / 'results.parquet'}, {out / 'summary.json'}, {out / 'sweep.toml'}")
+    if done.stopped_by is not None:
+        raise done.stopped_by  # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
+    if args.fail_under is not None and args.only is None and summary["success_rate"] < args.fail_under:
+        raise BelowThreshold(f"success rate {summary['success_rate']:.4f} is under --fail-under {args.fail_under:g}")
+    return 0
+
+
+def _out_dir(path: str, *, clear: bool) -> Path:
+    """The output folder, created (its parent must exist); a full sweep removes the recordings an
+    earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is mistaken for its own."""
+    from twin.sweep.worker import FAILURES, SCENARIOS
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {path!r} is a file; expected a folder")
+    if not out.parent.is_dir():
+        raise ConfigError(f"--out {path!r}: folder {str(out.parent)!r} does not exist")
+    try:
+        out.mkdir(exist_ok=True)
+        if clear:
+            for folder in (FAILURES, SCENARIOS):
+                for old in (out / folder).glob("scenario-*.mcap"):
+                    old.unlink()
+    except OSError as err:
+        raise ConfigError(f"--out {path!r}: {err.strerror or err}") from err
+    return out
+
+
+def _print_only(rows: list[dict], out: Path, save: str) -> None:
+    from twin.sweep.worker import FAILURES, SCENARIOS, scenario_path
+
+    for r in rows:
+        placed = "" if r["placement_error_mm"] is None else f", placement error {r['placement_error_mm']:.2f} mm"
+        print(f"scenario {r['scenario']}: {r['outcome']}{': ' + r['error'] if r['error'] else ''}{placed}")
+        folder = SCENARIOS if save == "all" else FAILURES if r["outcome"] != "ok" and save != "none" else None
+        if folder is not None:
+            print(f"recorded {scenario_path(out, folder, r['scenario'])}")
+
+
+def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> list[str]:
+    """The text summary printed at the end."""
+    n, wall = summary["scenarios"], done.wall_s
+    head = f"sweep {spec.task} on {spec.robot}: {n} scenarios"
+    if summary.get("interrupted"):
+        head += f" of {summary['planned']} (stopped part-way)"
+    lines = [(f"{head}, seed {spec.seed}, {executor.jobs} jobs ({executor.name}), wall {wall:.1f} s, "
+              f"{n / wall if wall > 0 else 0:.1f} scenarios/s")]
+    lo, hi = summary["wilson95"]
+    lines.append(f"ok {summary['ok']}, failed {summary['failed']}: success rate {100 * summary['success_rate']:.1f} % "
+                 f"(Wilson 95 %: {100 * lo:.1f}-{100 * hi:.1f} %)")
+    pe = summary["placement_error_mm"]
+    if pe["count"]:
+        lines.append(f"placement error: p50 {pe['p50']:.2f} mm, p95 {pe['p95']:.2f} mm, max {pe['max']:.2f} mm "
+                     f"(over {pe['count']} scenarios that placed)")
+    if summary["failures_by_reason"]:
+        lines.append("failures by reason:")
+        lines += [f"  {count:6d}  {why}" for why, count in summary["failures_by_reason"].items()]
+        if save != "none":
+            first = next(r["scenario"] for r in done.rows if r["outcome"] != "ok")
+            lines.append(f"failures recorded in {out / 'failures'}/ (e.g. twin replay "
+                         f"{out / 'failures' / f'scenario-{first}.mcap'})")
+    return lines
+
+
+class Progress:
+    """The progress on stderr: a tqdm bar on a terminal (scenarios done, ETA, running success rate);
+    elsewhere (CI logs) a plain line at most once a second and at the end; nothing with --quiet."""
+
+    def __init__(self, total: int, *, quiet: bool, stream=None) -> None:
+        self.total, self.done, self.ok = total, 0, 0
+        self.stream = stream or sys.stderr
+        self.quiet = quiet
+        self._bar = None
+        self._last = -1e9
+        self._t0 = time.perf_counter()
+        if not quiet and self.stream.isatty():
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, file=self.stream, unit="scenario", dynamic_ncols=True, leave=True)
+
+    def __call__(self, rows: list[dict]) -> None:
+        self.done += len(rows)
+        self.ok += sum(r["outcome"] == "ok" for r in rows)
+        text = f"ok {100 * self.ok / self.done:.1f} %"
+        if self._bar is not None:
+            self._bar.set_postfix_str(text, refresh=False)
+            self._bar.update(len(rows))
+        elif not self.quiet and (time.perf_counter() - self._last >= 1.0 or self.done == self.total):
+            self._last = time.perf_counter()
+            elapsed = self._last - self._t0
+            eta = elapsed / self.done * (self.total - self.done)
+            self.stream.write(f"sweep: {self.done}/{self.total} scenarios, {text}, ETA {eta:.0f} s\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()

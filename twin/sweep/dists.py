@@ -1,0 +1,113 @@
+"""Distributions a sweep draws a key's value from: `uniform(a,b)`, `normal(mu,sigma)`,
+`choice(v1,v2,...)` or a constant, parsed from the text a user writes after `--vary KEY=`."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.errors import ConfigError
+
+_CALL = re.compile(r"^\s*([a-z_]+)\s*\((.*)\)\s*$", re.DOTALL)
+MAX_CHOICES = 1000
+
+
+@dataclass(frozen=True)
+class Dist:
+    """One distribution: kind "uniform" (args a, b), "normal" (mu, sigma), "choice" (the values) or
+    "constant" (one value). `text` is how the user wrote it (kept for the results and the summary)."""
+
+    kind: str
+    args: tuple
+    text: str
+
+    def sample(self, rng: np.random.Generator) -> object:
+        """One value drawn with rng (a generator made for this scenario and key alone)."""
+        if self.kind == "uniform":
+            return float(rng.uniform(self.args[0], self.args[1]))
+        if self.kind == "normal":
+            return float(rng.normal(self.args[0], self.args[1]))
+        if self.kind == "choice":
+            return self.args[int(rng.integers(len(self.args)))]
+        return self.args[0]
+
+    def candidates(self) -> tuple:
+        """Values that show whether a key accepts this distribution before anything runs: both ends
+        of a uniform, the mean of a normal, every choice, the constant."""
+        if self.kind == "normal":
+            return (self.args[0],)
+        return self.args
+
+    @property
+    def real(self) -> bool:
+        """True when the draws are real numbers (uniform, normal), not given values."""
+        return self.kind in ("uniform", "normal")
+
+
+def parse_dist(text: str, key: str = "") -> Dist:
+    """A distribution from its text; ConfigError (one line, naming the key and what was expected)."""
+    where = f"--vary {key}={text}" if key else f"distribution {text!r}"
+    if not isinstance(text, str) or not text.strip():
+        raise ConfigError(f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), choice(v1,v2,...) or a value")
+    m = _CALL.match(text)
+    if m is None:
+        return Dist("constant", (_value(text.strip(), where),), text.strip())
+    kind, inner = m.group(1), m.group(2)
+    values = tuple(_value(v, where) for v in _split(inner, where))
+    if kind in ("uniform", "normal"):
+        if len(values) != 2 or not all(_is_number(v) for v in values):
+            raise ConfigError(f"{where} is invalid; expected {kind}(two finite numbers)")
+        a, b = (float(v) for v in values)
+        if kind == "uniform" and not a < b:
+            raise ConfigError(f"{where} is invalid; expected uniform(a,b) with a < b")
+        if kind == "normal" and not b > 0:
+            raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with sigma > 0")
+        return Dist(kind, (a, b), text.strip())
+    if kind == "choice":
+        if not values or len(values) > MAX_CHOICES:
+            raise ConfigError(f"{where} is invalid; expected choice(v1,v2,...) with 1 to {MAX_CHOICES} values")
+        return Dist("choice", values, text.strip())
+    raise ConfigError(f"{where}: unknown distribution {kind!r}; expected uniform, normal or choice")
+
+
+def _split(inner: str, where: str) -> list[str]:
+    """The arguments between the parentheses, split at commas outside double quotes."""
+    parts, current, quoted = [], [], False
+    for ch in inner:
+        if ch == '"':
+            quoted = not quoted
+        if ch == "," and not quoted:
+            parts.append("".join(current))
+            current = []
+        else:
+            current.append(ch)
+    if quoted:
+        raise ConfigError(f"{where} is invalid: an unclosed quote")
+    parts.append("".join(current))
+    if len(parts) == 1 and not parts[0].strip():
+        return []
+    if any(not p.strip() for p in parts):
+        raise ConfigError(f"{where} is invalid: an empty argument")
+    return [p.strip() for p in parts]
+
+
+def _value(text: str, where: str) -> object:
+    """A value as JSON when it parses (numbers, true/false, "quoted text"), else the bare text; a
+    non-finite number is refused."""
+    try:
+        value = json.loads(text, parse_constant=lambda name: float("nan"))
+    except ValueError:
+        return text
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"{where} is invalid: {text} is not a finite number")
+    if isinstance(value, (list, dict)) or value is None:
+        raise ConfigError(f"{where} is invalid: {text} is not a number, true/false or text")
+    return value
+
+
+def _is_number(v: object) -> bool:
+    return not isinstance(v, bool) and isinstance(v, (int, float))

@@ -1,0 +1,132 @@
+"""One scenario's run, in whatever process runs it: the configuration with the scenario's values,
+a fresh Twin, the task with its parameters; the row of results; and, for a failing scenario (or
+every one, per --save), a recording `failures/scenario-<i>.mcap` that `twin replay` and `twin diff`
+read. The MCAP writer runs in this process (a worker must not start a recorder process per
+scenario); the file is byte-identical to the one `twin sweep ... --only i` writes.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from twin.errors import TwinError, exception_text
+from twin.model.sink import Sink
+from twin.sim.twin import Twin
+from twin.sweep.keys import apply_values, task_values
+from twin.sweep.sampling import RandomSampler
+from twin.sweep.spec import Prepared, SweepSpec, prepare
+from twin.tasks import TimeLimit, run_task
+from twin.verify.check import task_run
+
+SAVE = ("failures", "all", "none")
+COUNTED = ("attach", "release", "break", "suction_empty")
+FAILURES, SCENARIOS = "failures", "scenarios"
+
+
+@dataclass(frozen=True)
+class Job:
+    """What every batch of one sweep shares: the definition, the output folder (None: write no
+    files) and what to record."""
+
+    spec: SweepSpec
+    out_dir: str | None
+    save: str = "failures"
+
+
+_PREPARED: dict[str, tuple[Prepared, RandomSampler]] = {}  # per worker process: a definition is prepared once
+
+
+def _prepared(spec: SweepSpec) -> tuple[Prepared, RandomSampler]:
+    key = spec.key()
+    if key not in _PREPARED:
+        prep = prepare(spec)
+        _PREPARED.clear()
+        _PREPARED[key] = (prep, RandomSampler(spec.seed, prep.keys))
+    return _PREPARED[key]
+
+
+def run_batch(job: Job, scenarios: list[int]) -> list[dict]:
+    """The rows of a batch of scenarios, in order (what an executor runs as one task)."""
+    return [run_scenario(job, i) for i in scenarios]
+
+
+def scenario_path(out_dir: str | os.PathLike, folder: str, scenario: int) -> Path:
+    return Path(out_dir) / folder / f"scenario-{scenario}.mcap"
+
+
+def run_scenario(job: Job, scenario: int) -> dict:
+    """Run scenario `scenario` once (twice for a failure that is recorded) and return its row."""
+    prep, sampler = _prepared(job.spec)
+    values = sampler.values(scenario)
+    row = {"scenario": scenario, "seed": job.spec.seed, **{key.name: value for key, value in values.items()}}
+    save_all = job.save == "all" and job.out_dir is not None
+    first = scenario_path(job.out_dir, SCENARIOS, scenario) if save_all else None
+    t0 = time.perf_counter()
+    result = _run(prep, values, scenario, first)
+    row.update(result, wall_s=time.perf_counter() - t0)
+    if row["outcome"] != "ok" and job.out_dir is not None and job.save != "none":
+        failed = scenario_path(job.out_dir, FAILURES, scenario)
+        if first is not None:
+            shutil.copyfile(first, failed)
+        else:  # the run is deterministic: running it again, recorded, gives this same run
+            _run(prep, values, scenario, failed)
+    return row
+
+
+class _Tally(Sink):
+    """Counts the events a row reports and keeps the worst placement error."""
+
+    def __init__(self) -> None:
+        self.counts = dict.fromkeys(COUNTED, 0)
+        self.worst_m: float | None = None
+        self.sim_s = 0.0
+
+    def on_event(self, event) -> None:
+        if event.kind in self.counts:
+            self.counts[event.kind] += 1
+        elif event.kind == "placed":
+            error_m = event.data.get("error_m")
+            if isinstance(error_m, (int, float)) and (self.worst_m is None or error_m > self.worst_m):
+                self.worst_m = float(error_m)
+
+
+def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) -> dict:
+    """One run; its outcome, error line, counts, worst placement error and simulated time. A task
+    that fails raises inside the recorders' block, as in `twin run`, so the file is finalized with
+    outcome error and the task's message."""
+    spec = prep.spec
+    tally, error = _Tally(), ""
+    try:
+        config = apply_values(prep.config, values, where=f"scenario {scenario}")
+        params = {**spec.params, **task_values(values)}
+        limit = [TimeLimit(spec.timeout_s)] if spec.timeout_s is not None else []
+        if mcap_path is None:
+            _task(config, prep.fn, params, tally, limit)
+        else:
+            from twin.record import open_recorders
+
+            mcap_path.parent.mkdir(exist_ok=True)
+            run = task_run(spec.task, params, mcap_path)
+            if spec.timeout_s is not None:
+                run["timeout_s"] = spec.timeout_s
+            with open_recorders(config, run, mcap_path=mcap_path, background=False) as sinks:
+                _task(config, prep.fn, params, tally, [*sinks, *limit])
+    except TwinError as err:  # the task failed, or the scenario's values are invalid: the sweep goes on
+        error = exception_text(err) or type(err).__name__
+    worst = tally.worst_m
+    return {"outcome": "error" if error else "ok", "error": error.splitlines()[0] if error else "",
+            "placement_error_mm": None if worst is None else worst * 1000.0, **tally.counts, "sim_s": tally.sim_s}
+
+
+def _task(config, fn, params: dict, tally: _Tally, sinks: list) -> None:
+    """Run the task on a fresh twin (tally first among its sinks, which keeps the simulated time)."""
+    twin = Twin(config, sinks=[tally, *sinks])
+    try:
+        run_task(twin, fn, params)
+    finally:
+        tally.sim_s = twin.t_s
+        twin.close()

@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
+from twin.model.images import CAMERAS, DEFAULT_RATE_HZ, DEFAULT_SIZE_PX, MAX_SIDE_PX, camera
 from twin.robot.profile_files import get_profile
 
 
@@ -18,11 +19,47 @@ def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
     p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
     if gui:
         p.add_argument("--gui", action="store_true", help="open the PyBullet window")
+    add_camera_options(p)
 
 
 def twin_config(args: argparse.Namespace) -> TwinConfig:
-    """The twin configuration the --robot and --rate-hz options ask for."""
-    return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz))
+    """The twin configuration the --robot, --rate-hz and camera options ask for."""
+    return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz), cameras=camera_specs(args))
+
+
+def add_camera_options(p: argparse.ArgumentParser) -> None:
+    """--camera NAME (repeatable), --camera-size WxH, --camera-hz HZ: cameras rendered into the recordings."""
+    default_w, default_h = DEFAULT_SIZE_PX
+    p.add_argument("--camera", action="append", default=[], choices=sorted(CAMERAS), metavar="NAME",
+                   help=f"render this camera into the recording (repeatable): {', '.join(CAMERAS)}")
+    p.add_argument("--camera-size", type=size_px, default=None, metavar="WxH",
+                   help=f"picture size in pixels (default {default_w}x{default_h})")
+    p.add_argument("--camera-hz", type=float, default=None, metavar="HZ",
+                   help=f"pictures per second of simulated time (default {DEFAULT_RATE_HZ:g})")
+
+
+def camera_specs(args: argparse.Namespace) -> tuple:
+    """The cameras the options ask for (none without --camera)."""
+    names = getattr(args, "camera", None) or []
+    size, rate = getattr(args, "camera_size", None), getattr(args, "camera_hz", None)
+    if not names and (size is not None or rate is not None):
+        raise ConfigError("--camera-size and --camera-hz need a --camera NAME; expected e.g. --camera overhead")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"--camera {names} names a camera twice; expected each camera once")
+    return tuple(camera(n, size or DEFAULT_SIZE_PX, DEFAULT_RATE_HZ if rate is None else rate) for n in names)
+
+
+def size_px(text: str) -> tuple[int, int]:
+    """An argparse type: WxH in pixels, each 16..4096."""
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h)) if sep else None
+    except ValueError:
+        size = None
+    if size is None or not all(16 <= v <= MAX_SIDE_PX for v in size):
+        raise argparse.ArgumentTypeError(f"--camera-size {text!r} is invalid; expected WxH, e.g. 320x240, "
+                                         f"each 16..{MAX_SIDE_PX} pixels")
+    return size
 
 
 def add_param_option(p: argparse.ArgumentParser) -> None:

@@ -174,12 +174,13 @@ class TeleopOptions:
     rrd_path: str | None = None
     record_rate: int = 1
     extra_sinks: list = field(default_factory=list)
+    cameras: tuple = ()  # model.images.CameraSpec: rendered into the recordings
 
 
 def teleop_config(options: TeleopOptions) -> TwinConfig:
     profile = get_profile(options.robot)
     return TwinConfig(profile=profile, dt_ns=dt_ns_from_hz(options.rate_hz),
-                      keymap=keymap_for(profile, options.keymap_path or None))
+                      keymap=keymap_for(profile, options.keymap_path or None), cameras=tuple(options.cameras))
 
 
 def run_teleop(options: TeleopOptions) -> Session:

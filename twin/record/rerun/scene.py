@@ -30,6 +30,7 @@ Z_PATH = "plots/z_m"
 SUCTION_PATH = "plots/suction"
 EVENTS_PATH = "events"
 COMMANDS_PATH = "commands"
+CAMERAS_PATH = "world/cameras"  # one entity per camera: its Pinhole (static), pose and pictures
 STEP_TIMELINE = "step"
 TIME_TIMELINE = "sim_time"
 
@@ -50,6 +51,10 @@ EVENT_LEVELS = {
 
 def object_path(name: str) -> str:
     return f"{OBJECTS_PATH}/{rr.escape_entity_path_part(name)}"
+
+
+def camera_path(name: str) -> str:
+    return f"{CAMERAS_PATH}/{rr.escape_entity_path_part(name)}"
 
 
 def joint_path(name: str) -> str:
@@ -108,6 +113,11 @@ def log_static_scene(stream: rr.RecordingStream, config: TwinConfig, tree: rr.ur
     pad_m = config.profile.pad_length_m
     stream.log(PAD_PATH, rr.Cylinders3D.from_fields(
         lengths=[pad_m + PAD_MARGIN_M], radii=[PAD_RADIUS_M + PAD_MARGIN_M], fill_mode="solid"), static=True)
+    for cam in config.cameras:  # pictures and poses come with each picture (RerunRecorder.on_image)
+        k = cam.intrinsics()
+        stream.log(camera_path(cam.name), rr.Pinhole(
+            image_from_camera=[k[0:3], k[3:6], k[6:9]], resolution=[cam.width_px, cam.height_px],
+            camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.1), static=True)
     for role in ("shoulder", "elbow", "wrist"):
         _series_style(stream, f"{ANGLES_PATH}/{role}", f"{role} q", JOINT_RGB[role], ACTUAL_WIDTH_PX)
         _series_style(stream, f"{ANGLES_PATH}/{role}_target", f"{role} target", JOINT_RGB[role], TARGET_WIDTH_PX)
@@ -131,8 +141,10 @@ def blueprint(config: TwinConfig, *, play_state: str | None = None) -> rrb.Bluep
         name="robot",
         origin="/",
         contents=[f"+ /{WORLD_PATH}/**", f"+ /{ROBOT_PATH}/**", f"- /{ROBOT_PATH}/**/collision_geometries/**"],
+        # The whole workspace at every moment: the arm at full reach in any direction, pick_place's pick
+        # (0.2, 0.7) and place (-0.3, -0.55) points and the box between them; from the front right, above.
         eye_controls=rrb.EyeControls3D(
-            position=(0.95 * reach_m, -1.2 * reach_m, 0.6 * reach_m), look_target=(-0.15, -0.2, 0.12), eye_up=(0, 0, 1)
+            position=(1.45 * reach_m, -1.7 * reach_m, 1.3 * reach_m), look_target=(0.0, 0.0, 0.05), eye_up=(0, 0, 1)
         ),
         # URDF links carry a colour but no fill mode: draw them as solids, not wireframes.
         defaults=[rr.Boxes3D.from_fields(fill_mode="solid"), rr.Cylinders3D.from_fields(fill_mode="solid")],
@@ -151,8 +163,13 @@ def blueprint(config: TwinConfig, *, play_state: str | None = None) -> rrb.Bluep
             TextLogColumn("LogLevel"), TextLogColumn("Body"), TextLogColumn("EntityPath", visible=False)])),
         row_shares=[3, 2, 1.5, 2],
     )
+    main = rrb.Horizontal(view_3d, plots, column_shares=[5, 4])
+    if config.cameras:  # each camera's pictures in a column beside the 3D view
+        pictures = rrb.Vertical(*(rrb.Spatial2DView(name=f"camera {c.name}", origin=f"/{camera_path(c.name)}")
+                                  for c in config.cameras))
+        main = rrb.Horizontal(view_3d, pictures, plots, column_shares=[5, 2.5, 4])
     return rrb.Blueprint(
-        rrb.Horizontal(view_3d, plots, column_shares=[5, 4]),
+        main,
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(timeline=TIME_TIMELINE, state="collapsed", play_state=play_state),

@@ -2,9 +2,11 @@
 
 An episode is a span of one recording's steps: the whole recording, or one pick-place cycle (from
 the task's `cycle N: ...` phase event to the next cycle's, the last to the end of the recording).
-Resampling holds the last recorded frame: dataset frame k of an episode starting at time t0 is the
-recorded frame with the largest t_ns <= t0 + k / fps (exact integer arithmetic in nanoseconds), so
-every value in a dataset is one the twin recorded, never an interpolation.
+Resampling takes the nearest recorded frame: dataset frame k of an episode starting at time t0 is the
+recorded frame whose t_ns is nearest t0 + k / fps (the earlier of two as near; exact integer
+arithmetic), so every value in a dataset is one the twin recorded, never an interpolation. Nearest,
+not the last before: a step's t_ns is rounded to whole nanoseconds (240 Hz: 4166667 ns), so step 8k
+lies 2.7k ns after k / 30 s, and "the last before" would take step 8k - 1.
 """
 
 from __future__ import annotations
@@ -64,11 +66,17 @@ def resample(rec: Recording, first_step: int, end_step: int, fps: int, cycle: in
     t0 = int(t_ns[lo])
     span_ns = int(t_ns[hi]) - t0
     count = span_ns * fps // NS_PER_S + 1  # frames k with k / fps <= span
-    # the last recorded frame at or before each sample time: (t - t0) * fps <= k * 1e9
-    elapsed_scaled = (t_ns[lo:hi + 1] - t0) * fps
-    targets = np.arange(count, dtype=np.int64) * NS_PER_S
-    rows = lo + np.searchsorted(elapsed_scaled, targets, side="right") - 1
-    return Episode(rec, rows.astype(np.int64), t0, cycle)
+    rows = lo + nearest((t_ns[lo:hi + 1] - t0) * fps, np.arange(count, dtype=np.int64) * NS_PER_S)
+    return Episode(rec, rows, t0, cycle)
+
+
+def nearest(times: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """For each wanted time, the index of the nearest of the sorted times (the earlier of two as near).
+    Both in the same integer unit (here ns × fps), so the choice is exact."""
+    after = np.clip(np.searchsorted(times, wanted, side="left"), 0, len(times) - 1)
+    before = np.maximum(after - 1, 0)
+    take_before = np.abs(wanted - times[before]) <= np.abs(times[after] - wanted)
+    return np.where(take_before, before, after).astype(np.int64)
 
 
 def episodes(recordings: list[Recording], fps: int, mode: str) -> list[Episode]:

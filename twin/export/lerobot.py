@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.errors import ConfigError
-from twin.export.episodes import NS_PER_S, Episode
+from twin.export.episodes import NS_PER_S, Episode, nearest
 from twin.export.stats import feature_stats, image_stats
 from twin.model.tables import frame_column_names, suction_command
 from twin.record.outputs import fsync_file
@@ -80,13 +80,12 @@ def camera_names(episodes: list[Episode]) -> list[str]:
 
 
 def camera_frames(ep: Episode, name: str, fps: int) -> list[np.ndarray]:
-    """The camera image shown at each dataset frame: the last one taken at or before its time."""
+    """The camera image shown at each dataset frame: the one taken nearest its time (episodes.nearest)."""
     track = ep.rec.cameras[name]
     if len(track.t_ns) == 0:
         raise ConfigError(f"recording {ep.rec.path!r}: camera {name!r} has no images")
     elapsed = (np.asarray(track.t_ns, dtype=np.int64) - ep.t0_ns) * fps
-    wanted = np.arange(len(ep), dtype=np.int64) * NS_PER_S
-    which = np.maximum(np.searchsorted(elapsed, wanted, side="right") - 1, 0)
+    which = nearest(elapsed, np.arange(len(ep), dtype=np.int64) * NS_PER_S)
     cache: dict[int, np.ndarray] = {}
     out = []
     for i in which.tolist():

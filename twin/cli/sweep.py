@@ -118,8 +118,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     executor = make_executor(args.executor, min(args.jobs, len(scenarios)) if args.executor == "local" else args.jobs,
                              args.scheduler)
     progress = Progress(len(scenarios), quiet=args.quiet)
-    done = run_sweep(Job(spec, str(out), args.save), scenarios, executor, batch_size=args.batch, on_rows=progress)
-    progress.close()
+    try:
+        done = run_sweep(Job(spec, str(out), args.save), scenarios, executor, batch_size=args.batch, on_rows=progress)
+    finally:
+        progress.close()
+        executor.close()
     if args.only is not None:
         _print_only(done.rows, out, args.save)
     else:

@@ -102,9 +102,11 @@ class DaskExecutor:
         try:
             if scheduler:
                 self._client = Client(scheduler, timeout=10, set_as_default=False)
+                self.jobs = max(1, self.worker_count())  # batches sized for the cluster's workers
             else:
                 self._cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                             dashboard_address=None, silence_logs=logging.ERROR)
+                                             dashboard_address=None, silence_logs=logging.ERROR,
+                                             preload=["twin.sweep.worker"])  # twin imported as workers start
                 self._client = Client(self._cluster, set_as_default=False)
         except (OSError, TimeoutError) as err:
             self.close()
@@ -121,7 +123,7 @@ class DaskExecutor:
                    for i, item in enumerate(items)]
         index = {fut.key: i for i, fut in enumerate(futures)}
         try:
-            for fut in as_completed(futures):
+            for fut in as_completed(futures, loop=self._client.loop):
                 try:
                     result = fut.result()
                 except TwinError:

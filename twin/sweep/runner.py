@@ -36,7 +36,8 @@ def batches(scenarios: Sequence[int], jobs: int, size: int | None = None) -> lis
 
 def run_sweep(job: Job, scenarios: Sequence[int], executor, *, batch_size: int | None = None,
               on_rows: Callable[[list[dict]], None] | None = None) -> SweepRun:
-    """Run the scenarios; on_rows is told each finished batch's rows. The executor is closed at the end."""
+    """Run the scenarios; on_rows is told each finished batch's rows. The caller closes the executor
+    (it may run more); an interrupted sweep closes it at once."""
     t0 = time.perf_counter()
     rows: list[dict] = []
     items = [(job, batch) for batch in batches(scenarios, executor.jobs, batch_size)]
@@ -48,7 +49,6 @@ def run_sweep(job: Job, scenarios: Sequence[int], executor, *, batch_size: int |
                 on_rows(batch_rows)
     except (KeyboardInterrupt, Terminated) as err:
         stopped_by = err
-    finally:
-        executor.close()
+        executor.close()  # stop the workers now; the batches that finished are kept
     rows.sort(key=lambda r: r["scenario"])
     return SweepRun(rows, len(scenarios), time.perf_counter() - t0, stopped_by)

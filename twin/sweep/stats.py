@@ -23,7 +23,9 @@ def wilson(ok: int, n: int, z: float = Z95) -> tuple[float, float]:
     denom = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    lo = 0.0 if ok == 0 else max(0.0, centre - half)  # exact ends where rounding would miss them
+    hi = 1.0 if ok == n else min(1.0, centre + half)
+    return lo, hi
 
 
 def reason(error: str) -> str:

@@ -52,7 +52,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         raise RecordingError(f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
                              f"of a run that was killed (or is still running); `twin recover {args.file}` restores it")
     info = describe(args.file)
-    for line in format_info(info):
+    for line in format_info(info, all_events=args.events):
         print(line)
     if not info.intact:
         raise RecordingError(f"recording {args.file!r} is not finalized: {info.problem}; "
@@ -73,6 +73,7 @@ def add_record_commands(sub) -> None:
     p = sub.add_parser("info", help="describe a recording: duration, channels, events, metadata, finalized or not",
                        description="Exit code 0 for a complete file, 2 for a missing, unreadable or unfinished one.")
     p.add_argument("file", metavar="FILE.mcap")
+    p.add_argument("--events", action="store_true", help="also list every event with its time, step and data")
     p.set_defaults(func=cmd_info)
     p = sub.add_parser("recover", help="restore the readable part of a recording cut short (crash, kill -9)",
                        description="Reads up to the first damaged record and writes a complete MCAP file. A run "

@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import json
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from twin.errors import RecordingError
+from twin.model.config import TwinConfig
+from twin.model.types import Event
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json
-from twin.record.mcap.reader import block_steps, scan
+from twin.record.mcap.reader import block_steps, parse_event, scan
 from twin.record.metadata import parse_config, parse_run
 
 
@@ -36,6 +40,8 @@ class Info:
     commands: int
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: list[tuple[str, int]] = field(default_factory=list)
+    config: TwinConfig | None = None  # what the run was: robot, scene, pad, cameras
+    event_list: list[Event] = field(default_factory=list)  # every readable event, in file order
 
 
 def _steps(messages: list) -> np.ndarray:
@@ -74,11 +80,23 @@ def describe(path: str | Path) -> Info:
         channels=channels, events=dict(sorted(kinds.items())), commands=len(topics.get(S.COMMANDS.topic, [])),
         metadata={k: v for k, v in sorted(s.metadata.items()) if k != S.META_CONFIG},
         attachments=[(a.name, len(a.data)) for a in s.attachments],
+        config=config, event_list=_events(topics.get(S.EVENTS.topic, []), s.path),
     )
 
 
-def format_info(info: Info) -> list[str]:
-    """The human-readable report `twin info` prints."""
+def _events(messages: list, where: str) -> list[Event]:
+    """The events a file holds, as far as they parse (a damaged one is left out: info describes what is readable)."""
+    out = []
+    for m in messages:
+        try:
+            out.append(parse_event(m.data, where))
+        except RecordingError:
+            continue
+    return out
+
+
+def format_info(info: Info, *, all_events: bool = False) -> list[str]:
+    """The human-readable report `twin info` prints; with all_events, every event with its time and data."""
     if info.finalized:
         outcome = info.finished.get("outcome", "?")
         state = f"yes (run outcome {outcome}" + (f": {info.finished['error']})" if info.finished.get("error") else ")")
@@ -116,4 +134,38 @@ def format_info(info: Info) -> list[str]:
         lines.append(f"  {name}: {text if len(text) <= 160 else text[:157] + '...'}")
     if info.attachments:
         lines.append("attachments: " + ", ".join(f"{name} ({size:,} bytes)" for name, size in info.attachments))
+    if info.config is not None:
+        lines += setup_lines(info.config, info.run)
+    if all_events:
+        lines.append(f"all events ({len(info.event_list)}):" if info.event_list else "all events: none")
+        lines += [f"  {event_line(e)}" for e in info.event_list]
     return lines
+
+
+def setup_lines(config: TwinConfig, run: dict) -> list[str]:
+    """What the run was: the robot, each scene object with its mass and start pose, the pad's strength
+    and limits, the cameras, the task and its parameters."""
+    p, pad = config.profile, config.suction
+    lines = ["setup:", f"  robot {p.name}: links {p.link1_m:g} + {p.link2_m:g} m, Z stroke {p.z_stroke_m:g} m, "
+                       f"joints {', '.join(p.joint_names)}" + (f" ({p.description})" if p.description else "")]
+    for o in config.objects:
+        x, y, z = o.pos_m
+        lines.append(f"  object {o.name}: {o.mass_kg:g} kg, {' x '.join(f'{s:g}' for s in o.size_m)} m, at "
+                     f"({x:g}, {y:g}, {z:g}) m, yaw {math.degrees(o.yaw_rad):g} deg, friction {o.friction:g}")
+    strength = ("infinite strength" if pad.infinite_strength else
+                f"breaks past pull {pad.max_pull_force_n:g} N, shear {pad.max_shear_force_n:g} N, "
+                f"peel {pad.max_peel_torque_nm:g} N·m")
+    lines.append(f"  pad: {strength}; sensor {pad.sensor_range_m * 1000:g} mm long, "
+                 f"{pad.sensor_offset_m * 1000:g} mm below the pad root")
+    for c in config.cameras:
+        lines.append(f"  camera {c.name}: {c.width_px}x{c.height_px} {c.format} at {c.rate_hz:g} Hz, "
+                     f"{c.fov_deg:g} deg field of view, mounted on the {c.mount}")
+    params = json.dumps(run.get("params", {}), sort_keys=True)
+    lines.append(f"  task {run.get('task', '') or '(none)'} ({run.get('source', '?')}), parameters {params}")
+    return lines
+
+
+def event_line(e: Event) -> str:
+    """One event: time, step, kind, body, message and its data as JSON."""
+    data = f" {json.dumps(e.data, sort_keys=True)}" if e.data else ""
+    return f"t={e.t_ns * 1e-9:9.3f} s  step {e.step:>7}  {e.kind:<14} {e.body:<6} {e.message}{data}".rstrip()

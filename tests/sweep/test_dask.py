@@ -1,0 +1,71 @@
+"""`twin sweep --executor dask`: a real LocalCluster (2 single-threaded worker processes on
+127.0.0.1), the same results as the local pool, also when a worker process is killed mid-sweep."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import psutil
+import pyarrow.parquet as pq
+import pytest
+
+from twin.cli.main import main
+
+pytestmark = pytest.mark.slow  # a cluster starts in seconds; each test runs one
+
+SWEEP = ["pick_place", "--scenarios", "40", "--seed", "11", "--vary", "box.x_m=uniform(0.17,0.23)",
+         "--vary", "box.y_m=uniform(0.67,0.73)", "--vary", "box.mass_kg=choice(0.1,0.5)",
+         "--param", "cycles=1", "--param", "pause_s=0.1", "--param", "max_error_m=0.02", "--batch", "2"]
+
+
+def _table(folder):
+    return pq.read_table(folder / "results.parquet").drop(["wall_s"])
+
+
+def _workers(pid: int) -> list[psutil.Process]:
+    """The Dask worker processes the sweep started (spawned by its nannies)."""
+    out = []
+    for child in psutil.Process(pid).children(recursive=True):
+        try:
+            if "spawn_main" in " ".join(child.cmdline()):
+                out.append(child)
+        except psutil.NoSuchProcess:
+            pass
+    return out
+
+
+def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
+    assert main(["sweep", *SWEEP, "--quiet", "--jobs", "1", "--out", str(tmp_path / "local")]) == 0
+    capsys.readouterr()
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "sweep", *SWEEP, "--executor", "dask", "--jobs", "2",
+                             "--out", str(tmp_path / "dask")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stderr.readline()  # the first batches are back: both workers are busy with the rest
+        assert first.startswith("sweep: "), first + proc.stderr.read()
+        workers = _workers(proc.pid)
+        assert len(workers) == 2
+        for conn in psutil.Process(proc.pid).net_connections(kind="inet"):
+            if conn.status == psutil.CONN_LISTEN:
+                assert conn.laddr.ip == "127.0.0.1"  # the scheduler listens on loopback only
+        for w in workers:
+            for conn in w.net_connections(kind="inet"):
+                if conn.status == psutil.CONN_LISTEN:
+                    assert conn.laddr.ip == "127.0.0.1"
+        victim = workers[0]
+        victim.kill()  # SIGKILL mid-batch: its tasks go to the other worker (and the nanny's new one)
+        victim.wait(10)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr
+    assert "40 scenarios" in stdout and "(dask)" in stdout
+    assert _table(tmp_path / "dask").equals(_table(tmp_path / "local"))
+    local_failures = sorted(p.name for p in (tmp_path / "local" / "failures").iterdir())
+    assert sorted(p.name for p in (tmp_path / "dask" / "failures").iterdir()) == local_failures
+    for name in local_failures:
+        assert (tmp_path / "dask" / "failures" / name).read_bytes() == (tmp_path / "local" / "failures" / name).read_bytes()
+    time.sleep(0.5)
+    assert not psutil.pid_exists(victim.pid) or victim.status() == psutil.STATUS_ZOMBIE

@@ -187,6 +187,10 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
     fields.append(_command_stat(golden.commands, candidate.commands, tol["commands.sequence"], dt_ns))
     fields.append(_task_stat(golden, candidate, tol["outcome.task"], max(length), dt_ns))
     fields.extend(_count_stats(golden.events, candidate.events, tol, max(length), dt_ns))
+    if golden.config.cameras or candidate.config.cameras:
+        fields.append(_image_stat(golden, candidate, tol["images.pixels"], dt_ns))
+        if tol["images.pixels"] == INF:
+            notes.append("camera pictures are not compared under these tolerances (images.pixels = inf)")
     if tol.event_window_steps is None:
         matched, shifted, event_diffs = 0, 0, []
     else:
@@ -391,6 +395,50 @@ def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) 
                                     float(abs(a - b)), t, "events")
         stats.append(stat)
     return stats
+
+
+def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns: int) -> FieldStat:
+    """Each camera's pictures, paired by step: the mean absolute difference of their pixels (levels 0..255),
+    inf for a picture only one run has. Identical bytes are 0 without decoding; others are decoded by the
+    model (CameraTrack.rgb). Not looked at when the tolerance is inf."""
+    unit = FIELDS["images.pixels"][0]
+    if tolerance == INF:
+        return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
+    names = list(dict.fromkeys([c.name for c in golden.config.cameras] + [c.name for c in candidate.config.cameras]))
+    rows: list[tuple[int, str, float]] = []  # (step, "camera #index", error)
+    for name in names:
+        g, c = golden.cameras.get(name), candidate.cameras.get(name)
+        g_steps = g.step if g is not None else np.zeros(0, dtype=np.int64)
+        c_steps = c.step if c is not None else np.zeros(0, dtype=np.int64)
+        _, gi, ci = np.intersect1d(g_steps, c_steps, assume_unique=True, return_indices=True)
+        for i, j in zip(gi.tolist(), ci.tolist(), strict=True):
+            rows.append((int(g_steps[i]), f"{name} #{i}", _picture_error(g, i, c, j)))
+        for steps, which in ((g_steps, gi), (c_steps, ci)):
+            missing = np.setdiff1d(np.arange(len(steps)), which)
+            rows += [(int(steps[k]), f"{name} #{k}", INF) for k in missing.tolist()]
+    if not rows:
+        return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
+    rows.sort(key=lambda r: r[0])
+    errors = np.array([r[2] for r in rows])
+    worst = int(np.argmax(errors))
+    over = [r for r in rows if not r[2] <= tolerance]
+    stat = FieldStat("images.pixels", unit, tolerance, float(errors[worst]), rows[worst][0], rows[worst][1],
+                     float(np.sqrt(np.mean(np.square(errors)))), len(over))
+    if over:
+        step, element, err = over[0]
+        stat.first = Divergence(step, step * dt_ns * 1e-9, "images", "pixels", element, ["picture"],
+                                ["picture" if err != INF else "missing"], err, tolerance, unit)
+    return stat
+
+
+def _picture_error(g, i: int, c, j: int) -> float:
+    """Mean absolute pixel difference of picture i of track g and picture j of track c (inf: other sizes)."""
+    if g.data[i] == c.data[j]:
+        return 0.0
+    a, b = g.rgb(i), c.rgb(j)
+    if a.shape != b.shape:
+        return INF
+    return float(np.mean(np.abs(a.astype(np.int16) - b.astype(np.int16))))
 
 
 def _decimation_notes(golden: Recording, candidate: Recording, compared: int) -> list[str]:

@@ -29,10 +29,12 @@ FIELDS: dict[str, tuple[str, str]] = {
     "counts.attach": ("events", "number of attach events"),
     "counts.release": ("events", "number of release events"),
     "counts.break": ("events", "number of break events"),
+    "images.pixels": ("levels", "mean absolute difference of a camera picture's pixels (0..255 per channel)"),
 }
 DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.sequence", "outcome.task"})
 COUNTED_EVENTS = ("attach", "release", "break")
 _ALWAYS = {"outcome.task": 0.0, "counts.attach": 0.0, "counts.release": 0.0, "counts.break": 0.0}
+IMAGE_TIGHT_LEVELS = 0.5  # tight: a picture may differ by half a level on average (another CPU's rounding)
 POSITION_M = 2.5e-4  # physical: a clear margin below 1 mm, so a 1 mm change always shows
 
 _ALL_ZERO = {name: 0.0 for name in FIELDS}
@@ -54,6 +56,7 @@ _PHYSICAL = _ALWAYS | {
     "final.orientation": 1e-3,
     "run.length": 0.0,
     "commands.sequence": INF,  # physically equal runs may be driven by other but equivalent commands
+    "images.pixels": INF,  # pictures of physically equal runs differ where the robot differs by a pixel
 }
 # outcome: where the objects ended, whether the task ended ok, how often the pad took and let go
 _OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
@@ -62,7 +65,7 @@ _OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "
 PRESETS: dict[str, tuple[dict[str, float], int | None]] = {
     "exact": (_ALL_ZERO, 0),
     "tight": ({name: 0.0 if name in DISCRETE or name == "run.length" or name in _ALWAYS else 1e-9
-               for name in FIELDS}, 0),
+               for name in FIELDS} | {"images.pixels": IMAGE_TIGHT_LEVELS}, 0),
     "physical": (_PHYSICAL, 12),
     "outcome": (_OUTCOME, None),
 }

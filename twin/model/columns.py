@@ -91,6 +91,7 @@ class FrameCollector(Sink):
         self.frames: list[Frame] = []
         self.commands = []
         self.events = []
+        self.images = []  # model.images.CameraImage, as they came
 
     def on_frame(self, frame: Frame) -> None:
         self.frames.append(frame)
@@ -100,6 +101,9 @@ class FrameCollector(Sink):
 
     def on_event(self, event) -> None:
         self.events.append(event)
+
+    def on_image(self, image) -> None:
+        self.images.append(image)
 
     def columns(self) -> FrameColumns:
         return FrameColumns.from_frames(self.frames)
@@ -116,6 +120,7 @@ class ColumnCollector(Sink):
         self._pending: list[Frame] = []
         self.commands = []
         self.events = []
+        self.images = []  # model.images.CameraImage, as they came
 
     def on_frame(self, frame: Frame) -> None:
         self._pending.append(frame)
@@ -128,6 +133,9 @@ class ColumnCollector(Sink):
 
     def on_event(self, event) -> None:
         self.events.append(event)
+
+    def on_image(self, image) -> None:
+        self.images.append(image)
 
     def columns(self) -> FrameColumns:
         parts = self._chunks + ([FrameColumns.from_frames(self._pending)] if self._pending else [])

@@ -169,6 +169,27 @@ class CameraTrack:
                            np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images])
 
 
+def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[str, CameraTrack]:
+    """Each camera's pictures among images (in the order they came), as tracks by camera name."""
+    return {spec.name: CameraTrack.from_images(spec, [im for im in images if im.camera == spec.name])
+            for spec in cameras}
+
+
+def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTrack], frame_steps: np.ndarray,
+                    pad_poses: np.ndarray) -> list[CameraImage]:
+    """A recording's pictures as CameraImages in step order (camera order within a step), each with its
+    camera's pose from the recorded frame at (or, in a decimated file, just before) its step."""
+    out = []
+    for spec in cameras:
+        track = by_name.get(spec.name)
+        for i in range(len(track) if track is not None and len(frame_steps) else 0):
+            step = int(track.step[i])
+            row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
+            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i],
+                                   optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))))
+    return sorted(out, key=lambda im: im.step)
+
+
 def encode(rgb: np.ndarray, format: str = "png") -> bytes:
     """(h, w, 3) uint8 pixels as PNG (fixed compression, no timestamps) or JPEG (quality 90)."""
     from PIL import Image

@@ -19,6 +19,7 @@ from pathlib import Path
 from twin.errors import RecordingError
 from twin.model.columns import ColumnCollector, FrameCollector
 from twin.model.config import TwinConfig
+from twin.model.images import recorded_images, tracks
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin
 
@@ -49,7 +50,8 @@ def replay_run(rec: Recording) -> dict:
 def collected(collector: FrameCollector | ColumnCollector, rec_config, run: dict, *, path: str = "") -> Recording:
     """An in-memory Recording of what a collector saw."""
     return Recording(config=rec_config, frames=collector.columns(), commands=list(collector.commands),
-                     events=list(collector.events), run=dict(run), meta={}, finalized=True, path=path)
+                     events=list(collector.events), run=dict(run), meta={}, finalized=True, path=path,
+                     cameras=tracks(rec_config.cameras, collector.images))
 
 
 def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
@@ -102,17 +104,22 @@ def _robot_files(rec: Recording) -> Iterator[TwinConfig]:
 
 
 def feed(rec: Recording, sinks: Sequence[Sink]) -> None:
-    """Send a recording's frames, commands and events to sinks, step by step: frame s, then the
-    commands and events stamped s (those happen after frame s, before frame s + 1)."""
+    """Send a recording's frames, pictures, commands and events to sinks, step by step: frame s, then
+    the pictures, commands and events stamped s (those happen after frame s, before frame s + 1)."""
     commands = sorted(rec.commands, key=lambda c: c.step)
     events = sorted(rec.events, key=lambda e: e.step)
-    ci = ei = 0
+    images = recorded_images(rec.config.cameras, rec.cameras, rec.frames.step, rec.frames.pad_pose)
+    ci = ei = mi = 0
     steps = rec.frames.step
     for i in range(len(rec.frames)):
         frame = rec.frames.frame(i)
         for s in sinks:
             s.on_frame(frame)
         upto = int(steps[i + 1]) if i + 1 < len(steps) else None
+        while mi < len(images) and (upto is None or images[mi].step < upto):  # pictures come right after their frame
+            for s in sinks:
+                s.on_image(images[mi])
+            mi += 1
         while ci < len(commands) and (upto is None or commands[ci].step < upto):
             for s in sinks:
                 s.on_command(commands[ci])

@@ -19,7 +19,7 @@ import rerun as rr
 from twin.errors import RecordingError
 from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
-from twin.model.images import CameraImage, camera_view, optical_pose
+from twin.model.images import CameraImage, recorded_images
 from twin.model.recording import Recording
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
@@ -267,19 +267,8 @@ def write_rrd(recording: Recording, path: str | os.PathLike, *, batch_steps: int
             recorder.on_command(command)
         for event in recording.events:
             recorder.on_event(event)
-        for image in _recorded_images(recording):
+        for image in recorded_images(recording.config.cameras, recording.cameras, recording.frames.step,
+                                     recording.frames.pad_pose):
             recorder.on_image(image)
     return recorder.frames_written
 
-
-def _recorded_images(recording: Recording):
-    """A loaded recording's pictures as CameraImages, each camera's pose from the recorded frame at
-    (or, in a decimated file, just before) the picture's step."""
-    steps = recording.frames.step
-    for spec in recording.config.cameras:
-        track = recording.cameras.get(spec.name)
-        for i in range(len(track) if track is not None and len(steps) else 0):
-            step = int(track.step[i])
-            frame = recording.frames.frame(max(0, int(np.searchsorted(steps, step, side="right")) - 1))
-            pose = optical_pose(*camera_view(spec, frame.pad_pose))
-            yield CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose)

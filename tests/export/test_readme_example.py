@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_readme_pandas_example(tmp_path):
     pytest.importorskip("matplotlib")
     readme = (ROOT / "README.md").read_text()
-    code = re.search(r"```python\n(import matplotlib\.pyplot as plt\n.*?)```", readme, re.S).group(1)
+    code = re.search(r"```python\n(import matplotlib\.pyplot as plt\n.*?)```", readme, re.DOTALL).group(1)
     claimed = re.search(r"it\), it prints `([^`]+)`", readme).group(1)
     (tmp_path / "recordings").symlink_to(ROOT / "recordings")
     (tmp_path / "docs").mkdir()

@@ -61,6 +61,25 @@ def test_suction_command_follows_the_commands(pick_place_mcap):
     assert first_on == on_steps[0] + 1
 
 
+def test_suction_command_of_a_key_session(tmp_path, capsys):
+    """Keys switch suction through the recording's key map (seed001: `3` on and down, `5` off)."""
+    mcap = tmp_path / "keys.mcap"
+    assert twin(capsys, "teleop", "--robot", "seed001", "--keys", "3 wait*2 5 wait", "--record", mcap)[0] == 0
+    rec = twin_pkg.load(mcap)
+    assert {c.kind for c in rec.commands} == {"key"}
+    table = rec.to_arrow()
+    command = table.column("suction.command").to_numpy(zero_copy_only=False)
+    assert command.any() and not command[-1]
+    assert np.array_equal(command, table.column("suction.on").to_numpy(zero_copy_only=False))
+
+
+def test_a_recording_without_frames_gives_an_empty_table(pick_place_mcap):
+    rec = twin_pkg.load(pick_place_mcap[0])
+    rec.frames = rec.frames.slice(0, 0)
+    table = rec.to_arrow()
+    assert table.num_rows == 0 and table.num_columns == len(frame_column_names(["box"])) + 1
+
+
 def test_events_and_commands_tables(pick_place_mcap):
     path, _ = pick_place_mcap
     rec = twin_pkg.load(path)

@@ -40,6 +40,8 @@ class Episode:
 def spans(rec: Recording, mode: str) -> list[tuple[int, int, int]]:
     """(first step, end step exclusive, cycle) of each episode in rec: one for mode "recording",
     one per pick-place cycle for mode "cycles" (ConfigError if the recording has no cycle phases)."""
+    if len(rec.frames) == 0:
+        raise ConfigError(f"recording {rec.path!r} has no frames; expected at least one to export")
     last = int(rec.frames.step[-1]) + 1
     if mode == "recording":
         return [(int(rec.frames.step[0]), last, 0)]

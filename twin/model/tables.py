@@ -79,7 +79,7 @@ def frames_table(rec):
     arrays = []
     for f in FRAME_FIELDS:
         values = getattr(cols, f.name)
-        flat = values.reshape(n, -1) if values.ndim > 1 else values.reshape(n, 1)
+        flat = values.reshape(n, int(np.prod(values.shape[1:], dtype=np.int64)))
         arrays += [np.ascontiguousarray(flat[:, i]) for i in range(flat.shape[1])]
     names = frame_column_names([o.name for o in rec.config.objects])
     if len(names) != len(arrays):

@@ -13,7 +13,7 @@ import numpy as np
 QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 _Q_KEYS = tuple(f"q{round(q * 100):02d}" for q in QUANTILES)
 IMAGE_SAMPLE_FRAMES = 100  # at most this many frames of an episode are looked at
-IMAGE_SAMPLE_SIDE_PX = 150  # each subsampled to about this many pixels along its longer side
+IMAGE_SAMPLE_SIDE_PX = 150  # each subsampled to at most this many pixels along its longer side
 
 
 def feature_stats(values: np.ndarray) -> dict[str, list]:
@@ -33,7 +33,7 @@ def image_stats(frames: list[np.ndarray]) -> dict[str, list]:
     """Per-channel statistics of (H, W, 3) uint8 frames scaled to [0, 1], each shaped (3, 1, 1)."""
     step = max(1, len(frames) // IMAGE_SAMPLE_FRAMES)
     sample = frames[::step][:IMAGE_SAMPLE_FRAMES]
-    stride = max(1, max(sample[0].shape[:2]) // IMAGE_SAMPLE_SIDE_PX)
+    stride = -(-max(sample[0].shape[:2]) // IMAGE_SAMPLE_SIDE_PX)  # ceil: the longer side <= IMAGE_SAMPLE_SIDE_PX
     pixels = np.concatenate([f[::stride, ::stride].reshape(-1, 3) for f in sample]).astype(np.float64) / 255.0
     flat = feature_stats(pixels)
     return {key: value if key == "count" else [[[v]] for v in value] for key, value in {

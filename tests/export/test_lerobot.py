@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 from pathlib import Path
 
 import av
@@ -255,4 +256,12 @@ def test_recordings_with_different_cameras_are_refused(camera_run, pick_place_mc
     code, _, err = twin(capsys, "export", camera_run, pick_place_mcap[0], "--format", "lerobot", "--fps", "10",
                         "-o", tmp_path / "ds")
     assert code == 2 and "different cameras" in err and not (tmp_path / "ds").exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_video_without_pyav_is_one_line_exit_2(camera_run, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "av", None)  # import av now raises ImportError
+    code, _, err = twin(capsys, "export", camera_run, "--format", "lerobot", "--fps", "10", "-o", tmp_path / "ds")
+    assert code == 2 and err == "twin: error: video export needs the av package (PyAV): pip install 'twin[export]' " \
+                               "or pip install av\n"
     assert list(tmp_path.iterdir()) == []

@@ -104,6 +104,10 @@ def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int
     if not episodes:
         raise ConfigError("no episode to export")
     cameras = camera_names(episodes)
+    if cameras:
+        from twin.export.video import require_av
+
+        require_av()  # before any work: a missing PyAV is one line, and nothing is written
     tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
     if tmp.exists():  # left by a killed export of this process id: ours by its name
         shutil.rmtree(tmp)

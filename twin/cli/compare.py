@@ -105,14 +105,27 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
+    from twin.sweep.executors import make_executor
+    from twin.sweep.golden import check_sweep, split_paths
     from twin.verify.check import Progress, check_all, exit_code, golden_paths, summary_table
 
     tol = _tolerances(args)
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
-    paths = golden_paths(args.paths)
-    outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=Progress(len(paths)),
-                         allow_error=args.allow_error)
+    recordings, sweeps = split_paths(args.paths)
+    paths = golden_paths(recordings) if recordings or not sweeps else []
+    progress = Progress(len(paths) + len(sweeps))
+    executor = make_executor(args.executor, args.jobs, args.scheduler) if sweeps or args.executor == "dask" else None
+    try:
+        run_many = executor.map_unordered if args.executor == "dask" else None
+        outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=progress,
+                             allow_error=args.allow_error, run_many=run_many) if paths else []
+        for definition in sweeps:  # statistical goldens: each sweep spread over the executor's workers
+            outcomes.append(check_sweep(definition, executor, update=args.update))
+            progress(outcomes[-1])
+    finally:
+        if executor is not None:
+            executor.close()
     if args.junit:
         from twin.compare.report import render_check_junit
 
@@ -149,13 +162,19 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)
 
-    p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap)")
-    p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/)")
+    p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap); "
+                                     "sweep goldens (NAME.toml) are judged by statistics")
+    p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/), sweep definitions "
+                   "NAME.toml with NAME.summary.json beside them, or folders of them (recordings/sweeps)")
     p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which); "
                    "never with a run whose task failed")
     p.add_argument("--allow-error", action="store_true",
                    help="with --update: also write a run whose task failed (its outcome stays error)")
     p.add_argument("--jobs", "-j", type=whole_number(1), default=1, metavar="N", help="parallel processes (default 1)")
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="local: processes on this machine (default); dask: Dask's distributed scheduler (a "
+                        "LocalCluster of --jobs workers on 127.0.0.1, or --scheduler), for large golden sets")
+    p.add_argument("--scheduler", default=None, metavar="ADDR", help="with --executor dask: tcp://HOST:8786")
     p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
     p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")
     _add_tolerance_options(p, "exact")

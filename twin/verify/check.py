@@ -213,12 +213,19 @@ class Progress:
 
 
 def check_all(paths: Sequence[str], tolerances: Tolerances, *, update: bool = False, jobs: int = 1,
-              progress: Callable[[Outcome], None] | None = None, allow_error: bool = False) -> list[Outcome]:
-    """Check every golden, in `jobs` processes; outcomes in the order of paths."""
+              progress: Callable[[Outcome], None] | None = None, allow_error: bool = False,
+              run_many: Callable | None = None) -> list[Outcome]:
+    """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which yields
+    (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order of paths."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     results: dict[str, Outcome] = {}
-    if jobs == 1 or len(paths) <= 1:
+    if run_many is not None:
+        for i, outcome in run_many(check_one, [(p, tolerances, update, allow_error) for p in paths]):
+            results[paths[i]] = outcome
+            if progress:
+                progress(outcome)
+    elif jobs == 1 or len(paths) <= 1:
         for p in paths:
             results[p] = check_one(p, tolerances, update, allow_error)
             if progress:

@@ -62,11 +62,12 @@ def state_names(rec) -> tuple[list[str], list[str]]:
     return positions + ["suction.on", "suction.holding"], targets + ["suction.command"]
 
 
-def episode_arrays(ep: Episode) -> tuple[np.ndarray, np.ndarray]:
-    """observation.state and action of each dataset frame of an episode (float32)."""
+def episode_arrays(ep: Episode, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """observation.state and action of each dataset frame of an episode (float32); command is its
+    recording's suction.command column (model.tables.suction_command)."""
     f, rows = ep.rec.frames, ep.rows
     state = np.column_stack([f.joint_q[rows], f.suction_on[rows], f.held_body[rows] >= 0])
-    action = np.column_stack([f.joint_target[rows], suction_command(ep.rec)[rows]])
+    action = np.column_stack([f.joint_target[rows], command[rows]])
     return state.astype(np.float32), action.astype(np.float32)
 
 
@@ -133,9 +134,10 @@ def _write_all(root: Path, episodes: list[Episode], tasks: list[str], cameras: l
     data_path.parent.mkdir(parents=True)
     writer = None
     start = 0
+    commands = {id(ep.rec): suction_command(ep.rec) for ep in episodes}  # once per recording, not per cycle
     for e, (ep, task) in enumerate(zip(episodes, tasks, strict=True)):
         n = len(ep)
-        state, action = episode_arrays(ep)
+        state, action = episode_arrays(ep, commands[id(ep.rec)])
         frame_index = np.arange(n, dtype=np.int64)
         cols = {"observation.state": state, "action": action,
                 "timestamp": (frame_index / fps).astype(np.float32), "frame_index": frame_index,

@@ -265,3 +265,15 @@ def test_video_without_pyav_is_one_line_exit_2(camera_run, tmp_path, capsys, mon
     assert code == 2 and err == "twin: error: video export needs the av package (PyAV): pip install 'twin[export]' " \
                                "or pip install av\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_empty_folder_is_filled_in_place(pick_place_mcap, tmp_path, capsys, monkeypatch):
+    """`-o .` in an empty folder: the dataset lands in it (the folder itself is not replaced)."""
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    inode = folder.stat().st_ino
+    monkeypatch.chdir(folder)
+    assert twin(capsys, "export", pick_place_mcap[0], "--format", "lerobot", "--fps", "10", "-o", ".")[0] == 0
+    assert folder.stat().st_ino == inode and (folder / "meta" / "info.json").is_file()
+    assert sorted(p.name for p in folder.iterdir()) == ["data", "meta"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]

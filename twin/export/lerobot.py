@@ -294,8 +294,8 @@ def _write_json(path: Path, value: dict) -> None:
 
 
 def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
-    """Move the finished dataset into place: over an empty folder, or (overwrite) over an old dataset,
-    which is renamed aside first and removed only once the new one is in place."""
+    """Move the finished dataset into place: as a new folder, into an empty one, or (overwrite) over an
+    old dataset, which is renamed aside first and removed only once the new one is in place."""
     for path in sorted(tmp.rglob("*")):
         if path.is_file():
             fsync_file(path)
@@ -306,7 +306,9 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
         os.replace(out, old / out.name)
         os.replace(tmp, out)
         shutil.rmtree(old, ignore_errors=True)
+    elif out.exists():  # an empty folder (perhaps the current one): filled in place, meta/ (info.json) last
+        for name in sorted(p.name for p in tmp.iterdir() if p.name != "meta") + ["meta"]:
+            os.replace(tmp / name, out / name)
+        tmp.rmdir()
     else:
-        if out.exists():
-            out.rmdir()
         os.replace(tmp, out)

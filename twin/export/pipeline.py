@@ -49,7 +49,9 @@ def export_lerobot(paths: list[str], out: Path, fps: int, *, mode: str = "record
         return None, sources
     eps = episodes([s.rec for s in kept], fps, mode)
     tasks = [task if task is not None else _default_task(ep) for ep in eps]
-    written = write_dataset(eps, tasks, out, fps, provenance(sources, eps, fps, mode, verify_first), overwrite=overwrite)
+    written = write_dataset(eps, tasks, out.absolute(), fps, provenance(sources, eps, fps, mode, verify_first),
+                            overwrite=overwrite)  # absolute: `-o .` has a folder to write beside
+    written.path = out
     return written, sources
 
 

@@ -3,6 +3,11 @@
 pick_place run without recording, with MCAP, with MCAP + Rerun, each as a ratio to the
 physics-only step rate; MCAP bytes per simulated minute; the recorder's cost per step; load time.
 tools/bench.py calls bench(ctx); `python tools/bench_record.py` runs it alone.
+
+Each run is timed twice over: its stepping (first Frame to last, what the physics-only baseline
+times too: `record_*_vs_motion`) and the whole run (recorders started, twin built, stepping, files
+finalized: `record_*_run_vs_motion`), with the start and finish costs on their own rows. The modes
+take turns, repeat by repeat, so a machine that slows down slows them all.
 """
 
 from __future__ import annotations
@@ -13,8 +18,10 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 from twin.model.config import TwinConfig
+from twin.model.sink import Sink
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
 from twin.sim.twin import Twin
@@ -30,24 +37,49 @@ def _cpu_s() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
-def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> tuple[int, float, float, int]:
-    """One pick_place run: (steps, wall seconds, CPU seconds of this process's threads and of the
-    recorder process it waited for, MCAP bytes)."""
+class _Clock(Sink):
+    """A sink after the recorders: the wall time of the first and the last Frame."""
+
+    def __init__(self) -> None:
+        self.first_s = self.last_s = 0.0
+
+    def on_frame(self, frame) -> None:
+        self.last_s = time.perf_counter()
+        if frame.step == 0:
+            self.first_s = self.last_s
+
+
+class Timed(NamedTuple):
+    steps: int
+    stepping_s: float  # first Frame to last
+    run_s: float  # open_recorders to files finalized
+    start_s: float  # open_recorders to the first Frame (recorders started, twin built)
+    finish_s: float  # last Frame to files finalized
+    cpu_s: float  # this process's threads and the recorder process it waited for
+    mcap_bytes: int
+
+
+def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
+    """One pick_place run, timed (see the module docstring)."""
     config = TwinConfig()
     mcap_path = folder / "bench.mcap" if mcap else None
     rrd_path = folder / "bench.rrd" if rrd else None
+    clock = _Clock()
     t0, cpu0 = time.perf_counter(), _cpu_s()
     with open_recorders(config, RUN, mcap_path=mcap_path, rrd_path=rrd_path) as sinks:
-        twin = Twin(config, sinks=sinks)
+        twin = Twin(config, sinks=[*sinks, clock])
         run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
         twin.close()
-    wall_s, cpu_s = time.perf_counter() - t0, _cpu_s() - cpu0
-    return twin.step_index, wall_s, cpu_s, mcap_path.stat().st_size if mcap_path else 0
+    t1, cpu_s = time.perf_counter(), _cpu_s() - cpu0
+    return Timed(twin.step_index, clock.last_s - clock.first_s, t1 - t0, clock.first_s - t0, t1 - clock.last_s,
+                 cpu_s, mcap_path.stat().st_size if mcap_path else 0)
 
 
 def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
-    """Process CPU time the MCAP recorder spends per frame, fed a recorded run's frames (no physics)."""
+    """Process CPU time the MCAP recorder spends per frame, fed a recorded run's frames as the recorder
+    process feeds it (packed rows, 32 a batch; no physics)."""
     from twin.model.columns import FrameCollector
+    from twin.model.rows import FrameRows
     from twin.record.mcap.writer import McapRecorder
     from twin.robot.urdf import urdf_text
 
@@ -56,17 +88,22 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
     twin = Twin(config, sinks=[collector])
     run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
     twin.close()
+    rows = FrameRows(len(config.profile.joint_names), len(config.objects))
+    n = len(collector.frames)
+    packed = bytearray(n * rows.size)
+    for i, frame in enumerate(collector.frames):
+        rows.pack_into(packed, i * rows.size, frame)
     best = float("inf")
     for _ in range(max(3, repeats)):
         t0 = time.process_time()
         recorder = McapRecorder(folder / "cpu.mcap", config, RUN, urdf=urdf_text(config.profile))
-        for frame in collector.frames:
-            recorder.on_frame(frame)
+        for start in range(0, n, 32):
+            recorder.on_rows(rows, memoryview(packed)[start * rows.size:min(n, start + 32) * rows.size])
         for event in collector.events:
             recorder.on_event(event)
         recorder.close()
         best = min(best, time.process_time() - t0)
-    return best / len(collector.frames) * 1e6
+    return best / n * 1e6
 
 
 def _have_rerun_writer() -> bool:
@@ -87,18 +124,27 @@ def bench(ctx) -> list[tuple[str, str]]:
     cpu_us: dict[str, float] = {}
     with tempfile.TemporaryDirectory(prefix="twin_bench_record_") as tmp:
         folder = Path(tmp)
-        mcap_bytes, steps = 0, 0
-        for name, (mcap, rrd) in modes.items():
-            samples, cpu_samples = [], []
-            for _ in range(repeats):
-                steps, wall_s, cpu_s, size = timed_run(folder, mcap=mcap, rrd=rrd)
-                samples.append(steps / wall_s)
-                cpu_samples.append(cpu_s / steps * 1e6)
-                mcap_bytes = size or mcap_bytes
-            rates[name] = statistics.median(samples)
-            cpu_us[name] = statistics.median(cpu_samples)
-            rows.append((f"{name}: steps/s (ratio to physics-only)",
-                         f"{ctx.ratio(rates[name])}; CPU {cpu_us[name]:.1f} us/step"))
+        runs: dict[str, list[Timed]] = {name: [] for name in modes}
+        for _ in range(repeats):  # the modes take turns
+            for name, (mcap, rrd) in modes.items():
+                runs[name].append(timed_run(folder, mcap=mcap, rrd=rrd))
+        steps = runs["twin, no recording"][0].steps
+        mcap_bytes = runs["twin + MCAP"][-1].mcap_bytes
+        for name, timed in runs.items():
+            rates[name] = statistics.median(t.steps / t.stepping_s for t in timed)
+            run_rate = statistics.median(t.steps / t.run_s for t in timed)
+            cpu_us[name] = statistics.median(t.cpu_s / t.steps * 1e6 for t in timed)
+            rows.append((f"{name}: stepping steps/s (ratio to physics-only)",
+                         f"{ctx.ratio(rates[name])}; CPU {cpu_us[name]:.1f} us/step (whole run)"))
+            start_ms = statistics.median(t.start_s for t in timed) * 1e3
+            finish_ms = statistics.median(t.finish_s for t in timed) * 1e3
+            rows.append((f"{name}: whole run, start and finish included",
+                         f"{ctx.ratio(run_rate)}; start {start_ms:.0f} ms, finish {finish_ms:.0f} ms"))
+            key = {"twin + MCAP": "record_mcap", "twin + MCAP + Rerun": "record_both"}.get(name)
+            if key:
+                ctx.rate_figures(f"{key}_run", run_rate)
+                ctx.figures[f"{key}_start_ms"] = start_ms
+                ctx.figures[f"{key}_finish_ms"] = finish_ms
         plain, with_mcap = rates["twin, no recording"], rates["twin + MCAP"]
         ctx.rate_figures("record_mcap", with_mcap)
         rows.append(("twin + MCAP: speed relative to no recording (wall; CPU)",

@@ -220,3 +220,13 @@ def test_each_scene_s_down_puts_the_pad_on_a_50_mm_box(name, down, up):
     assert (profile.z_down(), profile.z_up()) == (down, up)
     assert k.fk(profile, (0.0, 0.0, down, 0.0)).z_m == pytest.approx(0.055)
     assert k.fk(profile, (0.0, 0.0, up, 0.0)).z_m > 0.1
+
+
+@settings(max_examples=300, deadline=None)
+@given(name=st.sampled_from(sorted(PROFILES)), q=st.tuples(*[st.floats(-7.0, 7.0)] * 4))
+def test_the_per_step_pad_pose_is_fk_bit_for_bit(name, q):
+    """The twin's per-step pad pose (pad_pose_function) and fk give the same bits: recordings depend on it."""
+    profile = PROFILES[name]
+    pose = k.fk(profile, q)
+    half = 0.5 * pose.heading_rad
+    assert k.pad_pose_function(profile)(q) == (pose.x_m, pose.y_m, pose.z_m, 0.0, 0.0, math.sin(half), math.cos(half))

@@ -85,22 +85,11 @@ BY_NAME = {f.name: f for f in FRAME_FIELDS}
 BLOCKS = ("JointBlock", "SuctionBlock", "PoseBlock")  # the MCAP block messages, in channel order
 NAMES_FIELD = 3  # each block's names: joint names (JointBlock) or object names
 NAMES_FIELD_NAME = {"JointBlock": "joint_names", "SuctionBlock": "object_names", "PoseBlock": "object_names"}
-FLOAT_FIELDS = tuple(f.name for f in FRAME_FIELDS if f.wire == "<f8")  # one packed float row per frame
 
 
 def block_fields(block: str) -> tuple[FrameField, ...]:
     """The Frame fields a block message carries, step and t_ns first."""
     return tuple(f for f in FRAME_FIELDS if f.block in ("*", block))
-
-
-def float_offsets(n_joints: int, n_objects: int) -> dict[str, slice]:
-    """Where each float field sits in a frame's packed float row (FLOAT_FIELDS order)."""
-    out, at = {}, 0
-    for name in FLOAT_FIELDS:
-        size = int(np.prod(BY_NAME[name].trailing(n_joints, n_objects), dtype=np.int64))
-        out[name] = slice(at, at + size)
-        at += size
-    return out
 
 
 COMPARED: tuple[tuple[FrameField, Compared], ...] = tuple((f, c) for f in FRAME_FIELDS for c in f.compared)

@@ -4,8 +4,13 @@ overrides what it uses (a recorder all of them, an event log only on_event)."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from twin.model.images import CameraImage
 from twin.model.types import Command, Event, Frame
+
+if TYPE_CHECKING:
+    from twin.model.rows import FrameRows
 
 OUTCOMES = ("ok", "error", "interrupted")  # how a run ended, as close() is told
 
@@ -15,6 +20,12 @@ class Sink:
 
     def on_frame(self, frame: Frame) -> None:
         pass
+
+    def on_rows(self, rows: FrameRows, buf) -> None:
+        """Many Frames at once, packed as `rows` lays them out (the recorder process is fed so):
+        the same as on_frame for each; writers override it to take the rows as columns."""
+        for i in range(rows.count(buf)):
+            self.on_frame(rows.frame(buf, i))
 
     def on_command(self, command: Command) -> None:
         pass

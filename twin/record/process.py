@@ -1,8 +1,9 @@
 """Recording on the machine's other core: a sink that batches the twin's stream to a recorder
 process, which runs the same MCAP and Rerun writers.
 
-The stepping thread then pays one to two microseconds a frame (a tuple copy and a share of one
-marshal + pipe write per batch) instead of the writers' encoding and compression. Files are
+The stepping thread then pays one to two microseconds a frame (the Frame packed into a preallocated
+row buffer, model.rows, and a share of one pipe write per batch) instead of the writers' encoding and
+compression; the writers take each batch's rows as columns. Files are
 byte-for-byte what the in-process writers make, since the same writer code sees the same stream.
 If the twin's process dies, the recorder sees the pipe close and leaves the MCAP file unfinalized
 (and recoverable, as NAME.partial) with everything that reached it. Ctrl-C, SIGTERM and SIGHUP are
@@ -16,11 +17,14 @@ import multiprocessing
 import os
 import pickle
 import signal
+import struct
+import sys
 from pathlib import Path
 
 from twin.errors import RecordingError
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
+from twin.model.rows import FrameRows
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
 
@@ -32,6 +36,7 @@ _BATCH, _CLOSE = b"B", b"C"
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
 _HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}  # item kind -> the sinks' method
+_HEAD = struct.Struct("<cI")  # tag, frames in the batch; then their rows, then the marshalled others
 
 
 class RecorderProcess(Sink):
@@ -39,9 +44,11 @@ class RecorderProcess(Sink):
 
     def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
                  mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
-        self._items: list[tuple] = []
-        self._frames = 0
+        self._rows = FrameRows(len(config.profile.joint_names), len(config.objects))
         self._batch_frames = max(1, round(BATCH_S * 1e9 / config.dt_ns))
+        self._buf = bytearray(_HEAD.size + self._batch_frames * self._rows.size)  # the next batch
+        self._frames = 0
+        self._others: list[tuple[int, int, bytes]] = []  # (frames before it in the batch, kind, pickle)
         self._in_flight = 0
         self._closed = False
         # Load the writers here, once: every forked recorder inherits them instead of importing anew
@@ -71,7 +78,7 @@ class RecorderProcess(Sink):
 
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        self._items.append(tuple(frame))  # floats, ints and bools from PyBullet: marshal's fast path
+        self._rows.pack_into(self._buf, _HEAD.size + self._frames * self._rows.size, frame)
         self._frames += 1
         if self._frames >= self._batch_frames:
             self._send()
@@ -79,21 +86,23 @@ class RecorderProcess(Sink):
     # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
     # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
     def on_command(self, command: Command) -> None:
-        self._items.append((_COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append((self._frames, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
 
     def on_event(self, event: Event) -> None:
-        self._items.append((_EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append((self._frames, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
 
     def on_image(self, image: CameraImage) -> None:
-        self._items.append((_IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append((self._frames, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
 
     # -- plumbing -----------------------------------------------------------------------------
     def _send(self) -> None:
         """One batch to the recorder. At most MAX_IN_FLIGHT batches wait in the pipe or the writers'
         intake: a full pipe (64 KiB, ~6 batches) would otherwise hold ~0.8 s more of simulated time
         that a kill -9 of the process group loses (measured: up to 1.8 s lost with --rrd)."""
-        payload = _BATCH + marshal.dumps(self._items)
-        self._items.clear()
+        end = _HEAD.size + self._frames * self._rows.size
+        _HEAD.pack_into(self._buf, 0, _BATCH, self._frames)
+        payload = b"".join((memoryview(self._buf)[:end], marshal.dumps(self._others)))
+        self._others.clear()
         self._frames = 0
         try:
             while self._in_flight >= MAX_IN_FLIGHT:
@@ -127,7 +136,7 @@ class RecorderProcess(Sink):
             return
         self._closed = True
         try:
-            if self._items:
+            if self._frames or self._others:
                 self._send()
             self._conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
             self._expect_ok("recording could not be finished")
@@ -147,7 +156,10 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
     for signum in _TWINS_SIGNALS:  # Ctrl-C, SIGTERM, SIGHUP are the twin's to handle; it then closes us
         signal.signal(signum, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _TWINS_SIGNALS)
+    if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
+        sys.meta_path.insert(0, _NoPandas())  # whether arrays are pandas objects: they never are here
     from twin.record.mcap.writer import McapRecorder  # already loaded by the parent
+    rows = FrameRows(len(config.profile.joint_names), len(config.objects))
 
     sinks = []
     try:
@@ -178,7 +190,7 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
             os._exit(0)
         if not failure:  # after a failure: drain until the twin closes, it learns of the failure then
             try:
-                _feed(marshal.loads(body), sinks)
+                _feed(message, rows, sinks)
             except Exception as err:  # noqa: BLE001 - e.g. a full disk
                 failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
                 _abandon(sinks)
@@ -190,16 +202,31 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
             os._exit(0)
 
 
-def _feed(items: list[tuple], sinks: list) -> None:
-    for item in items:
-        if len(item) == 2:
-            message = pickle.loads(item[1])
+def _feed(batch: bytes, rows: FrameRows, sinks: list) -> None:
+    """One batch to every sink in the order the twin made it: runs of frames (as rows), and between
+    them the commands and events that came after the frames before them."""
+    n_frames = _HEAD.unpack_from(batch)[1]
+    view = memoryview(batch)
+    at = _HEAD.size
+    done = 0
+    for before, kind, data in [*marshal.loads(view[at + n_frames * rows.size:]), (n_frames, None, b"")]:
+        if before > done:
+            run = view[at + done * rows.size:at + before * rows.size]
             for sink in sinks:
-                getattr(sink, _HANDLERS[item[0]])(message)
-        else:
-            frame = Frame._make(item)
+                sink.on_rows(rows, run)
+            done = before
+        if kind is not None:
+            message = pickle.loads(data)
             for sink in sinks:
-                sink.on_frame(frame)
+                getattr(sink, _HANDLERS[kind])(message)
+
+
+class _NoPandas:
+    """An import hook that says pandas is not installed (the recorder process never needs it)."""
+
+    def find_spec(self, name: str, path=None, target=None):
+        if name == "pandas" or name.startswith("pandas."):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
 
 
 def _close_all(sinks: list, outcome: str, error: str) -> str:

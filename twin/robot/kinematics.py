@@ -75,6 +75,24 @@ def fk(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> PadPose:
     )
 
 
+def pad_pose_function(profile: RobotProfile):
+    """q -> the pad tip's pose (x, y, z, qx, qy, qz, qw) for joint values q, the pad pointing down
+    about z by its heading: fk's arithmetic, operation for operation (the same bits), with the
+    profile's numbers bound once; the twin calls it every physics step."""
+    l1, l2, z0 = profile.link1_m, profile.link2_m, profile.tip_z0_m
+    zero, (s1, s2, s3, s4) = profile.shoulder_zero_rad, profile.axis_signs
+    cos, sin = math.cos, math.sin
+
+    def pad_pose(q) -> tuple[float, ...]:
+        t1 = zero + s1 * q[0]
+        t12 = t1 + s2 * q[1]
+        half = 0.5 * (t12 + s4 * q[3])
+        return (l1 * cos(t1) + l2 * cos(t12), l1 * sin(t1) + l2 * sin(t12), z0 - s3 * q[2],
+                0.0, 0.0, sin(half), cos(half))
+
+    return pad_pose
+
+
 def ik_branches(profile: RobotProfile, x_m: float, y_m: float) -> list[ArmSolution]:
     """Both elbow branches reaching (x, y) in the profile's joint values (wrapped into [-pi, pi)),
     ignoring joint limits; [] if outside the outer circle."""

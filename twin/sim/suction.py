@@ -10,6 +10,7 @@ sees an object its ray starts inside (a pad set into a box with sim.setJointPosi
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from twin.model.config import SuctionParams
@@ -38,13 +39,17 @@ class Suction:
         self._held_this_period = False
         self._broken_this_period = False  # a broken hold stays broken until the pad is switched off
 
-    def update(self, on: bool, frame: Frame, heading_rad: float) -> list[SuctionEvent]:
+    def update(self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]) -> list[SuctionEvent]:
         """Advance the pad's state for the coming step from the latest Frame; returns what happened.
-        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter)."""
+        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter).
+        heading_of(frame): the pad's heading (rad), asked for only when an object is attached."""
+        p = self.params
+        if on and self.on and self.held != NO_BODY and p.infinite_strength:  # holding on: nothing changes
+            self.sensed = self.held
+            return []
         if not on and not self.on:
             return []
         events: list[SuctionEvent] = []
-        p = self.params
         x, y, z_tip = frame.pad_pose[:3]
         root_z = z_tip + self.pad_length_m
         if on and self.held == NO_BODY:
@@ -68,7 +73,7 @@ class Suction:
                 events.append(self._drop("break", reason))
                 self._broken_this_period = True
         if on and self.held == NO_BODY and self.sensed != NO_BODY and not self._broken_this_period:
-            self.world.attach(self.sensed, (x, y, root_z), heading_rad)
+            self.world.attach(self.sensed, (x, y, root_z), heading_of(frame))
             self.held = self.sensed
             self._held_this_period = True
             events.append(SuctionEvent("attach", self.held, "suction attached"))

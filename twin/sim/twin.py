@@ -44,6 +44,7 @@ class Twin:
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
         self._key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
         self._said: Event | None = None  # the Event the last `event` Command emitted
+        self._pad_pose = kinematics.pad_pose_function(self.profile)
         self._camera_renderer = self._add_cameras()
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
@@ -93,8 +94,7 @@ class Twin:
         sinks, pad_model, world = self.sinks, self.suction_pad, self._world
         for _ in range(n):
             if self._suction_wanted or pad_model.on:  # an idle pad has nothing to do
-                f = self.frame
-                for ev in pad_model.update(self._suction_wanted, f, self._heading(f)):
+                for ev in pad_model.update(self._suction_wanted, self.frame, self._heading):
                     self._emit(ev.kind, self._body_name(ev.body), ev.message)
             world.step()
             self.step_index += 1
@@ -111,19 +111,11 @@ class Twin:
 
     # -- state ------------------------------------------------------------------------------
     def _read_frame(self) -> Frame:
-        q, qd, effort = self._world.joint_states()
-        pad = kinematics.fk(self.profile, q)
-        half = 0.5 * pad.heading_rad
-        poses = self._world.object_poses()
-        force, torque = self._world.hold_wrench(poses)
+        q, qd, effort, poses, force, torque = self._world.state()
         sp = self.suction_pad
         step = self.step_index
-        return Frame(
-            step, step * self.config.dt_ns, q, qd, effort, tuple(self._targets),
-            sp.on, sp.sensed, sp.held, force, torque,
-            (pad.x_m, pad.y_m, pad.z_m, 0.0, 0.0, math.sin(half), math.cos(half)),
-            poses,
-        )
+        return Frame(step, step * self.config.dt_ns, q, qd, effort, tuple(self._targets),
+                     sp.on, sp.sensed, sp.held, force, torque, self._pad_pose(q), poses)
 
     def _heading(self, f: Frame) -> float:
         return kinematics.heading(self.profile, f.joint_q)

@@ -180,17 +180,17 @@ class World:
             self._collide_once_apart()
 
     # -- reading ----------------------------------------------------------------------------
-    def joint_states(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-        """Positions, velocities and applied motor efforts of the four joints (float64)."""
-        s0, s1, s2, s3 = pb.getJointStates(self.robot, self.joints, physicsClientId=self.client)
-        return (s0[0], s1[0], s2[0], s3[0]), (s0[1], s1[1], s2[1], s3[1]), (s0[3], s1[3], s2[3], s3[3])
-
-    def object_poses(self) -> tuple[tuple[float, ...], ...]:
-        out = []
-        for body in self.object_ids:
-            pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
-            out.append(pos + orn)
-        return tuple(out)
+    def state(self) -> tuple:
+        """Everything a Frame reads from the engine, in one call (the twin makes one every step):
+        the four joints' positions, velocities and applied motor efforts (float64), each object's
+        pose, and the hold's force and torque (_hold_wrench)."""
+        c = self.client
+        s0, s1, s2, s3 = pb.getJointStates(self.robot, self.joints, physicsClientId=c)
+        pose = pb.getBasePositionAndOrientation
+        poses = tuple([p + o for p, o in [pose(body, physicsClientId=c) for body in self.object_ids]])
+        force, torque = _NO_WRENCH if self._constraint == NO_CONSTRAINT else self._hold_wrench(poses)
+        return ((s0[0], s1[0], s2[0], s3[0]), (s0[1], s1[1], s2[1], s3[1]), (s0[3], s1[3], s2[3], s3[3]),
+                poses, force, torque)
 
     def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> int:
         """The scene object (index) a vertical ray going down from z_from_m hits first, or NO_BODY."""
@@ -247,11 +247,11 @@ class World:
         for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client)):
             pb.setCollisionFilterPair(self.robot, body, link, -1, int(enable), physicsClientId=self.client)
 
-    def hold_wrench(self, object_poses: tuple[tuple[float, ...], ...]
+    def _hold_wrench(self, object_poses: tuple[tuple[float, ...], ...]
                     ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
         object in the last step, world frame; zeros if nothing is held. A box hanging still gets +m·g in z.
-        object_poses: this step's object_poses() (the held object's orientation turns the torque).
+        object_poses: this step's object poses (the held object's orientation turns the torque).
 
         getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
         along world axes, the torque along the constraint frame's axes, which are rigid with the object.

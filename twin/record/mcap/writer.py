@@ -9,14 +9,10 @@ fsynced, when it is finalized: a run killed part-way never leaves a broken file 
 
 from __future__ import annotations
 
-import itertools
 import json
-import operator
 import os
-import struct
 from pathlib import Path
 
-import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
@@ -28,6 +24,7 @@ from twin.model import fields as F
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
 from twin.model.json_values import finite_or_null
+from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
@@ -82,17 +79,14 @@ class McapRecorder(Sink):
         self._joint_names = b"".join(wire.str_field(S.NAMES, n) for n in config.profile.joint_names)
         self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
         self._tf = SceneTransforms(urdf, config.profile.joint_names, tuple(o.name for o in config.objects))
-        self._frames: list[Frame] = []
-        n_joints = len(config.profile.joint_names)
-        self._offsets = F.float_offsets(n_joints, self.n_objects)  # each float field's slice of a frame's row
-        self._float_row = _row_packer(sum(s.stop - s.start for s in self._offsets.values()))
-        self._int_fields = tuple(f.name for f in F.FRAME_FIELDS if f.wire != "<f8")
-        self._ints_of = operator.attrgetter(*self._int_fields)
+        self._rows = FrameRows(len(config.profile.joint_names), self.n_objects)
+        self._block = bytearray()  # the next block's frames, as packed rows
+        self._block_last_step = -1
         names = {"JointBlock": self._joint_names}  # every other block names the scene's objects
         self._blocks = tuple((topic, names.get(b, self._object_names), F.block_fields(b)[2:])
                              for b, topic in S.BLOCK_TOPICS.items())
         self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
-        self._last_frame: Frame | None = None
+        self._last: tuple[bytes, int, int] | None = None  # the last frame seen: (row, step, t_ns)
         self._last_written_step = -1
         self._last_flush_ns = 0
         self._sequence: dict[int, int] = {}
@@ -134,17 +128,34 @@ class McapRecorder(Sink):
 
     # -- sink -----------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        self._last_frame = frame
-        if frame.step % self.view_every == 0:
-            self._pending.append((frame.t_ns, self._channel[S.TF.topic], self._tf.message(frame)))
-        if frame.step % self.rate == 0:
-            self._frames.append(frame)
-            if len(self._frames) >= self.block_frames:
+        self._take(self._rows.pack(frame), frame.step, frame.t_ns, frame)
+
+    def on_rows(self, rows: FrameRows, buf) -> None:
+        """Frames packed as rows (the recorder process's feed): each one as on_frame takes it, without
+        making Frames but for the transforms' viewing rate."""
+        if rows.size != self._rows.size:
+            raise RecordingError(f"rows of {rows.size} bytes fed to a recorder of {self._rows.size}-byte rows")
+        records = rows.records(buf)
+        view = memoryview(buf)
+        size = rows.size
+        for i, (step, t_ns) in enumerate(zip(records["step"].tolist(), records["t_ns"].tolist(), strict=True)):
+            self._take(view[i * size:(i + 1) * size], step, t_ns, None)
+
+    def _take(self, row, step: int, t_ns: int, frame: Frame | None) -> None:
+        """One frame: its transforms at the viewing rate, its row into the block at the recording rate."""
+        self._last = (row, step, t_ns)
+        if step % self.view_every == 0:
+            frame = frame or self._rows.frame(row)
+            self._pending.append((t_ns, self._channel[S.TF.topic], self._tf.message(frame)))
+        if step % self.rate == 0:
+            self._block += row
+            self._block_last_step = step
+            if len(self._block) >= self.block_frames * self._rows.size:
                 self._write_block()
                 return
-        if frame.t_ns - self._last_flush_ns >= 2 * self.flush_ns:  # blocks far apart (a high --rate)
+        if t_ns - self._last_flush_ns >= 2 * self.flush_ns:  # blocks far apart (a high --rate)
             self._write_pending()
-            self._flush(frame.t_ns)
+            self._flush(t_ns)
 
     def on_command(self, command: Command) -> None:
         body = _json({"step": command.step, "kind": command.kind, "args": command.args})
@@ -215,26 +226,23 @@ class McapRecorder(Sink):
 
     def _write_block(self) -> None:
         """The buffered frames as one message per block channel (model.fields says which field goes where)."""
-        frames = self._frames
-        n = len(frames)
-        ints = np.array([self._ints_of(f) for f in frames], dtype=np.int64)
-        ints_at = {name: ints[:, i] for i, name in enumerate(self._int_fields)}
-        floats = np.frombuffer(b"".join([self._float_row(f) for f in frames]), dtype="<f8").reshape(n, -1)
-        head = wire.packed(S.STEP, ints_at["step"], "<i8") + wire.packed(S.T_NS, ints_at["t_ns"], "<i8")
+        records = self._rows.records(bytes(self._block))
+        self._block.clear()
+        head = wire.packed(S.STEP, records["step"], "<i8") + wire.packed(S.T_NS, records["t_ns"], "<i8")
         messages = []
         for topic, names, fields in self._blocks:
             body = [head, names]
             for f in fields:
-                values = floats[:, self._offsets[f.name]] if f.wire == "<f8" else ints_at[f.name]
-                body.append(wire.packed(f.number, values, f.wire))
+                values = records[f.name]
+                body.append(wire.packed(f.number, values.reshape(len(records), -1) if values.ndim > 2 else values,
+                                        f.wire))
             messages.append((topic, b"".join(body)))
-        t_last = frames[-1].t_ns
+        t_last = int(records["t_ns"][-1])
         self._write_pending()
         for topic, data in messages:
             self._add(topic, t_last, data)
-        self.frames_written += n
-        self._last_written_step = frames[-1].step
-        frames.clear()
+        self.frames_written += len(records)
+        self._last_written_step = int(records["step"][-1])
         if t_last - self._last_flush_ns >= self.flush_ns:
             self._flush(t_last)
 
@@ -250,7 +258,7 @@ class McapRecorder(Sink):
             return
         self.closed = True
         try:
-            if self._frames:
+            if self._block:
                 self._write_block()
             self._write_pending()
             self._writer.flush()
@@ -267,18 +275,18 @@ class McapRecorder(Sink):
         if outcome == "ok" and self._task_error:
             outcome, error = "error", self._task_error
         try:
-            last = self._last_frame
-            if last is not None and last.step != self._last_written_step and (
-                    not self._frames or self._frames[-1].step != last.step):
-                self._frames.append(last)
-            if self._frames:
+            row, last_step, last_t_ns = self._last or (b"", -1, 0)
+            if self._last is not None and last_step != self._last_written_step and (
+                    not self._block or self._block_last_step != last_step):
+                self._block += row
+            if self._block:
                 self._write_block()
             self._write_pending()
             self._writer.flush()
             self._writer.add_metadata(S.META_FINALIZED, {
                 "outcome": outcome, "error": error,
-                "last_step": str(last.step if last else -1), "frames": str(self.frames_written),
-                "duration_ns": str(last.t_ns if last else 0),
+                "last_step": str(last_step), "frames": str(self.frames_written),
+                "duration_ns": str(last_t_ns),
             })
             self._writer.finish()
             self._file.close()
@@ -287,16 +295,6 @@ class McapRecorder(Sink):
             raise RecordingError(f"cannot finish recording {str(self.path)!r}: {err.strerror or err}") from err
         finally:
             self._file.close()
-
-
-def _row_packer(n_floats: int):
-    """frame -> its float fields packed as one little-endian row, in model.fields' FLOAT_FIELDS order. The
-    expression is written out from the field description once (an object_pose field is a tuple of
-    poses): as fast as a hand-written one, which a loop over the fields is not (2.5 against 1.1 us)."""
-    parts = ", ".join(f"*chain(f.{name})" if F.BY_NAME[name].shape == "object_pose" else f"*f.{name}"
-                      for name in F.FLOAT_FIELDS)
-    scope = {"pack": struct.Struct(f"<{n_floats}d").pack, "chain": itertools.chain.from_iterable}
-    return eval(f"lambda f: pack({parts})", scope)
 
 
 def _log_message(event: Event) -> bytes:

@@ -21,6 +21,7 @@ from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage, recorded_images
 from twin.model.recording import Recording
+from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.outputs import partial_path, publish
@@ -142,6 +143,10 @@ class RerunRecorder(Sink):
             start += k
             if self._n == self.batch_steps:
                 self._send_frames()
+
+    def on_rows(self, rows: FrameRows, buf) -> None:
+        """Frames packed as rows (the recorder process's feed), copied out as columns."""
+        self.on_frames(rows.columns(buf, copy=False))
 
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture on its entity (world/cameras/NAME, under its static Pinhole), with the

@@ -124,17 +124,39 @@ def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int
 
 def _write_all(root: Path, episodes: list[Episode], tasks: list[str], cameras: list[str], fps: int,
                provenance: dict) -> None:
+    task_index = {t: i for i, t in enumerate(dict.fromkeys(tasks))}
+    ep_rows, ep_stats, totals = _write_data(root, episodes, tasks, task_index, fps)
+    video_info, image_stats_by_key = _write_videos(root, episodes, cameras, fps, ep_rows)
+    stats = {k: feature_stats(v) for k, v in totals.items()}
+    for key, per_episode in image_stats_by_key.items():
+        for episode_stats, per in zip(ep_stats, per_episode, strict=True):
+            episode_stats[key] = per
+        stats[key] = _merged_image_stats(per_episode)
+    _write_episodes(root, ep_rows, ep_stats)
+    _write_tasks(root, task_index)
+    features = _features(*state_names(episodes[0].rec), video_info)
+    info = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features,
+            "total_episodes": len(episodes), "total_frames": sum(len(ep) for ep in episodes),
+            "total_tasks": len(task_index), "chunks_size": CHUNKS_SIZE, "data_files_size_in_mb": DATA_FILES_MB,
+            "video_files_size_in_mb": VIDEO_FILES_MB, "data_path": DATA_PATH,
+            "video_path": VIDEO_PATH if cameras else None,
+            "robot_type": "+".join(dict.fromkeys(ep.rec.config.profile.name for ep in episodes)),
+            "splits": {"train": f"0:{len(episodes)}"}}
+    _write_json(root / "meta/info.json", info)
+    _write_json(root / "meta/stats.json", {k: stats[k] for k in features})
+    _write_json(root / PROVENANCE_PATH, provenance)
+
+
+def _write_data(root: Path, episodes: list[Episode], tasks: list[str], task_index: dict[str, int], fps: int):
+    """data/chunk-000/file-000.parquet, one row group per episode. Returns each episode's row of the
+    episodes table (so far), each episode's stats, and every column over the whole dataset."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    task_index = {t: i for i, t in enumerate(dict.fromkeys(tasks))}
-    state_of, action_of = state_names(episodes[0].rec)
-    ep_rows, ep_stats, all_cols = [], [], []
-    data_path = root / DATA_PATH.format(chunk_index=0, file_index=0)
-    data_path.parent.mkdir(parents=True)
-    writer = None
-    start = 0
+    path = root / DATA_PATH.format(chunk_index=0, file_index=0)
+    path.parent.mkdir(parents=True)
     commands = {id(ep.rec): suction_command(ep.rec) for ep in episodes}  # once per recording, not per cycle
+    ep_rows, ep_stats, parts, writer, start = [], [], [], None, 0
     for e, (ep, task) in enumerate(zip(episodes, tasks, strict=True)):
         n = len(ep)
         state, action = episode_arrays(ep, commands[id(ep.rec)])
@@ -144,37 +166,15 @@ def _write_all(root: Path, episodes: list[Episode], tasks: list[str], cameras: l
                 "episode_index": np.full(n, e, dtype=np.int64), "index": start + frame_index,
                 "task_index": np.full(n, task_index[task], dtype=np.int64)}
         table = pa.table({k: _arrow_column(v) for k, v in cols.items()})
-        if writer is None:
-            writer = pq.ParquetWriter(data_path, table.schema, compression="snappy")
+        writer = writer or pq.ParquetWriter(path, table.schema, compression="snappy")
         writer.write_table(table)  # one row group per episode, as LeRobot writes them
-        all_cols.append(cols)
+        parts.append(cols)
         ep_stats.append({k: feature_stats(v) for k, v in cols.items()})
         ep_rows.append({"episode_index": e, "tasks": [task], "length": n, "data/chunk_index": 0,
                         "data/file_index": 0, "dataset_from_index": start, "dataset_to_index": start + n})
         start += n
     writer.close()
-
-    video_info, image_stats_by_key = _write_videos(root, episodes, cameras, fps, ep_rows)
-    for key, per_episode in image_stats_by_key.items():
-        for stats, per in zip(ep_stats, per_episode, strict=True):
-            stats[key] = per
-
-    totals = {k: np.concatenate([c[k] for c in all_cols]) for k in all_cols[0]}
-    stats = {k: feature_stats(v) for k, v in totals.items()}
-    for key, per_episode in image_stats_by_key.items():
-        stats[key] = _merged_image_stats(per_episode)
-    _write_episodes(root, ep_rows, ep_stats)
-    _write_tasks(root, task_index)
-    features = _features(state_of, action_of, video_info)
-    info = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features,
-            "total_episodes": len(episodes), "total_frames": start, "total_tasks": len(task_index),
-            "chunks_size": CHUNKS_SIZE, "data_files_size_in_mb": DATA_FILES_MB, "video_files_size_in_mb": VIDEO_FILES_MB,
-            "data_path": DATA_PATH, "video_path": VIDEO_PATH if cameras else None,
-            "robot_type": "+".join(dict.fromkeys(ep.rec.config.profile.name for ep in episodes)),
-            "splits": {"train": f"0:{len(episodes)}"}}
-    _write_json(root / "meta/info.json", info)
-    _write_json(root / "meta/stats.json", {k: stats[k] for k in features})
-    _write_json(root / PROVENANCE_PATH, provenance)
+    return ep_rows, ep_stats, {k: np.concatenate([c[k] for c in parts]) for k in parts[0]}
 
 
 def _arrow_column(values: np.ndarray):

@@ -14,7 +14,7 @@ Frame columns, in field order:
   suction.command                                   bool: a suction signal was on for the physics step
                                                     that made this frame (Commands stamped before it)
 
-pyarrow is imported here only; numpy and the model are all else it needs.
+pyarrow is imported when a table is built, not with the module: importing the model needs only numpy.
 """
 
 from __future__ import annotations

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import io
 import math
+import struct
+import zlib
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -23,7 +25,7 @@ MOUNTS = ("world", "pad")  # eye and target in world axes, or in the pad tip's f
 DEFAULT_SIZE_PX = (320, 240)
 DEFAULT_RATE_HZ = 15.0
 MAX_SIDE_PX = 4096
-PNG_COMPRESS_LEVEL = 1  # fixed: identical pixels give identical bytes (level 1: ~3x faster than 6, files ~1.3x)
+PNG_COMPRESS_LEVEL = 1  # fixed: identical pixels give identical bytes (level 1: 0.36 ms a picture, level 6: 0.9-1.2)
 
 
 @dataclass(frozen=True)
@@ -191,16 +193,33 @@ def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTr
 
 
 def encode(rgb: np.ndarray, format: str = "png") -> bytes:
-    """(h, w, 3) uint8 pixels as PNG (fixed compression, no timestamps) or JPEG (quality 90)."""
+    """(h, w, 3) uint8 pixels as PNG (png_bytes) or JPEG (Pillow, quality 90)."""
+    if format == "png":
+        return png_bytes(rgb)
     from PIL import Image
 
     out = io.BytesIO()
-    image = Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB")
-    if format == "png":
-        image.save(out, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
-    else:
-        image.save(out, format="JPEG", quality=90)
+    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(out, format="JPEG", quality=90)
     return out.getvalue()
+
+
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """A PNG of (h, w, 3) uint8 pixels: 8-bit RGB, every row unfiltered, zlib level PNG_COMPRESS_LEVEL, no
+    other chunks, so the same pixels always give the same bytes. Written here rather than by Pillow,
+    whose filter search took 1.5-3 ms a 320x240 picture; this takes 0.36 ms (the renderer's flat colours
+    compress well without filters: 3.5 KB)."""
+    h, w, _ = rgb.shape
+    rows = np.empty((h, 1 + 3 * w), dtype=np.uint8)
+    rows[:, 0] = 0  # filter type None
+    pixels = rows[:, 1:].reshape(h, w, 3)  # a view into rows: the renderer's RGBA slice is copied once, strided
+    pixels[...] = rgb
+    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8 bits, truecolour, deflate, no filter choice, no interlace
+    return b"".join((b"\x89PNG\r\n\x1a\n", _png_chunk(b"IHDR", header),
+                     _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)), _png_chunk(b"IEND", b"")))
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
 def decode_rgb(data: bytes) -> np.ndarray:

@@ -10,8 +10,14 @@ the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
 
 from __future__ import annotations
 
+import marshal
+import multiprocessing
+import os
+import signal
+
 import numpy as np
 
+from twin.errors import ConfigError
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage, CameraSpec, camera_view, encode, optical_pose
 from twin.model.sink import Sink
@@ -60,22 +66,126 @@ def render_frame(world: RenderWorld, cameras: tuple[CameraSpec, ...], frame: Fra
 
 class CameraRenderer(Sink):
     """Renders every camera of config at its steps and passes the pictures to targets (a list the
-    twin owns: sinks added to it later get them too; the renderer skips itself)."""
+    twin owns: sinks added to it later get them too; the renderer skips itself).
 
-    def __init__(self, config: TwinConfig, targets: list[Sink]) -> None:
+    background: the pictures are drawn in a render process of their own (forked, with its own render
+    world), so the stepping goes on while they are drawn; each picture is handed on LAG_PICTURES
+    pictures later (or at close), always at the same point of the run, so files stay byte-identical.
+    Otherwise they are drawn here, in the stepping thread."""
+
+    def __init__(self, config: TwinConfig, targets: list[Sink], *, background: bool = True) -> None:
         self.cameras = config.cameras
         self.targets = targets
         self._every = tuple(c.every_steps(config.dt_ns) for c in config.cameras)
-        self._world = RenderWorld(config)
+        self._world: RenderWorld | None = None
+        self._process: _RenderProcess | None = None
+        if background:
+            self._process = _RenderProcess(config)
+        else:
+            self._world = RenderWorld(config)
 
     def on_frame(self, frame: Frame) -> None:
         due = tuple(c for c, every in zip(self.cameras, self._every, strict=True) if frame.step % every == 0)
         if not due:
             return
-        for image in render_frame(self._world, due, frame):
+        if self._process is None:
+            self._emit(render_frame(self._world, due, frame))
+            return
+        self._process.send(due, frame)
+        if self._process.pending > LAG_PICTURES:
+            self._emit(self._process.receive())
+
+    def _emit(self, images: list[CameraImage]) -> None:
+        for image in images:
             for sink in self.targets:
                 if sink is not self:
                     sink.on_image(image)
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        self._world.close()
+        """Hand on the pictures still being drawn, then end the render process (or world)."""
+        if self._process is not None:
+            try:
+                while self._process.pending:
+                    self._emit(self._process.receive())
+            finally:
+                self._process.close()
+                self._process = None
+        if self._world is not None:
+            self._world.close()
+            self._world = None
+
+
+LAG_PICTURES = 4  # render-process pictures in flight: enough to keep it busy while the twin steps
+_CLOSE = b"C"
+_FAILED = b"!"
+_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class _RenderProcess:
+    """A forked child with its own render world: gets (cameras, frame), answers with the pictures."""
+
+    def __init__(self, config: TwinConfig) -> None:
+        self.pending = 0
+        ctx = multiprocessing.get_context("fork")
+        self._conn, child_conn = ctx.Pipe()
+        self._process = ctx.Process(target=_render_loop, args=(child_conn, self._conn, config),
+                                    name="twin-render", daemon=True)
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _SIGNALS)  # the child ignores them before it sees one
+        try:
+            self._process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        child_conn.close()
+
+    def send(self, cameras: tuple[CameraSpec, ...], frame: Frame) -> None:
+        try:
+            self._conn.send_bytes(marshal.dumps((tuple(c.name for c in cameras), tuple(frame))))
+        except OSError as err:
+            raise ConfigError(f"the camera render process stopped: {err}") from err
+        self.pending += 1
+
+    def receive(self) -> list[CameraImage]:
+        try:
+            reply = self._conn.recv_bytes()
+        except (EOFError, OSError) as err:
+            raise ConfigError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
+        self.pending -= 1
+        if reply.startswith(_FAILED):
+            raise ConfigError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")
+        return [CameraImage(*item) for item in marshal.loads(reply)]
+
+    def close(self) -> None:
+        try:
+            self._conn.send_bytes(_CLOSE)
+        except OSError:
+            pass
+        self._conn.close()
+        self._process.join(timeout=10)
+
+
+def _render_loop(conn, parent_end, config: TwinConfig) -> None:
+    """The render process: draw each frame it is sent with the cameras named, until told to close or
+    the twin's end of the pipe closes. Ctrl-C, SIGTERM and SIGHUP are the twin's to handle."""
+    parent_end.close()
+    for signum in _SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGNALS)
+    specs = {c.name: c for c in config.cameras}
+    world = RenderWorld(config)
+    while True:
+        try:
+            message = conn.recv_bytes()
+        except (EOFError, OSError):
+            os._exit(0)
+        if message == _CLOSE:
+            os._exit(0)
+        try:
+            names, fields = marshal.loads(message)
+            images = render_frame(world, tuple(specs[n] for n in names), Frame._make(fields))
+            reply = marshal.dumps([tuple(im) for im in images])
+        except Exception as err:  # noqa: BLE001 - told to the twin as one line
+            reply = _FAILED + f"{type(err).__name__}: {err}".encode()
+        try:
+            conn.send_bytes(reply)
+        except OSError:
+            os._exit(0)

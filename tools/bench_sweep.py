@@ -1,0 +1,117 @@
+"""Benchmark section: scenario sweeps.
+
+The shipped sweep golden's definition (recordings/sweeps/pick_place_jitter.toml: pick_place, one
+cycle, the box jittered, two masses) cut to SCENARIOS scenarios, recording nothing (--save none):
+scenarios per second on 1 and 2 local workers (the pool's start included), on a running Dask
+LocalCluster of 2 workers (its start reported apart: a cluster is started once), and what the
+sweep adds per scenario over building the twin and running the task alone in a loop.
+tools/bench.py calls bench(ctx); `python tools/bench_sweep.py` runs it alone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import statistics
+import sys
+import time
+from pathlib import Path
+
+from twin.errors import TwinError
+from twin.sim.twin import Twin
+from twin.sweep.executors import DaskExecutor, LocalExecutor
+from twin.sweep.keys import apply_values, task_values
+from twin.sweep.runner import run_sweep
+from twin.sweep.sampling import RandomSampler
+from twin.sweep.spec import load_spec, prepare
+from twin.sweep.worker import Job
+from twin.tasks import run_task
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFINITION = ROOT / "recordings" / "sweeps" / "pick_place_jitter.toml"
+SCENARIOS = 48
+
+
+def _spec():
+    return dataclasses.replace(load_spec(DEFINITION), scenarios=SCENARIOS)
+
+
+def _sweep_rate(executor) -> float:
+    """Scenarios per wall second of one sweep through executor (left open)."""
+    spec = _spec()
+    done = run_sweep(Job(spec, None, "none"), range(spec.scenarios), executor)
+    assert len(done.rows) == spec.scenarios
+    return spec.scenarios / done.wall_s
+
+
+def _local_rate(jobs: int) -> float:
+    executor = LocalExecutor(jobs)
+    try:
+        return _sweep_rate(executor)
+    finally:
+        executor.close()
+
+
+def _bare_cpu_s() -> float:
+    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and the task."""
+    spec = _spec()
+    prep = prepare(spec)
+    sampler = RandomSampler(spec.seed, prep.keys)
+    t0 = time.process_time()
+    for i in range(spec.scenarios):
+        values = sampler.values(i)
+        twin = Twin(apply_values(prep.config, values))
+        with contextlib.suppress(TwinError):  # a failing scenario is part of the work, as in the sweep
+            run_task(twin, prep.fn, {**spec.params, **task_values(values)})
+        twin.close()
+    return (time.process_time() - t0) / spec.scenarios
+
+
+def _sweep_cpu_s() -> float:
+    """CPU seconds per scenario of a 1-worker sweep (in this process) of the same scenarios."""
+    spec = _spec()
+    t0 = time.process_time()
+    run_sweep(Job(spec, None, "none"), range(spec.scenarios), LocalExecutor(1))
+    return (time.process_time() - t0) / spec.scenarios
+
+
+def bench(ctx) -> list[tuple[str, str]]:
+    repeats = ctx.repeats
+    one, two, overheads = [], [], []
+    for _ in range(repeats):  # alternated, so a busy moment of the shared machine hits both alike
+        one.append(_local_rate(1))
+        two.append(_local_rate(2))
+        bare_s = _bare_cpu_s()
+        overheads.append((_sweep_cpu_s() - bare_s) * 1000.0)
+    one, two, overhead_ms = statistics.median(one), statistics.median(two), statistics.median(overheads)
+    t0 = time.perf_counter()
+    cluster = DaskExecutor(2)
+    start_s = time.perf_counter() - t0
+    try:
+        _sweep_rate(cluster)  # the workers' first task: the definition prepared there once
+        dask, local = [], []
+        for _ in range(repeats):
+            dask.append(_sweep_rate(cluster))
+            local.append(_local_rate(2))
+        dask, local = statistics.median(dask), statistics.median(local)
+    finally:
+        cluster.close()
+    ctx.figures.update(sweep_scenarios_per_s=two, sweep_speedup_jobs2=two / one, sweep_dask_vs_local=dask / local,
+                       sweep_overhead_ms_per_scenario=overhead_ms, sweep_scenarios_per_s_jobs1=one,
+                       sweep_dask_start_s=start_s)
+    what = f"{SCENARIOS} scenarios of {DEFINITION.name}, --save none"
+    return [
+        (f"{what}: scenarios/s, 1 local worker (median of {repeats})", f"{one:.1f}"),
+        ("scenarios/s, 2 local workers (pool start included)", f"{two:.1f} ({two / one:.2f}x 1 worker; goal >= 1.6)"),
+        ("scenarios/s, Dask LocalCluster of 2 workers (started, warm), vs 2 local workers measured alternately",
+         f"{dask:.1f} vs {local:.1f} ({dask / local:.2f}x local; goal >= 0.9)"),
+        ("Dask LocalCluster start (2 workers, twin preloaded)", f"{start_s:.2f} s"),
+        ("sweep overhead per scenario: CPU time of a 1-worker sweep over the runs alone", f"{overhead_ms:.2f} ms"),
+    ]
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench import run
+
+    sys.exit(run(["sweep"], repeats=3))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -195,6 +196,54 @@ def vector3(elem: ET.Element | None, attr: str = "xyz",
     if len(vals) != 3:
         raise ConfigError(f"URDF {attr}={elem.get(attr)!r}: expected three numbers")
     return (vals[0], vals[1], vals[2])
+
+
+MOVING_TYPES = ("revolute", "continuous", "prismatic")
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One URDF joint as the transforms need it: the one reading of a joint element, which the MCAP
+    transforms (one value at a time) and the Rerun drawing (many at once) both turn into poses.
+
+    The child frame sits at `xyz`, rotated by `rpy`, from the parent's; a revolute or continuous
+    joint then turns it about `axis` (a unit vector in the joint frame), a prismatic one slides it."""
+
+    name: str
+    kind: str  # revolute | continuous | prismatic | fixed | ...
+    parent: str
+    child: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
+    axis: tuple[float, float, float]  # unit length; URDF's default (1, 0, 0) when absent
+
+    @property
+    def moving(self) -> bool:
+        return self.kind in MOVING_TYPES
+
+
+def urdf_joints(urdf: str) -> list[UrdfJoint]:
+    """Every joint of a URDF text, in document order; ConfigError when it does not parse or a joint
+    lacks its parent or child, or a moving joint has no direction."""
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as err:
+        raise ConfigError(f"robot URDF does not parse: {err}") from err
+    joints = []
+    for elem in root.iter("joint"):
+        name = elem.get("name", "")
+        parent, child = elem.find("parent"), elem.find("child")
+        if parent is None or child is None or not parent.get("link") or not child.get("link"):
+            raise ConfigError(f"URDF joint {name!r} needs a parent and a child link")
+        origin = elem.find("origin")
+        axis = vector3(elem.find("axis"), "xyz", (1.0, 0.0, 0.0))
+        norm = math.sqrt(sum(a * a for a in axis))
+        kind = elem.get("type", "fixed")
+        if kind in MOVING_TYPES and not norm > 0.0:
+            raise ConfigError(f"URDF joint {name!r} has a zero axis; expected a direction like '0 0 1'")
+        joints.append(UrdfJoint(name, kind, parent.get("link"), child.get("link"), vector3(origin, "xyz"),
+                                vector3(origin, "rpy"), tuple(a / (norm or 1.0) for a in axis)))
+    return joints
 
 
 def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...], pad_link: str,

@@ -19,7 +19,7 @@ from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
 from twin.record.rerun.rrd_file import read_scalars, rerun_executable, verify_rrd
 from twin.record.rerun.writer import RerunRecorder, write_rrd
-from twin.robot.urdf import urdf_text
+from twin.robot.urdf import urdf_joints, urdf_text
 from twin.sim.twin import Twin
 from twin.tasks import pick_place, run_task
 
@@ -199,9 +199,10 @@ def test_vectorised_joint_transforms_match_rerun(tmp_path, source):
     path = tmp_path / "robot.urdf"
     path.write_text(urdf_text(PROFILES["mtb"]) if source == "mtb" else _urdf_with_tilted_joints())
     tree = rr.urdf.UrdfTree.from_file_path(path)
+    ours = {j.name: j for j in urdf_joints(path.read_text())}
     values = np.array([-2.5, -0.7, 0.0, 0.05, 0.9, 2.9])
     for joint in tree.joints():
-        motion = JointMotion.from_urdf_joint(joint)
+        motion = JointMotion.from_urdf_joint(ours[joint.name])
         translations, quaternions = motion.transforms(values)
         for k, value in enumerate(values):
             ref = joint.compute_transform(float(value), clamp=False)
@@ -280,3 +281,21 @@ def test_any_number_of_objects_with_any_names(tmp_path, objects):
         np.testing.assert_array_equal(steps, np.arange(11))
         np.testing.assert_allclose(translations[-1][0], twin.frame.object_poses[k][:3], atol=1e-6)
     assert recorder.frames_written == 11
+
+
+@pytest.mark.parametrize("source", ["mtb", "tilted"])
+def test_the_drawing_and_the_mcap_transforms_pose_every_joint_alike(source):
+    """Both read the joints through robot.urdf: the vectorised poses (Rerun) and the scalar ones (the
+    MCAP's /tf) agree to rounding for every moving joint."""
+    from twin.record.mcap.scene_tf import SceneTransforms
+
+    text = urdf_text(PROFILES["mtb"]) if source == "mtb" else _urdf_with_tilted_joints()
+    joints = [j for j in urdf_joints(text) if j.moving]
+    scalar = SceneTransforms(text, tuple(j.name for j in joints), ())
+    values = np.array([-2.5, -0.7, 0.0, 0.05, 0.9, 2.9])
+    for joint, digested in zip(joints, [j for j in scalar.joints if j.column >= 0], strict=True):
+        translations, quaternions = JointMotion.from_urdf_joint(joint).transforms(values)
+        for k, value in enumerate(values):
+            xyz, quat = digested.pose(float(value))
+            np.testing.assert_allclose(translations[k], xyz, rtol=0, atol=1e-15)
+            np.testing.assert_allclose(quaternions[k], quat, rtol=0, atol=1e-15)

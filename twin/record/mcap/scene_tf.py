@@ -12,7 +12,7 @@ from twin.errors import ConfigError
 from twin.model.quat import quat_from_rpy, quat_mul, rotate
 from twin.model.types import Frame
 from twin.record.mcap.wire import len_field, tag, varint
-from twin.robot.urdf import vector3
+from twin.robot.urdf import UrdfJoint, urdf_joints
 
 WORLD = "world"
 PAD_TIP = "pad_tip"
@@ -24,23 +24,18 @@ _VEC_LEN, _QUAT_LEN = 27, 36
 
 
 class _Joint:
-    """One URDF joint, pre-digested so a transform costs a sine, a cosine and a pack."""
+    """One URDF joint (robot.urdf's reading of it), pre-digested so a transform costs a sine, a cosine
+    and a pack."""
 
-    def __init__(self, elem: ET.Element, column: int) -> None:
-        self.parent = elem.find("parent").get("link")
-        self.child = elem.find("child").get("link")
-        self.kind = elem.get("type", "fixed")
-        origin = elem.find("origin")
-        self.xyz = vector3(origin, "xyz")
-        rpy = vector3(origin, "rpy")
-        self.q_origin = quat_from_rpy(*rpy)
-        self.rotated = any(abs(v) > 0.0 for v in rpy)
-        axis = vector3(elem.find("axis"), "xyz", (1.0, 0.0, 0.0))  # URDF's default axis
-        norm = math.sqrt(sum(a * a for a in axis)) or 1.0
-        self.axis = tuple(a / norm for a in axis)
+    def __init__(self, joint: UrdfJoint, column: int) -> None:
+        self.kind = joint.kind
+        self.xyz = joint.xyz
+        self.q_origin = quat_from_rpy(*joint.rpy)
+        self.rotated = any(abs(v) > 0.0 for v in joint.rpy)
+        self.axis = joint.axis
         self.axis_in_parent = rotate(self.q_origin, self.axis)
         self.column = column  # index into Frame.joint_q, or -1 for a joint the frame does not carry
-        self.names = len_field(2, self.parent.encode()) + len_field(3, self.child.encode())
+        self.names = len_field(2, joint.parent.encode()) + len_field(3, joint.child.encode())
 
     def pose(self, q: float) -> tuple[tuple[float, float, float], tuple[float, ...]]:
         if self.kind in ("revolute", "continuous"):
@@ -75,8 +70,9 @@ class SceneTransforms:
         except ET.ParseError as err:
             raise ConfigError(f"robot URDF does not parse: {err}") from err
         columns = {name: i for i, name in enumerate(joint_names)}
-        self.joints = [_Joint(j, columns.get(j.get("name"), -1)) for j in root.iter("joint")]
-        children = {j.child for j in self.joints}
+        joints = urdf_joints(urdf)
+        self.joints = [_Joint(j, columns.get(j.name, -1)) for j in joints]
+        children = {j.child for j in joints}
         roots = sorted(link.get("name") for link in root.iter("link") if link.get("name") not in children)
         self.root_link = roots[0] if roots else WORLD
         taken = {WORLD, PAD_TIP, *(link.get("name") for link in root.iter("link"))}

@@ -1,23 +1,20 @@
 """Joint transforms for many joint values at once (numpy), for animating a URDF drawn by Rerun.
 
+The joints are robot.urdf's reading of the URDF, the same the MCAP transforms use one value at a time.
 Rerun's `UrdfJoint.compute_transform_columns` costs ~3 µs per value and per joint; this vectorised
-form costs a fraction of that. Tests check the result against Rerun's own `compute_transform`.
+form costs a fraction of that. Tests check the result against Rerun's own `compute_transform` and
+against the MCAP transforms.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.errors import RecordingError
 from twin.model.quat import quat_from_rpy, quat_mul_columns, rotate
-
-if TYPE_CHECKING:
-    from rerun.urdf import UrdfJoint
-
-MOVING_TYPES = ("revolute", "continuous", "prismatic")
+from twin.robot.urdf import MOVING_TYPES, UrdfJoint
 
 
 @dataclass(frozen=True)
@@ -34,18 +31,12 @@ class JointMotion:
 
     @staticmethod
     def from_urdf_joint(joint: UrdfJoint) -> JointMotion:
-        """From a `rerun.urdf.UrdfJoint` (or anything with the same properties)."""
-        if joint.joint_type not in MOVING_TYPES:
-            raise RecordingError(f"URDF joint {joint.name!r} is {joint.joint_type!r}; expected one of {MOVING_TYPES}")
-        axis = np.asarray(joint.axis, dtype=np.float64)
-        norm = float(np.linalg.norm(axis))
-        if not norm > 0.0:
-            raise RecordingError(f"URDF joint {joint.name!r} has a zero axis; expected a direction like '0 0 1'")
+        if not joint.moving:
+            raise RecordingError(f"URDF joint {joint.name!r} is {joint.kind!r}; expected one of {MOVING_TYPES}")
         return JointMotion(
-            name=joint.name, joint_type=joint.joint_type,
-            parent_frame=joint.parent_link, child_frame=joint.child_link,
-            origin_xyz=np.asarray(joint.origin_xyz, dtype=np.float64),
-            origin_quat=np.asarray(quat_from_rpy(*joint.origin_rpy)), axis=axis / norm,
+            name=joint.name, joint_type=joint.kind, parent_frame=joint.parent, child_frame=joint.child,
+            origin_xyz=np.asarray(joint.xyz, dtype=np.float64), origin_quat=np.asarray(quat_from_rpy(*joint.rpy)),
+            axis=np.asarray(joint.axis, dtype=np.float64),
         )
 
     def transforms(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

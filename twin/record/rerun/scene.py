@@ -14,9 +14,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn
 
-from twin.errors import RecordingError
+from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
-from twin.robot.urdf import PAD_RADIUS_M
+from twin.robot.urdf import PAD_RADIUS_M, UrdfJoint, urdf_joints
 
 APPLICATION_ID = "twin"
 ROLES = ("shoulder", "elbow", "z", "wrist")
@@ -85,16 +85,17 @@ def load_urdf_tree(config: TwinConfig, urdf_text: str) -> rr.urdf.UrdfTree:
         raise RecordingError(f"cannot draw the URDF of robot {config.profile.name!r}: {err}") from err
 
 
-def driven_joints(config: TwinConfig, tree: rr.urdf.UrdfTree) -> list[rr.urdf.UrdfJoint]:
+def driven_joints(config: TwinConfig, urdf_text: str) -> list[UrdfJoint]:
     """The URDF joints for shoulder, elbow, Z and wrist, in profile order."""
-    joints = []
-    for name in config.profile.joint_names:
-        joint = tree.get_joint_by_name(name)
-        if joint is None:
-            known = sorted(j.name for j in tree.joints())
-            raise RecordingError(f"URDF of robot {config.profile.name!r} has no joint {name!r}; it has {known}")
-        joints.append(joint)
-    return joints
+    try:
+        by_name = {j.name: j for j in urdf_joints(urdf_text)}
+    except ConfigError as err:
+        raise RecordingError(f"cannot draw the URDF of robot {config.profile.name!r}: {err}") from err
+    missing = [name for name in config.profile.joint_names if name not in by_name]
+    if missing:
+        raise RecordingError(f"URDF of robot {config.profile.name!r} has no joint {missing[0]!r}; "
+                             f"it has {sorted(by_name)}")
+    return [by_name[name] for name in config.profile.joint_names]
 
 
 def log_static_scene(stream: rr.RecordingStream, config: TwinConfig, tree: rr.urdf.UrdfTree) -> None:

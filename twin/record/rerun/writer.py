@@ -96,7 +96,7 @@ class RerunRecorder(Sink):
         self.config = config
         self.batch_steps = batch_steps
         tree = scene.load_urdf_tree(config, urdf_text)
-        self._joints = [JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, tree)]
+        self._joints = [JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, urdf_text)]
         # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per batch.
         self._frame_names = [(pa.array([j.parent_frame] * batch_steps, pa.utf8()),
                               pa.array([j.child_frame] * batch_steps, pa.utf8())) for j in self._joints]

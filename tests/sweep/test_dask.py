@@ -69,3 +69,17 @@ def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
         assert (tmp_path / "dask" / "failures" / name).read_bytes() == (tmp_path / "local" / "failures" / name).read_bytes()
     time.sleep(0.5)
     assert not psutil.pid_exists(victim.pid) or victim.status() == psutil.STATUS_ZOMBIE
+
+
+def test_twin_check_runs_mcap_and_sweep_goldens_on_dask(tmp_path, capsys):
+    folder = tmp_path / "goldens"
+    folder.mkdir()
+    assert main(["run", "pick_place", "--cycles", "1", "--record", str(folder / "a.mcap")]) == 0
+    assert main(["run", "seed002", "--robot", "seed002", "--record", str(folder / "b.mcap")]) == 0
+    (folder / "s.toml").write_text('task = "pick_place"\nscenarios = 8\nseed = 4\n[params]\ncycles = 1\n'
+                                   'pause_s = 0.1\n[vary]\n"box.x_m" = "uniform(0.19, 0.21)"\n')
+    assert main(["check", str(folder / "s.toml"), "--update"]) == 0  # written by the local executor
+    capsys.readouterr()
+    assert main(["check", str(folder), "--executor", "dask", "--jobs", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "3 match" in out and "s.toml" in out and "a.mcap" in out and "b.mcap" in out

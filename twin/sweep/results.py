@@ -3,6 +3,7 @@ definition `sweep.toml`, each written to NAME.partial and renamed into place."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -45,7 +46,8 @@ def _varied(values: list) -> pa.Array:
 def summary(spec: SweepSpec, rows: list[dict], *, planned: int | None = None) -> dict:
     """summary.json's content: the definition's task, robot and seed, then the statistics; planned
     (when the sweep was stopped part-way) is the number of scenarios asked for."""
-    out = {"task": spec.task, "robot": spec.robot, "seed": spec.seed, **summarize(rows)}
+    names = {k: Path(v).name if v.endswith((".py", ".toml")) else v for k, v in (("task", spec.task), ("robot", spec.robot))}
+    out = {**names, "seed": spec.seed, **summarize(rows)}  # a file by its name: no folder, no absolute path
     if planned is not None and planned != len(rows):
         out["interrupted"] = True
         out["planned"] = planned
@@ -68,7 +70,12 @@ def write_results(out_dir: str | os.PathLike, spec: SweepSpec, rows: list[dict],
 
 
 def write_definition(out_dir: str | os.PathLike, spec: SweepSpec) -> None:
-    """DIR/sweep.toml: the definition that made the results (copy it to recordings/sweeps/ as a golden)."""
+    """DIR/sweep.toml: the definition that made the results (copy it to recordings/sweeps/ as a golden).
+    A task or profile file is named relative to DIR, as load_spec finds it."""
+    for name in ("task", "robot"):
+        path = getattr(spec, name)
+        if path.endswith((".py", ".toml")) and Path(path).is_file():
+            spec = dataclasses.replace(spec, **{name: os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir))})
     text = dump_spec(spec)
     _publish(Path(out_dir) / DEFINITION, lambda p: p.write_text(text))
 

@@ -1,0 +1,91 @@
+"""`twin view --web` in a real browser: Debian's chromium (headless, driven by Playwright) opens the URL
+the command prints and shows the recording, its camera pictures beside the 3D view, not Rerun's
+welcome page (which the same server shows without the URL's ?url=)."""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from PIL import Image
+from support.camera_run import record_camera_run
+
+pytestmark = [
+    pytest.mark.slow,  # the web viewer's WASM takes 40-70 s to load here
+    pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Debian's chromium (tools/setup_test_system.sh)"),
+]
+LOAD_TIMEOUT_S = 240
+URL = re.compile(r"serving the web viewer at (http://127\.0\.0\.1:\d+/)(\?url=\S+) \(Ctrl-C to stop\)$")
+
+
+def _colours(png) -> dict[str, int]:
+    """Pixel counts of the recording's colours: the arm's orange links, the blue box, the joint plots' lines."""
+    image = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    r, g, b = image[..., 0], image[..., 1], image[..., 2]
+    return {"orange": int(((r > 180) & (g > 100) & (g < 200) & (b < 90)).sum()),
+            "blue box": int(((b > 180) & (r < 90) & (g > 90) & (g < 150)).sum())}
+
+
+def _shows_recording(colours: dict[str, int]) -> bool:
+    return colours["orange"] > 3000 and colours["blue box"] > 400
+
+
+@pytest.fixture
+def web_view(tmp_path):
+    """`twin view CAMERA.rrd --web` as a real process: (its process, the printed URL's page and query)."""
+    run = record_camera_run(tmp_path)
+    env = {**os.environ, "HOME": str(tmp_path), "TMPDIR": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "view", str(run["rrd"]), "--web"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env=env)
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 120)
+        line = proc.stdout.readline().strip() if ready else ""
+        match = URL.match(line)
+        assert match, f"no URL line: {line!r}"
+        yield match[1], match[2]
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+        proc.wait(timeout=30)
+
+
+def test_the_printed_url_opens_the_recording_in_chromium(web_view, tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    page_url, query = web_view
+    shots = {"printed": tmp_path / "printed.png", "bare": tmp_path / "bare.png"}
+    seen: dict[str, dict[str, int]] = {}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=[
+            "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
+        try:
+            pages = {}
+            for name, url in (("printed", page_url + query), ("bare", page_url)):
+                pages[name] = browser.new_page(viewport={"width": 1280, "height": 800})
+                pages[name].goto(url)
+            deadline = time.monotonic() + LOAD_TIMEOUT_S
+            while time.monotonic() < deadline:
+                pages["printed"].wait_for_timeout(5000)
+                for name, page in pages.items():
+                    page.screenshot(path=shots[name])
+                    seen[name] = _colours(shots[name])
+                if _shows_recording(seen["printed"]):
+                    pages["printed"].wait_for_timeout(5000)  # the bare page has had as long to load
+                    pages["bare"].screenshot(path=shots["bare"])
+                    seen["bare"] = _colours(shots["bare"])
+                    break
+        finally:
+            browser.close()
+    assert _shows_recording(seen["printed"]), f"the page never showed the recording: {seen} ({shots['printed']})"
+    assert not _shows_recording(seen["bare"]), f"without ?url= the page is Rerun's welcome page: {seen}"

@@ -14,6 +14,7 @@ from typing import Any
 
 from twin.errors import ConfigError, TwinError
 from twin.model.config import TwinConfig
+from twin.model.images import CameraImage
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.sim.twin import Twin
@@ -58,6 +59,12 @@ class _Relay(Sink):
             self.pending.append(("on_event", event))
         for s in self.targets:
             s.on_event(event)
+
+    def on_image(self, image: CameraImage) -> None:
+        if self.holding:
+            self.pending.append(("on_image", image))
+        for s in self.targets:
+            s.on_image(image)
 
     def attach(self, sinks: list) -> None:
         for method, item in self.pending:
@@ -158,6 +165,7 @@ class Scene:
         held = twin.frame.held_body
         self.state = SIMULATION_STOPPED
         try:
+            twin.finish_pictures()  # the run's last camera pictures, before its recording closes
             self._close_recorders()
         finally:
             self.relay.targets = []

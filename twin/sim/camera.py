@@ -101,12 +101,16 @@ class CameraRenderer(Sink):
                 if sink is not self:
                     sink.on_image(image)
 
+    def flush(self) -> None:
+        """Hand on the pictures still being drawn (before the recorders close: a run's last pictures)."""
+        while self._process is not None and self._process.pending:
+            self._emit(self._process.receive())
+
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Hand on the pictures still being drawn, then end the render process (or world)."""
         if self._process is not None:
             try:
-                while self._process.pending:
-                    self._emit(self._process.receive())
+                self.flush()
             finally:
                 self._process.close()
                 self._process = None

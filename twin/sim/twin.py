@@ -301,6 +301,12 @@ class Twin:
         self.sinks.append(renderer)
         return renderer
 
+    def finish_pictures(self) -> None:
+        """Hand the cameras' pictures still being drawn to the sinks now (close does it too): for a caller
+        that closes its recorders before the twin."""
+        if self._camera_renderer is not None:
+            self._camera_renderer.flush()
+
     def close(self) -> None:
         if self._camera_renderer is not None:
             self._camera_renderer.close()

@@ -108,9 +108,10 @@ class DaskExecutor:
                                              dashboard_address=None, silence_logs=logging.ERROR,
                                              preload=["twin.sweep.worker"])  # twin imported as workers start
                 self._client = Client(self._cluster, set_as_default=False)
-        except (OSError, TimeoutError) as err:
+        except (OSError, TimeoutError, RuntimeError) as err:  # RuntimeError: a worker process could not start
             self.close()
-            raise ConfigError(f"cannot reach the Dask scheduler {scheduler or 'LocalCluster'!r}: {err}") from err
+            raise ConfigError(f"cannot start or reach the Dask scheduler {scheduler or 'LocalCluster'!r}: {err} "
+                              "(a script that starts one needs the if __name__ == '__main__': guard)") from err
 
     def worker_count(self) -> int:
         return len(self._client.scheduler_info().get("workers", {}))

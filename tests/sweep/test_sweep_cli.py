@@ -100,3 +100,25 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_results_so_far(tmp_path):
     assert summary["interrupted"] is True and summary["planned"] == 400 and 0 < summary["scenarios"] < 400
     assert pq.read_table(out / "results.parquet").num_rows == summary["scenarios"]
     assert "(stopped part-way)" in stdout
+
+
+@pytest.mark.slow  # two sweeps of 40 scenarios
+def test_a_killed_local_worker_is_replaced_and_changes_nothing(tmp_path):
+    import psutil
+
+    args = [a for a in SWEEP if a != "--quiet"]
+    args[args.index("10")] = "40"
+    assert main(["sweep", *args, "--quiet", "--jobs", "1", "--out", str(tmp_path / "one")]) == 0
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "sweep", *args, "--jobs", "2", "--batch", "2",
+                             "--out", str(tmp_path / "two")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr.readline().startswith("sweep: ")  # batches are coming back
+        workers = psutil.Process(proc.pid).children()
+        assert len(workers) == 2
+        workers[0].kill()  # SIGKILL: the pool breaks; a new one takes the unfinished batches
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr
+    assert results(tmp_path / "two").equals(results(tmp_path / "one"))

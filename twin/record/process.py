@@ -1,5 +1,5 @@
-"""Recording on the machine's other core: a sink that batches the twin's stream to a recorder
-process, which runs the same MCAP and Rerun writers.
+"""Recording on the machine's other core: a sink that batches the twin's stream to recorder
+processes, which run the same MCAP and Rerun writers (one process each).
 
 The stepping thread then pays one to two microseconds a frame (the Frame packed into a preallocated
 row buffer, model.rows, and a share of one pipe write per batch) instead of the writers' encoding and
@@ -29,7 +29,8 @@ from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
 
 BATCH_S = 32 / 240  # simulated time per pipe write: 32 frames at 240 Hz
-MAX_IN_FLIGHT = 2  # batches sent but not yet taken in by the writers: bounds what a kill -9 loses
+MAX_IN_FLIGHT = 2  # batches sent but not yet taken in by the MCAP writer: bounds what a kill -9 loses
+MAX_IN_FLIGHT_VIEW = 16  # the same for the .rrd (about 2 s of simulated time): slack for its bursts
 _ACK = b"+"  # the recorder took in one batch
 _TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _BATCH, _CLOSE = b"B", b"C"
@@ -40,7 +41,9 @@ _HEAD = struct.Struct("<cI")  # tag, frames in the batch; then their rows, then 
 
 
 class RecorderProcess(Sink):
-    """A sink (on_frame/on_command/on_event) whose writers run in a child process."""
+    """A sink (on_frame/on_command/on_event/on_image) whose writers run in child processes: one for
+    the MCAP file, one for the .rrd, each fed the same batches. Apart, a burst of the Rerun writer
+    (it sends its columns every 2048 frames) cannot hold the MCAP writer, nor the twin, up."""
 
     def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
                  mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
@@ -49,31 +52,31 @@ class RecorderProcess(Sink):
         self._buf = bytearray(_HEAD.size + self._batch_frames * self._rows.size)  # the next batch
         self._frames = 0
         self._others: list[tuple[int, int, bytes]] = []  # (frames before it in the batch, kind, pickle)
-        self._in_flight = 0
         self._closed = False
         # Load the writers here, once: every forked recorder inherits them instead of importing anew
         # (rerun alone takes ~0.3 s to import).
         import twin.record.mcap.writer
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
-        ctx = multiprocessing.get_context("fork")
-        self._conn, child_conn = ctx.Pipe()
-        self._process = ctx.Process(
-            target=_serve, args=(child_conn, self._conn, config, run, urdf, meshes, mcap_path, rrd_path, rate),
-            name="twin-recorder", daemon=True)
-        # Signals wait until the child ignores them (it inherits the mask, then unblocks): one sent
-        # to the process group right at the fork must not kill the recorder before it can finalize.
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _TWINS_SIGNALS)
+        self._children: list[_Child] = []
+        writers = [("mcap", mcap_path, MAX_IN_FLIGHT), ("rrd", rrd_path, MAX_IN_FLIGHT_VIEW)]
+        starting = None
         try:
-            self._process.start()
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        child_conn.close()
-        try:
-            self._expect_ok("recording could not start")
-        except RecordingError:
-            self._conn.close()
-            self._process.join(timeout=30)
+            for writer, path, max_in_flight in writers:
+                if path is not None:
+                    self._children.append(_Child(writer, max_in_flight, self._children, (
+                        config, run, urdf, meshes, path, rate)))
+            for starting in self._children:  # they start side by side; each says when it is ready
+                starting.expect_ok("recording could not start")
+        except BaseException:
+            for child in self._children:  # as one process with both writers did: the others end as error
+                if child is starting:
+                    child.stop()
+                    continue
+                try:
+                    child.finish("error", "recording could not start")
+                except RecordingError:
+                    pass
             raise
 
     # -- sink -------------------------------------------------------------------------------
@@ -94,65 +97,114 @@ class RecorderProcess(Sink):
     def on_image(self, image: CameraImage) -> None:
         self._others.append((self._frames, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
 
-    # -- plumbing -----------------------------------------------------------------------------
     def _send(self) -> None:
-        """One batch to the recorder. At most MAX_IN_FLIGHT batches wait in the pipe or the writers'
-        intake: a full pipe (64 KiB, ~6 batches) would otherwise hold ~0.8 s more of simulated time
-        that a kill -9 of the process group loses (measured: up to 1.8 s lost with --rrd)."""
+        """One batch to every recorder."""
         end = _HEAD.size + self._frames * self._rows.size
         _HEAD.pack_into(self._buf, 0, _BATCH, self._frames)
         payload = b"".join((memoryview(self._buf)[:end], marshal.dumps(self._others)))
         self._others.clear()
         self._frames = 0
-        try:
-            while self._in_flight >= MAX_IN_FLIGHT:
-                if self._conn.recv_bytes() != _ACK:
-                    raise EOFError("unexpected reply")
-                self._in_flight -= 1
-            self._conn.send_bytes(payload)
-            self._in_flight += 1
-        except (EOFError, BrokenPipeError, ConnectionResetError, OSError) as err:
-            raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
-
-    def _expect_ok(self, what: str) -> None:
-        try:
-            reply = self._conn.recv_bytes()
-            while reply == _ACK:  # batches taken in before the answer
-                reply = self._conn.recv_bytes()
-        except (EOFError, OSError) as err:
-            raise RecordingError(f"{what}: the recorder process stopped ({self._exit_text()})") from err
-        if reply != b"OK":
-            self._process.join(timeout=5)
-            raise RecordingError(reply.decode(errors="replace"))
-
-    def _exit_text(self) -> str:
-        self._process.join(timeout=1)
-        code = self._process.exitcode
-        return "still running" if code is None else f"exit code {code}"
+        for child in self._children:
+            child.send(payload)
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Send what is buffered, have the writers finalize, wait for them. Idempotent."""
+        """Send what is buffered, have the writers finalize, wait for them (the first failure is
+        raised once all have finished). Idempotent."""
         if self._closed:
             return
         self._closed = True
+        failure: RecordingError | None = None
         try:
             if self._frames or self._others:
                 self._send()
-            self._conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
-            self._expect_ok("recording could not be finished")
+        except RecordingError as err:
+            failure = err
+        for child in self._children:
+            try:
+                child.finish(outcome, error)
+            except RecordingError as err:
+                failure = failure or err
+        if failure is not None:
+            raise failure
+
+
+class _Child:
+    """One recorder process and the twin's end of its pipe. At most `max_in_flight` batches wait in
+    the pipe or the writer's intake: for the MCAP file that bounds what a kill -9 loses (a full pipe,
+    64 KiB or ~6 batches, would hold ~0.8 s more of simulated time: measured up to 1.8 s lost with
+    --rrd when it was not bounded); the view gets more slack, so its bursts do not stall the twin."""
+
+    def __init__(self, writer: str, max_in_flight: int, siblings: list[_Child], args: tuple) -> None:
+        self.writer = writer
+        self.max_in_flight = max_in_flight
+        self.in_flight = 0
+        ctx = multiprocessing.get_context("fork")
+        self.conn, child_conn = ctx.Pipe()
+        twins_ends = [self.conn, *(s.conn for s in siblings)]  # the child closes its copies of these
+        self.process = ctx.Process(target=_serve, args=(child_conn, twins_ends, writer, *args),
+                                   name=f"twin-recorder-{writer}", daemon=True)
+        # Signals wait until the child ignores them (it inherits the mask, then unblocks): one sent
+        # to the process group right at the fork must not kill the recorder before it can finalize.
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _TWINS_SIGNALS)
+        try:
+            self.process.start()
         finally:
-            self._conn.close()
-            self._process.join(timeout=30)
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        child_conn.close()
+
+    def send(self, payload: bytes) -> None:
+        try:
+            while self.in_flight >= self.max_in_flight:
+                if self.conn.recv_bytes() != _ACK:
+                    raise EOFError("unexpected reply")
+                self.in_flight -= 1
+            self.conn.send_bytes(payload)
+            self.in_flight += 1
+        except (EOFError, BrokenPipeError, ConnectionResetError, OSError) as err:
+            raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
+
+    def expect_ok(self, what: str) -> None:
+        try:
+            reply = self.conn.recv_bytes()
+            while reply == _ACK:  # batches taken in before the answer
+                reply = self.conn.recv_bytes()
+        except (EOFError, OSError) as err:
+            raise RecordingError(f"{what}: the recorder process stopped ({self._exit_text()})") from err
+        if reply != b"OK":
+            self.process.join(timeout=5)
+            raise RecordingError(reply.decode(errors="replace"))
+
+    def finish(self, outcome: str, error: str) -> None:
+        """Have the writer finalize with the run's outcome and wait for it."""
+        try:
+            try:
+                self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
+            except OSError as err:
+                raise RecordingError(f"recording could not be finished: the recorder process stopped "
+                                     f"({self._exit_text()})") from err
+            self.expect_ok("recording could not be finished")
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        self.conn.close()
+        self.process.join(timeout=30)
+
+    def _exit_text(self) -> str:
+        self.process.join(timeout=1)
+        code = self.process.exitcode
+        return "still running" if code is None else f"exit code {code}"
 
 
-def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
-           mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
-    """The recorder process: build the writers, feed them each batch, finish on request.
+def _serve(conn, twins_ends: list, writer: str, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
+           path: str | Path, rate: int) -> None:
+    """A recorder process: build its writer ("mcap" or "rrd"), feed it each batch, finish on request.
 
     A writer that fails stops the recording there (what was written is kept, unfinalized, as after a
     crash); the process then waits for the close request and answers it with the failure, so the
     twin reports it as one line instead of losing the run's remaining output."""
-    parent_end.close()  # the fork's copy of the twin's end: with it open, the twin's death would go unseen
+    for end in twins_ends:  # the fork's copies of the twin's ends: with one open, its death would go unseen
+        end.close()
     for signum in _TWINS_SIGNALS:  # Ctrl-C, SIGTERM, SIGHUP are the twin's to handle; it then closes us
         signal.signal(signum, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _TWINS_SIGNALS)
@@ -163,12 +215,12 @@ def _serve(conn, parent_end, config: TwinConfig, run: dict, urdf: str, meshes: l
 
     sinks = []
     try:
-        if mcap_path is not None:
-            sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes, rate=rate))
-        if rrd_path is not None:
+        if writer == "mcap":
+            sinks.append(McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate))
+        else:
             from twin.record.rerun.writer import RerunRecorder
 
-            sinks.append(RerunRecorder(rrd_path, config, urdf))
+            sinks.append(RerunRecorder(path, config, urdf))
     except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
         _close_all(sinks, "error", "recording could not start")
         conn.send_bytes(str(err).encode())

@@ -13,6 +13,7 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))  # `import support...` from any folder, whatever pytest's import mode
 
+from support.camera_run import record_camera_run
 from support.runs import collect_pick_place
 
 ROOT = TESTS.parent  # the checkout: README.md, recordings/, tools/
@@ -39,3 +40,10 @@ def pick_place_cli(tmp_path_factory):
                           check=False)
     assert done.returncode == 0, done.stderr
     return {"tmp": tmp, "mcap": mcap, "rrd": rrd}
+
+
+@pytest.fixture(scope="session")
+def camera_run(tmp_path_factory):
+    """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (320x240,
+    15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before changing them."""
+    return record_camera_run(tmp_path_factory.mktemp("camera_run"))

@@ -6,9 +6,6 @@ from __future__ import annotations
 
 import copy
 
-import pytest
-from support.camera_run import record_camera_run
-
 import twin
 from twin.cli.main import main
 from twin.compare.engine import compare
@@ -17,13 +14,8 @@ from twin.compare.tolerances import Tolerances
 from twin.model.images import encode
 
 
-@pytest.fixture(scope="module")
-def camera_run(tmp_path_factory):
-    return record_camera_run(tmp_path_factory.mktemp("camera_compare"), "--camera-size", "160x120")
-
-
 def _with_darkened_picture(rec, camera: str, index: int):
-    """A copy of rec whose picture `index` of `camera` has a 20x20 black square (mean 5.3 levels off)."""
+    """A copy of rec whose picture `index` of `camera` has a 20x20 black square."""
     out = copy.deepcopy(rec)
     track = out.cameras[camera]
     pixels = track.rgb(index).copy()

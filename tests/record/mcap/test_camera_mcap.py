@@ -7,12 +7,10 @@ import io
 import json
 
 import numpy as np
-import pytest
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from PIL import Image
-from support.camera_run import record_camera_run
 
 import twin
 from twin.cli.main import main
@@ -20,10 +18,6 @@ from twin.model.config import TwinConfig
 
 PICTURES = 89  # a pick_place cycle: steps 0..1419, a picture every 16 steps
 
-
-@pytest.fixture(scope="module")
-def camera_run(tmp_path_factory):
-    return record_camera_run(tmp_path_factory.mktemp("camera_mcap"))
 
 
 def _decoded(path, topic: str) -> list:

@@ -9,15 +9,9 @@ import numpy as np
 import pytest
 from PIL import Image
 from rerun.chunk import RrdReader
-from support.camera_run import record_camera_run
 
 import twin
 from twin.cli.main import main
-
-
-@pytest.fixture(scope="module")
-def camera_run(tmp_path_factory):
-    return record_camera_run(tmp_path_factory.mktemp("camera_rerun"))
 
 
 @pytest.fixture(autouse=True)

@@ -110,3 +110,13 @@ def test_a_twin_without_cameras_has_no_renderer():
         assert not any(isinstance(s, CameraRenderer) for s in twin.sinks)
     finally:
         twin.close()
+
+
+def test_a_jpeg_camera_gives_jpeg_pictures():
+    from dataclasses import replace
+
+    spec = replace(camera("overhead", SMALL), format="jpeg")
+    images = _run((spec,), steps=20).images
+    assert [im.step for im in images] == [0, 16]
+    assert all(im.format == "jpeg" and im.data[:2] == b"\xff\xd8" for im in images)
+    assert decode_rgb(images[0].data).shape == (120, 160, 3)

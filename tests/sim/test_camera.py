@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from twin import load as load_recording
 from twin.model.columns import ColumnCollector
 from twin.model.config import TwinConfig
 from twin.model.images import CAMERAS, CameraSpec, camera, camera_view, decode_rgb, optical_pose
@@ -120,3 +121,28 @@ def test_a_jpeg_camera_gives_jpeg_pictures():
     assert [im.step for im in images] == [0, 16]
     assert all(im.format == "jpeg" and im.data[:2] == b"\xff\xd8" for im in images)
     assert decode_rgb(images[0].data).shape == (120, 160, 3)
+
+
+def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(pick_place_with_cameras, tmp_path):
+    """A daemon process (a pool's worker) may not fork, so it draws the pictures itself: it hands them
+    on at the same points of the run, so its MCAP file is the one the render process gives."""
+    from twin.record.mcap.writer import McapRecorder
+    from twin.robot.urdf import urdf_text
+
+    config = TwinConfig(cameras=(camera("overhead", SMALL), camera("wrist", SMALL)))
+    frames = pick_place_with_cameras.columns()
+    files = []
+    for background in (True, False):
+        path = tmp_path / f"background_{background}.mcap"
+        recorder = McapRecorder(path, config, {"source": "task", "task": "", "params": {}},
+                                urdf=urdf_text(config.profile))
+        renderer = CameraRenderer(config, [recorder], background=background)
+        for i in range(len(frames)):
+            frame = frames.frame(i)
+            recorder.on_frame(frame)
+            renderer.on_frame(frame)
+        renderer.close()
+        recorder.close()
+        files.append(path.read_bytes())
+    assert files[0] == files[1]
+    assert len(load_recording(tmp_path / "background_False.mcap").cameras["wrist"]) == 89

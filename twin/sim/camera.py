@@ -10,6 +10,7 @@ the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
 
 from __future__ import annotations
 
+import collections
 import marshal
 import multiprocessing
 import os
@@ -68,58 +69,68 @@ class CameraRenderer(Sink):
     """Renders every camera of config at its steps and passes the pictures to targets (a list the
     twin owns: sinks added to it later get them too; the renderer skips itself).
 
-    background: the pictures are drawn in a render process of their own (forked, with its own render
-    world), so the stepping goes on while they are drawn; each picture is handed on LAG_PICTURES
-    pictures later (or at close), always at the same point of the run, so files stay byte-identical.
-    Otherwise they are drawn here, in the stepping thread."""
+    background (the default, unless this process is a daemon, which may not fork: a worker of a
+    pool): the pictures are drawn in a render process of their own (forked, with its own render world),
+    so the stepping goes on while they are drawn. Either way a frame's pictures are handed on when the
+    pictures of LAG_PICTURES later camera frames have been asked for (or at flush and close): always at
+    the same point of the run, drawn here or there, so the files are byte-identical."""
 
-    def __init__(self, config: TwinConfig, targets: list[Sink], *, background: bool = True) -> None:
+    def __init__(self, config: TwinConfig, targets: list[Sink], *, background: bool | None = None) -> None:
         self.cameras = config.cameras
         self.targets = targets
         self._every = tuple(c.every_steps(config.dt_ns) for c in config.cameras)
+        if background is None:
+            background = not multiprocessing.current_process().daemon
         self._world: RenderWorld | None = None
         self._process: _RenderProcess | None = None
+        self._drawn: collections.deque[list[CameraImage]] = collections.deque()  # drawn here, not yet handed on
         if background:
             self._process = _RenderProcess(config)
         else:
             self._world = RenderWorld(config)
 
+    @property
+    def pending(self) -> int:
+        """Camera frames asked for whose pictures are not handed on yet."""
+        return self._process.pending if self._process is not None else len(self._drawn)
+
     def on_frame(self, frame: Frame) -> None:
         due = tuple(c for c, every in zip(self.cameras, self._every, strict=True) if frame.step % every == 0)
         if not due:
             return
-        if self._process is None:
-            self._emit(render_frame(self._world, due, frame))
-            return
-        self._process.send(due, frame)
-        if self._process.pending > LAG_PICTURES:
-            self._emit(self._process.receive())
+        if self._process is not None:
+            self._process.send(due, frame)
+        else:
+            self._drawn.append(render_frame(self._world, due, frame))
+        if self.pending > LAG_PICTURES:
+            self._emit_next()
 
-    def _emit(self, images: list[CameraImage]) -> None:
+    def _emit_next(self) -> None:
+        images = self._process.receive() if self._process is not None else self._drawn.popleft()
         for image in images:
             for sink in self.targets:
                 if sink is not self:
                     sink.on_image(image)
 
     def flush(self) -> None:
-        """Hand on the pictures still being drawn (before the recorders close: a run's last pictures)."""
-        while self._process is not None and self._process.pending:
-            self._emit(self._process.receive())
+        """Hand on the pictures not handed on yet (before the recorders close: a run's last pictures)."""
+        while self.pending:
+            self._emit_next()
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Hand on the pictures still being drawn, then end the render process (or world)."""
-        if self._process is not None:
-            try:
-                self.flush()
-            finally:
+        """Hand on the pictures not handed on yet, then end the render process (or world)."""
+        try:
+            self.flush()
+        finally:
+            if self._process is not None:
                 self._process.close()
                 self._process = None
-        if self._world is not None:
-            self._world.close()
-            self._world = None
+            if self._world is not None:
+                self._world.close()
+                self._world = None
 
 
-LAG_PICTURES = 4  # render-process pictures in flight: enough to keep it busy while the twin steps
+LAG_PICTURES = 4  # camera frames in flight: enough to keep the render process busy while the twin steps
 _CLOSE = b"C"
 _FAILED = b"!"
 _SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)

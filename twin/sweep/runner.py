@@ -27,10 +27,11 @@ class SweepRun:
     stopped_by: BaseException | None = None
 
 
-def batches(scenarios: Sequence[int], jobs: int, size: int | None = None) -> list[list[int]]:
-    """scenarios cut into batches of `size` (default: about BATCHES_PER_JOB per job, at most MAX_BATCH)."""
+def batches(scenarios: Sequence[int], jobs: int, size: int | None = None,
+            per_job: int = BATCHES_PER_JOB) -> list[list[int]]:
+    """scenarios cut into batches of `size` (default: about `per_job` batches per job, at most MAX_BATCH)."""
     if size is None:
-        size = 1 if jobs == 1 else max(1, min(MAX_BATCH, math.ceil(len(scenarios) / (jobs * BATCHES_PER_JOB))))
+        size = 1 if jobs == 1 else max(1, min(MAX_BATCH, math.ceil(len(scenarios) / (jobs * per_job))))
     return [list(scenarios[i:i + size]) for i in range(0, len(scenarios), size)]
 
 
@@ -40,7 +41,8 @@ def run_sweep(job: Job, scenarios: Sequence[int], executor, *, batch_size: int |
     (it may run more); an interrupted sweep closes it at once."""
     t0 = time.perf_counter()
     rows: list[dict] = []
-    items = [(job, batch) for batch in batches(scenarios, executor.jobs, batch_size)]
+    per_job = getattr(executor, "batches_per_job", BATCHES_PER_JOB)
+    items = [(job, batch) for batch in batches(scenarios, executor.jobs, batch_size, per_job)]
     stopped_by = None
     try:
         for _, batch_rows in executor.map_unordered(run_batch, items):

@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import TwinError, exception_text
+from twin.errors import RecordingError, TwinError, exception_text
 from twin.model.sink import Sink
 from twin.sim.twin import Twin
 from twin.sweep.keys import apply_values, task_values
@@ -71,7 +71,11 @@ def run_scenario(job: Job, scenario: int) -> dict:
     if row["outcome"] != "ok" and job.out_dir is not None and job.save != "none":
         failed = scenario_path(job.out_dir, FAILURES, scenario)
         if first is not None:
-            shutil.copyfile(first, failed)
+            try:
+                failed.parent.mkdir(exist_ok=True)
+                shutil.copyfile(first, failed)
+            except OSError as err:
+                raise RecordingError(f"cannot write {str(failed)!r}: {err.strerror or err}") from err
         else:  # the run is deterministic: running it again, recorded, gives this same run
             _run(prep, values, scenario, failed)
     return row
@@ -109,12 +113,17 @@ def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) ->
         else:
             from twin.record import open_recorders
 
-            mcap_path.parent.mkdir(exist_ok=True)
+            try:
+                mcap_path.parent.mkdir(exist_ok=True)
+            except OSError as err:
+                raise RecordingError(f"cannot create {str(mcap_path.parent)!r}: {err.strerror or err}") from err
             run = task_run(spec.task, params, mcap_path)
             if spec.timeout_s is not None:
                 run["timeout_s"] = spec.timeout_s
             with open_recorders(config, run, mcap_path=mcap_path, background=False) as sinks:
                 _task(config, prep.fn, params, tally, [*sinks, *limit])
+    except RecordingError:  # a file that cannot be written ends the sweep (one line), not the scenario
+        raise
     except TwinError as err:  # the task failed, or the scenario's values are invalid: the sweep goes on
         error = exception_text(err) or type(err).__name__
     worst = tally.worst_m

@@ -122,3 +122,19 @@ def test_a_killed_local_worker_is_replaced_and_changes_nothing(tmp_path):
             proc.kill()
     assert proc.returncode == 0, stderr
     assert results(tmp_path / "two").equals(results(tmp_path / "one"))
+
+
+def test_save_all_records_every_scenario_and_timeout_fails_scenarios(tmp_path, capsys):
+    out = tmp_path / "all"
+    assert main(["sweep", *SWEEP[:2], "4", *SWEEP[3:], "--jobs", "1", "--save", "all", "--out", str(out)]) == 0
+    rows = pq.read_table(out / "results.parquet").to_pylist()
+    assert sorted(p.name for p in (out / "scenarios").iterdir()) == [f"scenario-{i}.mcap" for i in range(4)]
+    for r in rows:
+        if r["outcome"] == "error":
+            name = f"scenario-{r['scenario']}.mcap"
+            assert (out / "failures" / name).read_bytes() == (out / "scenarios" / name).read_bytes()
+    capsys.readouterr()
+    assert main(["sweep", "pick_place", "--scenarios", "2", "--param", "cycles=2", "--timeout", "6", "--jobs", "1",
+                 "--save", "none", "--out", str(tmp_path / "slow"), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "slow" / "summary.json").read_text())
+    assert summary["failures_by_reason"] == {"task ran past --timeout # s of simulated time (stopped at t = # s)": 2}

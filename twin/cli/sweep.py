@@ -151,7 +151,7 @@ def _out_dir(path: str, *, clear: bool) -> Path:
         out.mkdir(exist_ok=True)
         if clear:
             for folder in (FAILURES, SCENARIOS):
-                for old in (out / folder).glob("scenario-*.mcap"):
+                for old in (*(out / folder).glob("scenario-*.mcap"), *(out / folder).glob("scenario-*.mcap.partial")):
                     old.unlink()
     except OSError as err:
         raise ConfigError(f"--out {path!r}: {err.strerror or err}") from err

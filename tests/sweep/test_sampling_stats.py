@@ -92,3 +92,14 @@ def test_a_definition_round_trips_through_toml(tmp_path):
     (tmp_path / "bad.toml").write_text('task = "pick_place"\nscenarios = 10\nspeed = 2\n')
     with pytest.raises(ConfigError, match="has unknown field 'speed'"):
         load_spec(tmp_path / "bad.toml")
+
+
+def test_a_draw_outside_the_schema_fails_its_scenario_not_the_sweep():
+    from twin.sweep.worker import Job, run_scenario
+
+    spec = SweepSpec("pick_place", 20, seed=1, vary=(("box.mass_kg", "normal(0.05, 0.1)"),), params={"cycles": 1})
+    sampler = RandomSampler(1, prepare(spec).keys)
+    i = next(i for i in range(20) if next(iter(sampler.values(i).values())) <= 0)
+    row = run_scenario(Job(spec, None, "none"), i)
+    assert row["outcome"] == "error" and row["error"].startswith(f"scenario {i}: box.mass_kg = -")
+    assert row["placement_error_mm"] is None and row["attach"] == 0 and row["sim_s"] == 0.0

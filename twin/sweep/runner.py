@@ -29,10 +29,13 @@ class SweepRun:
 
 def batches(scenarios: Sequence[int], jobs: int, size: int | None = None,
             per_job: int = BATCHES_PER_JOB) -> list[list[int]]:
-    """scenarios cut into batches of `size` (default: about `per_job` batches per job, at most MAX_BATCH)."""
+    """scenarios cut into batches of at most `size` (default: about `per_job` batches per job, at most
+    MAX_BATCH), all of nearly one length: a short last batch would leave a worker idle at the end."""
     if size is None:
         size = 1 if jobs == 1 else max(1, min(MAX_BATCH, math.ceil(len(scenarios) / (jobs * per_job))))
-    return [list(scenarios[i:i + size]) for i in range(0, len(scenarios), size)]
+    count = math.ceil(len(scenarios) / size)
+    n = len(scenarios)
+    return [list(scenarios[k * n // count:(k + 1) * n // count]) for k in range(count)]
 
 
 def run_sweep(job: Job, scenarios: Sequence[int], executor, *, batch_size: int | None = None,

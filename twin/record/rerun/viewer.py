@@ -99,13 +99,14 @@ def web_url(web_port: int, grpc_port: int) -> str:
 
 def serve_web(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, web_port: int = 0, grpc_port: int = 0,
               on_ready: Callable[[str], None] = print) -> int:
-    """Serve the web viewer (bundled in the wheel, works offline) on 127.0.0.1 until interrupted.
+    """Serve the web viewer (bundled in the wheel, works offline) on 127.0.0.1 until interrupted; no
+    browser is opened (`--serve-web`: `--web-viewer` would start the default one, the user opens the URL).
 
     Both ports are the given ones or free ones, so several viewers run side by side. Once both
     listen, on_ready gets the URL that opens the recording. Its log and its temporary files go to
     work_dir (a folder the caller removes). Returns 0 when the server ends by itself."""
     web_port, grpc_port = loopback_ports(("--port", web_port), ("--grpc-port", grpc_port))
-    cmd = [rerun_executable(), str(rrd), "--web-viewer", "--web-viewer-port", str(web_port), "--port",
+    cmd = [rerun_executable(), str(rrd), "--serve-web", "--web-viewer-port", str(web_port), "--port",
            str(grpc_port), "--bind", LOOPBACK]
     with open(Path(work_dir) / LOG_NAME, "w+b") as log:
         proc = spawn(cmd, log, tmp_dir=work_dir)

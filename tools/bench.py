@@ -88,7 +88,7 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
 
 def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
     """One sample of the bare PyBullet loop doing pick_place's work (see the module docstring)."""
-    from twin.model.columns import FrameCollector
+    from twin.model.collectors import FrameCollector
     from twin.model.config import TwinConfig
     from twin.sim.twin import Twin
     from twin.sim.world import World

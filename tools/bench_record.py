@@ -78,7 +78,7 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
 def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
     """Process CPU time the MCAP recorder spends per frame, fed a recorded run's frames as the recorder
     process feeds it (packed rows, 32 a batch; no physics)."""
-    from twin.model.columns import FrameCollector
+    from twin.model.collectors import FrameCollector
     from twin.model.rows import FrameRows
     from twin.record.mcap.writer import McapRecorder
     from twin.robot.urdf import urdf_text

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.profiles import PROFILES
 from twin.sim.twin import Twin

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from twin.model.columns import FrameCollector, FrameColumns
+from twin.model.collectors import FrameCollector
+from twin.model.columns import FrameColumns
 from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Frame

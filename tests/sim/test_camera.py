@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twin import load as load_recording
-from twin.model.columns import ColumnCollector
+from twin.model.collectors import ColumnCollector
 from twin.model.config import TwinConfig
 from twin.model.images import CAMERAS, CameraSpec, camera, camera_view, decode_rgb, optical_pose
 from twin.model.quat import rotate

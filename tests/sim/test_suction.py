@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.config import SceneObject, SuctionParams, TwinConfig
 from twin.model.profiles import PROFILES
 from twin.model.types import NO_BODY

@@ -10,7 +10,7 @@ import pytest
 from support.runs import collect_pick_place, columns_digest
 
 from twin.errors import ConfigError, OutOfReach, UnknownName
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.profiles import PROFILES
 from twin.model.types import Command

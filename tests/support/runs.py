@@ -7,7 +7,8 @@ import hashlib
 from dataclasses import fields
 from pathlib import Path
 
-from twin.model.columns import FrameCollector, FrameColumns
+from twin.model.collectors import FrameCollector
+from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.record import open_recorders

@@ -12,7 +12,7 @@ from support.teleop_plan import MAPS, plan
 
 from twin.cli import main
 from twin.errors import ConfigError
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.keymaps import parse_keys
 from twin.model.profiles import PROFILES
 from twin.record.mcap.reader import load

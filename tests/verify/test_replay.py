@@ -13,7 +13,7 @@ from support.runs import record_pick_place
 from twin.cli import main
 from twin.compare.engine import compare
 from twin.errors import RecordingError
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.keymaps import builtin_keymap
 from twin.model.types import Command

@@ -10,7 +10,6 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from twin.model.fields import FRAME_FIELDS
-from twin.model.sink import Sink
 from twin.model.types import Frame
 
 # field name -> (dtype, trailing shape given (n_joints, n_objects)), from the one field description
@@ -82,63 +81,3 @@ _PLAIN = {"frame": lambda v: v.item(), "joint": _tuple, "xyz": _tuple, "pose": _
 # Frame, FrameColumns and model.fields name the same fields in the same order
 if Frame._fields != tuple(FIELD_SPECS) or tuple(f.name for f in fields(FrameColumns)) != tuple(FIELD_SPECS):
     raise ImportError("twin.model: Frame, FrameColumns and model.fields.FRAME_FIELDS disagree")
-
-
-class FrameCollector(Sink):
-    """A sink that keeps every Frame, Command and Event in memory (tests, comparisons)."""
-
-    def __init__(self) -> None:
-        self.frames: list[Frame] = []
-        self.commands = []
-        self.events = []
-        self.images = []  # model.images.CameraImage, as they came
-
-    def on_frame(self, frame: Frame) -> None:
-        self.frames.append(frame)
-
-    def on_command(self, command) -> None:
-        self.commands.append(command)
-
-    def on_event(self, event) -> None:
-        self.events.append(event)
-
-    def on_image(self, image) -> None:
-        self.images.append(image)
-
-    def columns(self) -> FrameColumns:
-        return FrameColumns.from_frames(self.frames)
-
-
-class ColumnCollector(Sink):
-    """A sink that keeps Frames as numpy columns, converted in chunks: about a fifth of the memory
-    of Frame tuples, for long runs (replay, check). Commands and Events are kept as they come."""
-
-    CHUNK_FRAMES = 4096
-
-    def __init__(self) -> None:
-        self._chunks: list[FrameColumns] = []
-        self._pending: list[Frame] = []
-        self.commands = []
-        self.events = []
-        self.images = []  # model.images.CameraImage, as they came
-
-    def on_frame(self, frame: Frame) -> None:
-        self._pending.append(frame)
-        if len(self._pending) >= self.CHUNK_FRAMES:
-            self._chunks.append(FrameColumns.from_frames(self._pending))
-            self._pending = []
-
-    def on_command(self, command) -> None:
-        self.commands.append(command)
-
-    def on_event(self, event) -> None:
-        self.events.append(event)
-
-    def on_image(self, image) -> None:
-        self.images.append(image)
-
-    def columns(self) -> FrameColumns:
-        parts = self._chunks + ([FrameColumns.from_frames(self._pending)] if self._pending else [])
-        if not parts:
-            return FrameColumns.from_frames([])
-        return parts[0] if len(parts) == 1 else FrameColumns.concat(parts)

@@ -22,7 +22,7 @@ from twin.compare.engine import compare
 from twin.compare.report import first_line, render_text
 from twin.compare.tolerances import Tolerances
 from twin.errors import ConfigError, TwinError
-from twin.model.columns import ColumnCollector
+from twin.model.collectors import ColumnCollector
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin

@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from twin.errors import RecordingError
-from twin.model.columns import ColumnCollector, FrameCollector
+from twin.model.collectors import ColumnCollector, FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.images import recorded_images, tracks
 from twin.model.recording import Recording

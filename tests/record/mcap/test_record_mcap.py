@@ -18,7 +18,8 @@ from support.runs import collect_pick_place
 import twin
 from twin.cli import main
 from twin.errors import RecordingError
-from twin.model.columns import FrameCollector, FrameColumns
+from twin.model.collectors import FrameCollector
+from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire

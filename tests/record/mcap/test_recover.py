@@ -13,7 +13,7 @@ import pytest
 
 import twin
 from twin.cli import main
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.record.mcap import schemas as S
 from twin.record.mcap.recover import recover

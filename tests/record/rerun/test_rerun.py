@@ -11,7 +11,7 @@ import rerun as rr
 from rerun.chunk import RrdReader
 
 from twin.errors import RecordingError
-from twin.model.columns import FrameCollector
+from twin.model.collectors import FrameCollector
 from twin.model.config import SceneObject, TwinConfig
 from twin.model.profiles import PROFILES
 from twin.model.recording import Recording

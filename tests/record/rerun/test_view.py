@@ -169,14 +169,29 @@ def _end_group(proc: subprocess.Popen) -> None:
 
 def _served(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[str, int, int]:
     """(URL, web port, gRPC port) from the line `twin view --web` prints once both listen."""
-    ready, _, _ = select.select([proc.stdout], [], [], timeout_s)
-    line = proc.stdout.readline().strip() if ready else ""
+    line = _first_line(proc, timeout_s)
     match = URL.match(line)
     assert match, f"no URL line: {line!r}; stderr: {proc.stderr.read() if proc.poll() is not None else ''}"
     source = urllib.parse.unquote(match[3])
     grpc = re.fullmatch(r"rerun\+http://127\.0\.0\.1:(\d+)/proxy", source)
     assert grpc, source
     return match[1], int(match[2]), int(grpc[1])
+
+
+def _first_line(proc: subprocess.Popen, timeout_s: float) -> str:
+    """The first line the process prints, or what came before timeout_s (never blocks past it: the viewer,
+    a grandchild, keeps the pipe open, so a line without its newline would otherwise wait forever)."""
+    deadline, data = time.monotonic() + timeout_s, b""
+    fd = proc.stdout.fileno()
+    while b"\n" not in data:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            break
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            break
+        data += chunk
+    return data.split(b"\n", 1)[0].decode(errors="replace").strip()
 
 
 def _viewer_child(proc: subprocess.Popen) -> psutil.Process:

@@ -4,6 +4,7 @@ recorded frame, values equal to twin.load(...).frames, units in the column names
 from __future__ import annotations
 
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -158,3 +159,17 @@ def test_export_of_two_files_or_a_missing_one_is_refused(tmp_path, capsys):
     code, _, err = twin(capsys, "export", tmp_path / "nope.mcap", "--format", "csv", "-o", tmp_path / "x.csv")
     assert code == 2 and err.startswith("twin: error: ") and err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
+
+
+def test_encoding_video_leaves_the_process_scheduling_as_it_was(tmp_path):
+    """SVT-AV1 (run as root) switches the calling thread to SCHED_FIFO 99; every process started
+    afterwards inherits it, and one that spins (rerun's server does) starves the machine. encode_mp4
+    puts the policy back."""
+    import numpy as np
+
+    from twin.export.video import encode_mp4
+
+    before = (os.sched_getscheduler(0), os.sched_getparam(0))
+    frames = [np.full((240, 320, 3), i * 20, np.uint8) for i in range(6)]
+    assert encode_mp4(tmp_path / "a.mp4", frames, 30, 320, 240) == 6
+    assert (os.sched_getscheduler(0), os.sched_getparam(0)) == before

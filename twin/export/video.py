@@ -41,6 +41,14 @@ def encode_mp4(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: int, 
     """Encode (H, W, 3) uint8 RGB frames into an MP4 file at fps; returns the number of frames."""
     av = require_av()
     os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 prints its configuration to stderr unless told not to
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        return _encode(av, path, frames, fps, width_px, height_px)
+    finally:  # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
+        os.sched_setscheduler(0, policy, param)  # later would inherit it (a spinning one starved the machine)
+
+
+def _encode(av, path, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int) -> int:
     count = 0
     with av.open(str(path), "w", format="mp4") as out:
         stream = out.add_stream(CODEC, rate=fps, options=dict(OPTIONS))

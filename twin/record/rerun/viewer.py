@@ -7,9 +7,7 @@ listens on 127.0.0.1 only, on free ports unless told otherwise, and dies with us
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-import pickle
 import subprocess
 import sys
 import time
@@ -19,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.errors import RecordingError, TwinError
+from twin.errors import RecordingError
 from twin.model.recording import Recording
 from twin.record.rerun import scene
 from twin.record.rerun.process import LOOPBACK, ViewerError, last_log_line, loopback_ports, spawn, stop, wait_listening
@@ -57,49 +55,10 @@ def as_rrd(path: str | os.PathLike, tmp_dir: str | os.PathLike) -> Path:
 
 
 def mcap_to_rrd(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike) -> int:
-    """Convert an MCAP recording to an .rrd; returns the frames written.
-
-    The drawing happens in a forked child, so the Rerun SDK's threads end with it: left in a process
-    that then serves the web viewer, one of them was seen holding the GIL while the main thread waited
-    for the viewer to listen, for minutes (twin view FILE.mcap --web, in the full test suite)."""
+    """Convert an MCAP recording to an .rrd; returns the frames written."""
     if file_kind(mcap_path) != "mcap":
         raise RecordingError(f"{str(mcap_path)!r} is already a Rerun .rrd file; expected an MCAP file to convert")
-    ctx = multiprocessing.get_context("fork")
-    receive, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_draw_in_child, args=(send, mcap_path, rrd_path), name="twin-draw-rrd", daemon=True)
-    child.start()
-    send.close()
-    try:
-        outcome, value = receive.recv()
-    except EOFError:
-        child.join()
-        raise RecordingError(f"drawing {str(mcap_path)!r} stopped (exit code {child.exitcode})") from None
-    finally:
-        receive.close()
-    child.join()
-    if outcome == "error":
-        raise value
-    return value
-
-
-def _draw_in_child(send, mcap_path: str | os.PathLike, rrd_path: str | os.PathLike) -> None:
-    try:
-        result = ("ok", write_rrd(load_recording(mcap_path), rrd_path))
-    except TwinError as err:  # a damaged file, an unwritable path: the parent raises it as it is
-        result = ("error", err if _picklable(err) else RecordingError(str(err)))
-    except Exception as err:  # noqa: BLE001 - anything else, as one line
-        result = ("error", RecordingError(f"{type(err).__name__}: {err}"))
-    send.send(result)
-    send.close()
-    os._exit(0)
-
-
-def _picklable(err: Exception) -> bool:
-    try:
-        pickle.loads(pickle.dumps(err))
-    except Exception:  # noqa: BLE001
-        return False
-    return True
+    return write_rrd(load_recording(mcap_path), rrd_path)
 
 
 def require_display() -> None:

@@ -1,9 +1,10 @@
 """Recording on the machine's other core: a sink that batches the twin's stream to recorder
 processes, which run the same MCAP and Rerun writers (one process each).
 
-The stepping thread then pays one to two microseconds a frame (the Frame packed into a preallocated
-row buffer, model.rows, and a share of one pipe write per batch) instead of the writers' encoding and
-compression; the writers take each batch's rows as columns. Files are
+The stepping thread then does one to two microseconds of work a frame (the Frame packed into a
+preallocated row buffer, model.rows, and a share of one pipe write per batch) instead of the writers'
+encoding and compression; the writers take each batch's rows as columns. (In wall time a step costs
+more than that work: the recorder processes share the second core, and slow the first; README.) Files are
 byte-for-byte what the in-process writers make, since the same writer code sees the same stream.
 If the twin's process dies, the recorder sees the pipe close and leaves the MCAP file unfinalized
 (and recoverable, as NAME.partial) with everything that reached it. Ctrl-C, SIGTERM and SIGHUP are

@@ -15,7 +15,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 from twin.compare.engine import compare
 from twin.compare.report import render_text
@@ -106,13 +105,7 @@ def bench(ctx) -> list[tuple[str, str]]:
     ]
 
 
-def main() -> int:
-    rows = bench(SimpleNamespace(repeats=3))
-    width = max(len(label) for label, _ in rows)
-    for label, value in rows:
-        print(f"{label:<{width}}  {value}")
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    from bench import main  # tools/ is sys.path[0] when run as a script
+
+    sys.exit(main(["--only", "diff", *sys.argv[1:]]))

@@ -170,9 +170,7 @@ class RerunRecorder(Sink):
         if self.closed:
             return
         self.closed = True
-        self._send_frames()
-        self._send_events()
-        self._send_commands()
+        self._send_buffered()
         if self.path:
             finish_file(self.stream, partial_path(self.path), Path(self.path))
         else:
@@ -184,9 +182,7 @@ class RerunRecorder(Sink):
         if self.closed:
             return
         self.closed = True
-        self._send_frames()
-        self._send_events()
-        self._send_commands()
+        self._send_buffered()
         self.stream.flush()
         if self.path:
             self.stream.disconnect()
@@ -198,6 +194,12 @@ class RerunRecorder(Sink):
         self.close()
 
     # -- batches ------------------------------------------------------------------------------
+    def _send_buffered(self) -> None:
+        """Everything not yet sent: the frames of the open batch, the events, the commands."""
+        self._send_frames()
+        self._send_events()
+        self._send_commands()
+
     def _send_frames(self) -> None:
         n = self._n
         if n == 0:

@@ -6,6 +6,14 @@ scenarios per second on 1 and 2 local workers (the pool's start included), on a 
 LocalCluster of 2 workers (its start reported apart: a cluster is started once), and what the
 sweep adds per scenario (CPU time, on its first 48 scenarios) over building the twin and running
 the task alone in a loop.
+
+Every process that runs scenarios keeps the memory they free (worker.keep_freed_memory). Before,
+a scenario's cost depended on the process's past: 47 ms in a fresh one (7,100 page faults), 34 ms
+once it had imported dask. So the 1-worker rate was measured before this process started Dask and
+the 2-worker pool forked from it after (beside the cluster: up to 2.6x the 1-worker rate on 2
+cores), while Dask's freshly spawned workers paid the faults. The runs in this process (1 worker;
+the loop without a sweep, which keeps freed memory too so that the overhead is the sweep's own) go
+to a forked child, so the setting does not stay in this process for the sections measured after it.
 tools/bench.py calls bench(ctx); `python tools/bench_sweep.py` runs it alone.
 """
 
@@ -13,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import multiprocessing
 import statistics
 import sys
 import time
@@ -25,7 +34,7 @@ from twin.sweep.keys import apply_values, task_values
 from twin.sweep.runner import run_sweep
 from twin.sweep.sampling import RandomSampler
 from twin.sweep.spec import load_spec, prepare
-from twin.sweep.worker import Job
+from twin.sweep.worker import Job, keep_freed_memory
 from twin.tasks import run_task
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,7 +55,22 @@ def _sweep_rate(executor) -> float:
     return spec.scenarios / done.wall_s
 
 
+def _in_child(fn) -> float:
+    """fn() run in a forked child of this process; its result."""
+    ctx = multiprocessing.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=lambda: send.send(fn()))
+    child.start()
+    send.close()
+    try:
+        return receive.recv()
+    finally:
+        child.join()
+
+
 def _local_rate(jobs: int) -> float:
+    if jobs == 1:  # in-process, as twin sweep -j 1 runs: in a child, which the sweep's allocator setting stays in
+        return _in_child(lambda: _sweep_rate(LocalExecutor(1)))
     executor = LocalExecutor(jobs)
     try:
         return _sweep_rate(executor)
@@ -54,9 +78,11 @@ def _local_rate(jobs: int) -> float:
         executor.close()
 
 
-def _bare_cpu_s() -> float:
-    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and the task."""
-    spec = _spec(OVERHEAD_SCENARIOS)
+def _bare_cpu_s(scenarios: int = OVERHEAD_SCENARIOS) -> float:
+    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and the
+    task, the freed memory kept as a sweep's workers keep it (call in a child)."""
+    keep_freed_memory()
+    spec = _spec(scenarios)
     prep = prepare(spec)
     sampler = RandomSampler(spec.seed, prep.keys)
     t0 = time.process_time()
@@ -70,11 +96,20 @@ def _bare_cpu_s() -> float:
 
 
 def _sweep_cpu_s() -> float:
-    """CPU seconds per scenario of a 1-worker sweep (in this process) of the same scenarios."""
+    """CPU seconds per scenario of a 1-worker sweep (in the calling process) of the same scenarios."""
     spec = _spec(OVERHEAD_SCENARIOS)
     t0 = time.process_time()
     run_sweep(Job(spec, None, "none"), range(spec.scenarios), LocalExecutor(1))
     return (time.process_time() - t0) / spec.scenarios
+
+
+def _overhead_ms() -> float:
+    """Milliseconds of CPU per scenario a 1-worker sweep adds to the runs alone (call in a child).
+    A few runs first, not counted: a child's first runs grow its heap and cost it 0.5-1 ms more
+    per scenario (measured), which would be charged to whichever loop went first."""
+    _bare_cpu_s(8)
+    bare_s = _bare_cpu_s()
+    return (_sweep_cpu_s() - bare_s) * 1000.0
 
 
 def bench(ctx) -> list[tuple[str, str]]:
@@ -87,8 +122,7 @@ def bench(ctx) -> list[tuple[str, str]]:
         one.append(_local_rate(1))
         two.append(_local_rate(2))
         speedups.append(two[-1] / one[-1])
-        bare_s = _bare_cpu_s()
-        overheads.append((_sweep_cpu_s() - bare_s) * 1000.0)
+        overheads.append(_in_child(_overhead_ms))
     t0 = time.perf_counter()
     cluster = DaskExecutor(2)
     start_s = time.perf_counter() - t0

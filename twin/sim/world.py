@@ -174,8 +174,10 @@ class World:
         """Kinematic set (like simxSetJointPosition): position jumps, velocity zero."""
         pb.resetJointState(self.robot, self.joints[joint], q, 0.0, physicsClientId=self.client)
 
+    # The calls made every step pass the client positionally: pybullet then skips matching keyword
+    # names (measured: getJointStates 1.43 -> 1.28 us, getBasePositionAndOrientation 0.69 -> 0.56 us).
     def step(self) -> None:
-        pb.stepSimulation(physicsClientId=self.client)
+        pb.stepSimulation(self.client)
         if self._overlapping:
             self._collide_once_apart()
 
@@ -185,9 +187,9 @@ class World:
         the four joints' positions, velocities and applied motor efforts (float64), each object's
         pose, and the hold's force and torque (_hold_wrench)."""
         c = self.client
-        s0, s1, s2, s3 = pb.getJointStates(self.robot, self.joints, physicsClientId=c)
+        s0, s1, s2, s3 = pb.getJointStates(self.robot, self.joints, c)
         pose = pb.getBasePositionAndOrientation
-        poses = tuple([p + o for p, o in [pose(body, physicsClientId=c) for body in self.object_ids]])
+        poses = tuple([p + o for p, o in [pose(body, c) for body in self.object_ids]])
         force, torque = _NO_WRENCH if self._constraint == NO_CONSTRAINT else self._hold_wrench(poses)
         return ((s0[0], s1[0], s2[0], s3[0]), (s0[1], s1[1], s2[1], s3[1]), (s0[3], s1[3], s2[3], s3[3]),
                 poses, force, torque)
@@ -258,7 +260,7 @@ class World:
         """
         if self._constraint == NO_CONSTRAINT:
             return _NO_WRENCH
-        s = pb.getConstraintState(self._constraint, physicsClientId=self.client)
+        s = pb.getConstraintState(self._constraint, self.client)
         orn = object_poses[self.object_ids.index(self._held_body)][3:7]
         r = pb.getMatrixFromQuaternion(orn)  # row-major: world = r @ constraint frame
         tx, ty, tz = -s[3], -s[4], -s[5]

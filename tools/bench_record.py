@@ -197,7 +197,6 @@ def _rate_text(ctx, key: str) -> str:
 
 def main() -> int:
     """Run this section alone, with bench.py's baselines."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench import main as bench_main
 
     return bench_main(["--only", "record"])

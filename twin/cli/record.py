@@ -7,10 +7,8 @@ import argparse
 from pathlib import Path
 
 from twin.cli.args import whole_number
-from twin.errors import ConfigError, RecordingError
-from twin.record.outputs import check_output, partial_path
-
-DEFAULT_FOLDER = "runs"
+from twin.errors import RecordingError
+from twin.record.outputs import DEFAULT_FOLDER, check_output, partial_path
 
 
 def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True) -> None:
@@ -29,16 +27,12 @@ def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = 
 
 def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | None, Path | None]:
     """The MCAP and Rerun paths the options ask for (the MCAP default is runs/<default_stem>.mcap),
-    checked before any work (suffix, not a folder, the folder exists). Only the default folder
-    runs/ is created; a folder the user names must exist."""
+    checked before any work (suffix, not a folder, the folder exists). Only runs/ is created when
+    missing (the default's folder, or one the user names: twin.record.outputs.make_default_folder);
+    any other folder must exist."""
     mcap = args.record
     if mcap is None and getattr(args, "record_by_default", False) and not getattr(args, "no_record", False):
         mcap = str(Path(DEFAULT_FOLDER) / f"{default_stem}.mcap")
-        try:
-            Path(DEFAULT_FOLDER).mkdir(exist_ok=True)
-        except OSError as err:
-            raise ConfigError(f"cannot create the default folder {DEFAULT_FOLDER!r}: {err.strerror or err}; "
-                              "pass --record FILE.mcap or --no-record") from err
     mcap_path = check_output(mcap, ".mcap", option="recording") if mcap is not None else None
     rrd_path = check_output(args.rrd, ".rrd", option="recording") if args.rrd is not None else None
     return mcap_path, rrd_path

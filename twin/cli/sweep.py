@@ -138,14 +138,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _out_dir(path: str, *, clear: bool) -> Path:
-    """The output folder, created (its parent must exist); a full sweep removes the recordings an
+    """The output folder, created (its parent must exist, or be runs/); a full sweep removes the recordings an
     earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is mistaken for its own."""
+    from twin.record.outputs import make_default_folder
     from twin.sweep.worker import FAILURES, SCENARIOS
 
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {path!r} is a file; expected a folder")
-    if not out.parent.is_dir():
+    if not make_default_folder(out.parent):  # runs/ is made when missing, as for recordings
         raise ConfigError(f"--out {path!r}: folder {str(out.parent)!r} does not exist")
     try:
         out.mkdir(exist_ok=True)

@@ -14,6 +14,25 @@ from pathlib import Path
 from twin.errors import ConfigError
 
 PARTIAL_SUFFIX = ".partial"
+DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no other folder is
+
+
+def make_default_folder(folder: str | os.PathLike) -> bool:
+    """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so the
+    README's first command works in a fresh clone; any other folder is the user's to create.
+    True if `folder` exists (now). ConfigError if runs/ cannot be made."""
+    folder = Path(folder)
+    if folder.is_dir():
+        return True
+    if folder != Path(DEFAULT_FOLDER) or folder.exists():
+        return False
+    try:
+        folder.mkdir()
+    except FileExistsError:  # made meanwhile (another twin started beside this one)
+        pass
+    except OSError as err:
+        raise ConfigError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
+    return folder.is_dir()
 
 
 def partial_path(path: str | os.PathLike) -> Path:
@@ -30,15 +49,16 @@ def final_path(partial: str | os.PathLike) -> Path | None:
 
 def check_output(path: str | os.PathLike, suffix: str, *, inputs: Iterable[str | os.PathLike] = (),
                  option: str = "output") -> Path:
-    """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder exists,
-    and it is none of `inputs` (nor the same file through a link). ConfigError (exit 2) otherwise."""
+    """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder exists
+    (runs/ is made if missing: make_default_folder), and it is none of `inputs` (nor the same file
+    through a link). ConfigError (exit 2) otherwise."""
     p = Path(path)
     if p.suffix != suffix:
         raise ConfigError(f"{option} {str(path)!r} should end in {suffix}")
     if p.is_dir():
         raise ConfigError(f"cannot write {option} {str(path)!r}: it is a folder; expected a {suffix} file path")
     folder = p.parent
-    if not folder.is_dir():
+    if not make_default_folder(folder):
         why = "is not a folder" if folder.exists() else "does not exist"
         raise ConfigError(f"cannot write {option} {str(path)!r}: folder {str(folder)!r} {why}; create it first")
     for source in inputs:

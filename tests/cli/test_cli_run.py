@@ -195,3 +195,21 @@ def test_report_002s_program_as_a_task_misses_and_leaves_the_box(tmp_path):
     assert "suction_empty 2" in done.stdout and "attach" not in done.stdout
     final = re.search(r"box final pose: x ([-+\d.]+) y ([-+\d.]+)", done.stdout)
     assert math.dist((float(final.group(1)), float(final.group(2))), (0.2, 0.7)) < 1e-3
+
+
+def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tmp_path):
+    """`twin run ... | head -1`: the reader goes away after the first line. The run's files are
+    finished before the summary is printed, so they are what an unpiped run writes (byte for byte, the
+    camera's pictures included), and the camera process ends with the twin: exit 141 (128 + SIGPIPE)."""
+    args = ["run", "pick_place", "--cycles", "1", "--camera", "overhead", "--camera-size", "64x48"]
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", *args, "--record", str(tmp_path / "piped.mcap")],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))  # each line written as printed
+    first = proc.stdout.readline()
+    proc.stdout.close()  # as head does after its line
+    assert proc.wait(timeout=120) == 141, proc.stderr.read()
+    assert first.startswith(b"robot mtb: ")
+    assert proc.stderr.read() == b""
+    plain = _twin_cli(*args, "--record", str(tmp_path / "plain.mcap"), cwd=tmp_path)
+    assert plain.returncode == 0, plain.stderr
+    assert (tmp_path / "piped.mcap").read_bytes() == (tmp_path / "plain.mcap").read_bytes()

@@ -29,6 +29,7 @@ from twin.sim.twin import Twin
 from twin.tasks import TimeLimit, check_params, resolve, run_task, task_params
 
 DEFAULT_CYCLES = 2
+BROKEN_PIPE_EXIT = 141  # 128 + SIGPIPE: standard output was closed by its reader
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -46,15 +47,22 @@ def cmd_run(args: argparse.Namespace) -> int:
         run["timeout_s"] = args.timeout  # twin check re-runs the task with the same bound
     summary = _Summary()
     limit = [TimeLimit(args.timeout)] if args.timeout is not None else []
-    with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:
-        twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])  # the limit last: recorders see its frame
-        wall0 = time.perf_counter()
-        try:
-            run_task(twin, fn, params)
-        finally:
-            wall_s = time.perf_counter() - wall0
+    twin, wall_s = None, 0.0
+    # The summary is printed once the files are finished: output that cannot be written (a pipe into
+    # `head` that stopped reading) must not turn a good run's recording into an error, nor leave the
+    # twin (and its camera process) open.
+    try:
+        with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:
+            twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])  # the limit last: recorders see its frame
+            wall0 = time.perf_counter()
+            try:
+                run_task(twin, fn, params)
+            finally:
+                wall_s = time.perf_counter() - wall0
+                twin.close()
+    finally:
+        if twin is not None:
             _print_summary(twin, summary, wall_s)
-            twin.close()
     for path in (mcap_path, rrd_path):  # the files are finished only now
         if path is not None:
             print(f"recorded {path}")
@@ -183,9 +191,9 @@ def main(argv: list[str] | None = None) -> int:
     except Terminated as stop:
         print(f"twin: stopped by {stop.name}", file=sys.stderr)
         return stop.exit_code
-    except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 1
+    except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading: what the shell
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # reports for a program SIGPIPE ended
+        return BROKEN_PIPE_EXIT
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ import pickle
 import signal
 import struct
 import sys
+import weakref
 from pathlib import Path
 
 from twin.errors import RecordingError
@@ -152,6 +153,10 @@ class _Child:
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         child_conn.close()
+        # If finish() is never reached, the pipe is closed at exit or when this object goes: the child
+        # (which ignores SIGTERM) sees EOF, leaves its file unfinalized as after a crash, and ends, so
+        # multiprocessing's exit handler (terminate, then join daemon children) does not wait forever.
+        weakref.finalize(self, self.conn.close)
 
     def send(self, payload: bytes) -> None:
         try:

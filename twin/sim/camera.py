@@ -15,6 +15,7 @@ import marshal
 import multiprocessing
 import os
 import signal
+import weakref
 
 import numpy as np
 
@@ -151,6 +152,10 @@ class _RenderProcess:
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         child_conn.close()
+        # If close() is never reached (the twin's process ends by another path), the pipe is closed at
+        # exit or when this object goes: the child, which ignores SIGTERM, then sees EOF and ends, and
+        # multiprocessing's exit handler, which terminates and joins daemon children, does not wait forever.
+        weakref.finalize(self, self._conn.close)
 
     def send(self, cameras: tuple[CameraSpec, ...], frame: Frame) -> None:
         try:

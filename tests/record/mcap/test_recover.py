@@ -174,3 +174,12 @@ def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_
                 assert frame.t_ns - (rec.frames.t_ns[-1] if len(rec.frames) else 0) <= 1_000_000_000
     recorder.close()
     assert twin.load(live).finalized
+
+
+def test_recovering_a_run_that_left_no_file_says_so(tmp_path, capsys, monkeypatch):
+    """Neither the recording nor its .partial file: one line naming both, exit 2 (not a hint about -o)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["recover", "runs/killed.mcap"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("twin: error: neither 'runs/killed.mcap' nor 'runs/killed.mcap.partial' exists; "
+                   "expected a recording or the .partial file a killed run left\n")

@@ -11,9 +11,11 @@ from twin.errors import RecordingError
 from twin.record.outputs import DEFAULT_FOLDER, check_output, partial_path
 
 
-def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True) -> None:
-    """--record FILE.mcap, --no-record (when recording is on by default), --rrd FILE.rrd, --rate N."""
-    default_text = f"default {DEFAULT_FOLDER}/<task>_<robot>.mcap" if record_by_default else "default: no MCAP file"
+def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True,
+                       default_stem: str = "<task>_<robot>") -> None:
+    """--record FILE.mcap, --no-record (when recording is on by default), --rrd FILE.rrd, --rate N.
+    default_stem: the default file's name as the help shows it (record_paths makes the real one)."""
+    default_text = f"default {DEFAULT_FOLDER}/{default_stem}.mcap" if record_by_default else "default: no MCAP file"
     group = p.add_mutually_exclusive_group()
     group.add_argument("--record", metavar="FILE.mcap", help=f"record the run to this MCAP file ({default_text})")
     if record_by_default:

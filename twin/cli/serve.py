@@ -41,7 +41,7 @@ def add_serve_command(sub) -> None:
                    help="a stepping client silent this long no longer holds back the others' sim.step() "
                         f"(default {DEFAULT_STEP_GRACE_S:g}; {low:g}..{high:g})")
     p.add_argument("--start", action="store_true", help="start the simulation at launch, like pressing Play")
-    add_record_options(p, record_by_default=True)
+    add_record_options(p, record_by_default=True, default_stem="remote_<robot>")
     p.set_defaults(func=cmd_serve)
 
 

@@ -69,7 +69,7 @@ def add_sweep_command(sub) -> None:
                         "LocalCluster of --jobs workers on 127.0.0.1)")
     p.add_argument("--batch", type=whole_number(1), default=None, metavar="N",
                    help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on Dask; at most 16)")
-    p.add_argument("--out", required=True, metavar="DIR", help="the output folder (created; its parent must exist)")
+    p.add_argument("--out", required=True, metavar="DIR", help="the output folder (created; its parent must exist, or be runs/, which is made)")
     p.add_argument("--save", choices=("failures", "all", "none"), default="failures",
                    help="which scenarios to record as MCAP (default failures: DIR/failures/scenario-<i>.mcap; "
                         "all: also DIR/scenarios/scenario-<i>.mcap)")

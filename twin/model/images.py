@@ -89,7 +89,7 @@ class CameraSpec:
 
 
 # The built-in cameras. overhead: straight down on the workspace (robot base, pick point (0.2, 0.7)
-# and place point (-0.3, -0.55) of pick_place), image up = +y. wrist: on the pad, 10 cm above its tip
+# and place point (-0.3, -0.55) of pick_place), image up = +y. wrist: on the pad, 3 cm above its tip
 # and 6 cm behind it, looking down at what the pad picks.
 CAMERAS = {
     "overhead": CameraSpec("overhead"),

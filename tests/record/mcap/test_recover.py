@@ -181,5 +181,5 @@ def test_recovering_a_run_that_left_no_file_says_so(tmp_path, capsys, monkeypatc
     monkeypatch.chdir(tmp_path)
     assert main(["recover", "runs/killed.mcap"]) == 2
     err = capsys.readouterr().err
-    assert err == ("twin: error: neither 'runs/killed.mcap' nor 'runs/killed.mcap.partial' exists; "
+    assert err == ("twin: error: recording 'runs/killed.mcap' does not exist, nor does 'runs/killed.mcap.partial'; "
                    "expected a recording or the .partial file a killed run left\n")

@@ -98,8 +98,8 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
     find_source) to `output` (default: see default_output), a complete MCAP file put in place whole."""
     asked, source = str(source), find_source(source)
     if not source.exists() and not source.is_symlink():
-        raise RecordingError(f"neither {asked!r} nor {str(partial_path(asked))!r} exists; expected a recording "
-                             "or the .partial file a killed run left")
+        raise RecordingError(f"recording {asked!r} does not exist, nor does {str(partial_path(asked))!r}; "
+                             "expected a recording or the .partial file a killed run left")
     output = default_output(source) if output is None else output
     out_path = check_output(output, ".mcap", inputs=[source], option="output")
     s = scan(source, strict=False)

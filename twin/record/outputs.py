@@ -22,17 +22,15 @@ def make_default_folder(folder: str | os.PathLike) -> bool:
     README's first command works in a fresh clone; any other folder is the user's to create.
     True if `folder` exists (now). ConfigError if runs/ cannot be made."""
     folder = Path(folder)
-    if folder.is_dir():
-        return True
-    if folder != Path(DEFAULT_FOLDER) or folder.exists():
-        return False
+    if folder.is_dir() or folder != Path(DEFAULT_FOLDER):
+        return folder.is_dir()
     try:
-        folder.mkdir()
-    except FileExistsError:  # made meanwhile (another twin started beside this one)
-        pass
+        folder.mkdir(exist_ok=True)  # exist_ok: made meanwhile by a twin started beside this one
+    except FileExistsError:  # a file of that name
+        return False
     except OSError as err:
         raise ConfigError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
-    return folder.is_dir()
+    return True
 
 
 def partial_path(path: str | os.PathLike) -> Path:

@@ -14,16 +14,14 @@ the twin's to handle (it then finalizes the files): the recorder ignores them.
 from __future__ import annotations
 
 import marshal
-import multiprocessing
 import os
 import pickle
-import signal
 import struct
 import sys
-import weakref
 from pathlib import Path
 
 from twin.errors import RecordingError
+from twin.helpers import start_helper
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
 from twin.model.rows import FrameRows
@@ -34,7 +32,6 @@ BATCH_S = 32 / 240  # simulated time per pipe write: 32 frames at 240 Hz
 MAX_IN_FLIGHT = 2  # batches sent but not yet taken in by the MCAP writer: bounds what a kill -9 loses
 MAX_IN_FLIGHT_VIEW = 16  # the same for the .rrd (about 2 s of simulated time): slack for its bursts
 _ACK = b"+"  # the recorder took in one batch
-_TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _BATCH, _CLOSE = b"B", b"C"
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
@@ -140,23 +137,8 @@ class _Child:
         self.writer = writer
         self.max_in_flight = max_in_flight
         self.in_flight = 0
-        ctx = multiprocessing.get_context("fork")
-        self.conn, child_conn = ctx.Pipe()
-        twins_ends = [self.conn, *(s.conn for s in siblings)]  # the child closes its copies of these
-        self.process = ctx.Process(target=_serve, args=(child_conn, twins_ends, writer, *args),
-                                   name=f"twin-recorder-{writer}", daemon=True)
-        # Signals wait until the child ignores them (it inherits the mask, then unblocks): one sent
-        # to the process group right at the fork must not kill the recorder before it can finalize.
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _TWINS_SIGNALS)
-        try:
-            self.process.start()
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        child_conn.close()
-        # If finish() is never reached, the pipe is closed at exit or when this object goes: the child
-        # (which ignores SIGTERM) sees EOF, leaves its file unfinalized as after a crash, and ends, so
-        # multiprocessing's exit handler (terminate, then join daemon children) does not wait forever.
-        weakref.finalize(self, self.conn.close)
+        self.conn, self.process = start_helper(self, _serve, (writer, *args), name=f"twin-recorder-{writer}",
+                                               other_ends=[s.conn for s in siblings])
 
     def send(self, payload: bytes) -> None:
         try:
@@ -202,18 +184,13 @@ class _Child:
         return "still running" if code is None else f"exit code {code}"
 
 
-def _serve(conn, twins_ends: list, writer: str, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
+def _serve(conn, writer: str, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
            path: str | Path, rate: int) -> None:
     """A recorder process: build its writer ("mcap" or "rrd"), feed it each batch, finish on request.
 
     A writer that fails stops the recording there (what was written is kept, unfinalized, as after a
     crash); the process then waits for the close request and answers it with the failure, so the
     twin reports it as one line instead of losing the run's remaining output."""
-    for end in twins_ends:  # the fork's copies of the twin's ends: with one open, its death would go unseen
-        end.close()
-    for signum in _TWINS_SIGNALS:  # Ctrl-C, SIGTERM, SIGHUP are the twin's to handle; it then closes us
-        signal.signal(signum, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _TWINS_SIGNALS)
     if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
         sys.meta_path.insert(0, _NoPandas())  # whether arrays are pandas objects: they never are here
     from twin.record.mcap.writer import McapRecorder  # already loaded by the parent

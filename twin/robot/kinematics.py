@@ -64,21 +64,16 @@ def elbow_and_wrist_xy(profile: RobotProfile, q) -> tuple[tuple, tuple]:
 
 
 def fk(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> PadPose:
-    """Pad tip pose from joint values (shoulder, elbow, z, wrist)."""
-    t1, t12 = link_angles(profile, q)
-    l1, l2 = profile.link1_m, profile.link2_m
-    return PadPose(
-        x_m=l1 * math.cos(t1) + l2 * math.cos(t12),
-        y_m=l1 * math.sin(t1) + l2 * math.sin(t12),
-        z_m=profile.tip_z0_m - profile.axis_signs[2] * q[2],
-        heading_rad=t12 + profile.axis_signs[3] * q[3],
-    )
+    """Pad tip pose from joint values (shoulder, elbow, z, wrist): pad_pose_function's position and
+    heading()'s angle (the same arithmetic, so the same bits, as the twin's Frames)."""
+    x_m, y_m, z_m = pad_pose_function(profile)(q)[:3]
+    return PadPose(x_m=x_m, y_m=y_m, z_m=z_m, heading_rad=heading(profile, q))
 
 
 def pad_pose_function(profile: RobotProfile):
     """q -> the pad tip's pose (x, y, z, qx, qy, qz, qw) for joint values q, the pad pointing down
-    about z by its heading: fk's arithmetic, operation for operation (the same bits), with the
-    profile's numbers bound once; the twin calls it every physics step."""
+    about z by its heading (half of heading()'s angle in the quaternion): the one statement of the
+    arm's forward kinematics, with the profile's numbers bound once; the twin calls it every physics step."""
     l1, l2, z0 = profile.link1_m, profile.link2_m, profile.tip_z0_m
     zero, (s1, s2, s3, s4) = profile.shoulder_zero_rad, profile.axis_signs
     cos, sin = math.cos, math.sin

@@ -222,13 +222,18 @@ class UrdfJoint:
         return self.kind in MOVING_TYPES
 
 
-def urdf_joints(urdf: str) -> list[UrdfJoint]:
-    """Every joint of a URDF text, in document order; ConfigError when it does not parse or a joint
-    lacks its parent or child, or a moving joint has no direction."""
+def parse_urdf(urdf: str) -> ET.Element:
+    """A URDF text's root element; ConfigError when it does not parse."""
     try:
-        root = ET.fromstring(urdf)
+        return ET.fromstring(urdf)
     except ET.ParseError as err:
         raise ConfigError(f"robot URDF does not parse: {err}") from err
+
+
+def urdf_joints(urdf: str | ET.Element) -> list[UrdfJoint]:
+    """Every joint of a URDF (its text, or parse_urdf's root of it), in document order; ConfigError
+    when it does not parse or a joint lacks its parent or child, or a moving joint has no direction."""
+    root = parse_urdf(urdf) if isinstance(urdf, str) else urdf
     joints = []
     for elem in root.iter("joint"):
         name = elem.get("name", "")

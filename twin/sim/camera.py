@@ -14,12 +14,11 @@ import collections
 import marshal
 import multiprocessing
 import os
-import signal
-import weakref
 
 import numpy as np
 
 from twin.errors import ConfigError
+from twin.helpers import start_helper
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage, CameraSpec, camera_view, encode, optical_pose
 from twin.model.sink import Sink
@@ -134,7 +133,6 @@ class CameraRenderer(Sink):
 LAG_PICTURES = 4  # camera frames in flight: enough to keep the render process busy while the twin steps
 _CLOSE = b"C"
 _FAILED = b"!"
-_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class _RenderProcess:
@@ -142,20 +140,7 @@ class _RenderProcess:
 
     def __init__(self, config: TwinConfig) -> None:
         self.pending = 0
-        ctx = multiprocessing.get_context("fork")
-        self._conn, child_conn = ctx.Pipe()
-        self._process = ctx.Process(target=_render_loop, args=(child_conn, self._conn, config),
-                                    name="twin-render", daemon=True)
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _SIGNALS)  # the child ignores them before it sees one
-        try:
-            self._process.start()
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        child_conn.close()
-        # If close() is never reached (the twin's process ends by another path), the pipe is closed at
-        # exit or when this object goes: the child, which ignores SIGTERM, then sees EOF and ends, and
-        # multiprocessing's exit handler, which terminates and joins daemon children, does not wait forever.
-        weakref.finalize(self, self._conn.close)
+        self._conn, self._process = start_helper(self, _render_loop, (config,), name="twin-render")
 
     def send(self, cameras: tuple[CameraSpec, ...], frame: Frame) -> None:
         try:
@@ -183,13 +168,9 @@ class _RenderProcess:
         self._process.join(timeout=10)
 
 
-def _render_loop(conn, parent_end, config: TwinConfig) -> None:
-    """The render process: draw each frame it is sent with the cameras named, until told to close or
-    the twin's end of the pipe closes. Ctrl-C, SIGTERM and SIGHUP are the twin's to handle."""
-    parent_end.close()
-    for signum in _SIGNALS:
-        signal.signal(signum, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGNALS)
+def _render_loop(conn, config: TwinConfig) -> None:
+    """The render process (twin.helpers): draw each frame it is sent with the cameras named, until told
+    to close or the twin's end of the pipe closes."""
     specs = {c.name: c for c in config.cameras}
     world = RenderWorld(config)
     while True:

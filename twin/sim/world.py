@@ -252,14 +252,13 @@ class World:
     def _hold_wrench(self, object_poses: tuple[tuple[float, ...], ...]
                     ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
-        object in the last step, world frame; zeros if nothing is held. A box hanging still gets +m·g in z.
+        object in the last step, world frame (state() asks only while something is held). A box hanging
+        still gets +m·g in z.
         object_poses: this step's object poses (the held object's orientation turns the torque).
 
         getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
         along world axes, the torque along the constraint frame's axes, which are rigid with the object.
         """
-        if self._constraint == NO_CONSTRAINT:
-            return _NO_WRENCH
         s = pb.getConstraintState(self._constraint, self.client)
         orn = object_poses[self.object_ids.index(self._held_body)][3:7]
         r = pb.getMatrixFromQuaternion(orn)  # row-major: world = r @ constraint frame

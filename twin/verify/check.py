@@ -8,11 +8,12 @@ parallel processes; `update` rewrites the ones that differ.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -219,26 +220,28 @@ def check_all(paths: Sequence[str], tolerances: Tolerances, *, update: bool = Fa
     (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order of paths."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
+    if run_many is None:
+        run_many = _in_turn if jobs == 1 or len(paths) <= 1 else functools.partial(_in_pool, jobs)
     results: dict[str, Outcome] = {}
-    if run_many is not None:
-        for i, outcome in run_many(check_one, [(p, tolerances, update, allow_error) for p in paths]):
-            results[paths[i]] = outcome
-            if progress:
-                progress(outcome)
-    elif jobs == 1 or len(paths) <= 1:
-        for p in paths:
-            results[p] = check_one(p, tolerances, update, allow_error)
-            if progress:
-                progress(results[p])
-    else:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(paths))) as pool:
-            futures = {pool.submit(check_one, p, tolerances, update, allow_error): p for p in paths}
-            for fut in as_completed(futures):
-                outcome = fut.result()
-                results[futures[fut]] = outcome
-                if progress:
-                    progress(outcome)
+    for i, outcome in run_many(check_one, [(p, tolerances, update, allow_error) for p in paths]):
+        results[paths[i]] = outcome
+        if progress:
+            progress(outcome)
     return [results[p] for p in paths]
+
+
+def _in_turn(fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Outcome]]:
+    """fn(*item) for each item here, in order: (index, result)."""
+    for i, item in enumerate(items):
+        yield i, fn(*item)
+
+
+def _in_pool(jobs: int, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Outcome]]:
+    """fn(*item) for each item in a pool of `jobs` processes: (index, result) as each finishes."""
+    with ProcessPoolExecutor(max_workers=min(jobs, len(items))) as pool:
+        futures = {pool.submit(fn, *item): i for i, item in enumerate(items)}
+        for fut in as_completed(futures):
+            yield futures[fut], fut.result()
 
 
 def summary_table(outcomes: list[Outcome]) -> str:

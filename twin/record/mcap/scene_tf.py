@@ -6,13 +6,11 @@ from __future__ import annotations
 
 import math
 import struct
-import xml.etree.ElementTree as ET
 
-from twin.errors import ConfigError
 from twin.model.quat import quat_from_rpy, quat_mul, rotate
 from twin.model.types import Frame
 from twin.record.mcap.wire import len_field, tag, varint
-from twin.robot.urdf import UrdfJoint, urdf_joints
+from twin.robot.urdf import UrdfJoint, parse_urdf, urdf_joints
 
 WORLD = "world"
 PAD_TIP = "pad_tip"
@@ -29,6 +27,7 @@ class _Joint:
 
     def __init__(self, joint: UrdfJoint, column: int) -> None:
         self.kind = joint.kind
+        self.moving = joint.moving
         self.xyz = joint.xyz
         self.q_origin = quat_from_rpy(*joint.rpy)
         self.rotated = any(abs(v) > 0.0 for v in joint.rpy)
@@ -65,12 +64,9 @@ class SceneTransforms:
     """Builds one FrameTransforms message per viewed frame from a URDF and the scene's object names."""
 
     def __init__(self, urdf: str, joint_names: tuple[str, ...], object_names: tuple[str, ...]) -> None:
-        try:
-            root = ET.fromstring(urdf)
-        except ET.ParseError as err:
-            raise ConfigError(f"robot URDF does not parse: {err}") from err
+        root = parse_urdf(urdf)
         columns = {name: i for i, name in enumerate(joint_names)}
-        joints = urdf_joints(urdf)
+        joints = urdf_joints(root)
         self.joints = [_Joint(j, columns.get(j.name, -1)) for j in joints]
         children = {j.child for j in joints}
         roots = sorted(link.get("name") for link in root.iter("link") if link.get("name") not in children)
@@ -83,7 +79,7 @@ class SceneTransforms:
         # every transform, in message order: (names, constant tail or None, moving joint or None)
         static = [(root_names, _tail((0.0, 0.0, 0.0), IDENTITY_Q), None)]
         for j in self.joints:
-            moving = j.column >= 0 and j.kind in ("revolute", "continuous", "prismatic")
+            moving = j.column >= 0 and j.moving
             static.append((j.names, None if moving else _tail(*j.pose(0.0)), j if moving else None))
         self._items = static
         self._pad_names = pad_names

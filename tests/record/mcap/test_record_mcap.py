@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 from pathlib import Path
@@ -291,6 +292,43 @@ def test_every_chunk_compression_loads_the_same(recorded, tmp_path, compression)
         recorder.on_frame(frame)
     recorder.close()
     assert twin.load(tmp_path / "c.mcap").frames.equals(collector.columns())
+
+
+@pytest.mark.parametrize("rate", [1, 7])
+def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path, rate):
+    """The recorder process hands on_rows runs of rows in a buffer it overwrites once on_rows returns
+    (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame writes.
+    Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last frame is
+    kept only from the last run (the buffer is garbage by then)."""
+    from twin.model.rows import FrameRows
+    from twin.record.mcap.writer import McapRecorder
+
+    _, collector = recorded
+    config = TwinConfig()
+    rows = FrameRows(len(config.profile.joint_names), len(config.objects))
+
+    def write(path: Path, by_rows: bool) -> bytes:
+        recorder = McapRecorder(path, config, RUN, urdf=urdf_text(config.profile), rate=rate)
+        frames, buf, at = collector.frames, bytearray(64 * rows.size), 0
+        for size in itertools.cycle((1, 7, 64, 33, 3)):
+            batch = frames[at:at + size]
+            if not batch:
+                break
+            at += size
+            if not by_rows:
+                for frame in batch:
+                    recorder.on_frame(frame)
+                continue
+            for k, frame in enumerate(batch):
+                rows.pack_into(buf, k * rows.size, frame)
+            recorder.on_rows(rows, memoryview(buf)[:len(batch) * rows.size])
+            buf[:] = b"\xff" * len(buf)
+        for event in collector.events:
+            recorder.on_event(event)
+        recorder.close()
+        return path.read_bytes()
+
+    assert write(tmp_path / "rows.mcap", by_rows=True) == write(tmp_path / "frames.mcap", by_rows=False)
 
 
 def test_a_user_urdf_travels_with_its_meshes_and_drives_the_transforms(tmp_path, capsys):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 from pathlib import Path
 
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
@@ -80,8 +81,9 @@ class McapRecorder(Sink):
         self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
         self._tf = SceneTransforms(urdf, config.profile.joint_names, tuple(o.name for o in config.objects))
         self._rows = FrameRows(len(config.profile.joint_names), self.n_objects)
+        self._tf_numbers = _tf_numbers(self._rows).unpack_from
+        self._block_bytes = self.block_frames * self._rows.size
         self._block = bytearray()  # the next block's frames, as packed rows
-        self._block_last_step = -1
         names = {"JointBlock": self._joint_names}  # every other block names the scene's objects
         self._blocks = tuple((topic, names.get(b, self._object_names), F.block_fields(b)[2:])
                              for b, topic in S.BLOCK_TOPICS.items())
@@ -114,6 +116,7 @@ class McapRecorder(Sink):
         for spec in S.CHANNELS:
             schema_id = self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
             self._channel[spec.topic] = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id)
+        self._tf_channel = self._channel[S.TF.topic]
         self._register_cameras(config)
         extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
                  "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
@@ -128,34 +131,39 @@ class McapRecorder(Sink):
 
     # -- sink -----------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        self._take(self._rows.pack(frame), frame.step, frame.t_ns, frame)
+        self._take(memoryview(self._rows.pack(frame)), (frame.step,), (frame.t_ns,))
 
     def on_rows(self, rows: FrameRows, buf) -> None:
-        """Frames packed as rows (the recorder process's feed): each one as on_frame takes it, without
-        making Frames but for the transforms' viewing rate."""
+        """Frames packed as rows (the recorder process's feed), each one as on_frame takes it."""
         if rows.size != self._rows.size:
             raise RecordingError(f"rows of {rows.size} bytes fed to a recorder of {self._rows.size}-byte rows")
         records = rows.records(buf)
-        view = memoryview(buf)
-        size = rows.size
-        for i, (step, t_ns) in enumerate(zip(records["step"].tolist(), records["t_ns"].tolist(), strict=True)):
-            self._take(view[i * size:(i + 1) * size], step, t_ns, None)
+        if len(records):
+            self._take(memoryview(buf).cast("B"), records["step"].tolist(), records["t_ns"].tolist())
 
-    def _take(self, row, step: int, t_ns: int, frame: Frame | None) -> None:
-        """One frame: its transforms at the viewing rate, its row into the block at the recording rate."""
-        self._last = (row, step, t_ns)
-        if step % self.view_every == 0:
-            frame = frame or self._rows.frame(row)
-            self._pending.append((t_ns, self._channel[S.TF.topic], self._tf.message(frame)))
-        if step % self.rate == 0:
-            self._block += row
-            self._block_last_step = step
-            if len(self._block) >= self.block_frames * self._rows.size:
-                self._write_block()
-                return
-        if t_ns - self._last_flush_ns >= 2 * self.flush_ns:  # blocks far apart (a high --rate)
-            self._write_pending()
-            self._flush(t_ns)
+    def _take(self, view: memoryview, steps, times) -> None:
+        """Frames as rows, one after another in `view`, with their steps and times: each one's transforms
+        at the viewing rate, its row into the block at the recording rate. What it keeps it copies (the
+        sender may reuse the memory behind `view` as soon as this returns)."""
+        # locals, not attributes, in this loop over every frame (0.3 us a frame less; 0.86 it cost)
+        size, n_joints, view_every, rate = self._rows.size, self._rows.n_joints, self.view_every, self.rate
+        block, full, far = self._block, self._block_bytes, 2 * self.flush_ns
+        at = 0
+        for step, t_ns in zip(steps, times, strict=True):
+            if not step % view_every:
+                numbers = self._tf_numbers(view, at)  # joint values, then the poses
+                self._pending.append((t_ns, self._tf_channel,
+                                      self._tf.message(t_ns, numbers[:n_joints], numbers[n_joints:])))
+            at += size
+            if not step % rate:
+                block += view[at - size:at]
+                if len(block) >= full:
+                    self._write_block()
+                    continue
+            if t_ns - self._last_flush_ns >= far:  # blocks far apart (a high --rate)
+                self._write_pending()
+                self._flush(t_ns)
+        self._last = (bytes(view[at - size:at]), steps[-1], times[-1])
 
     def on_command(self, command: Command) -> None:
         body = _json({"step": command.step, "kind": command.kind, "args": command.args})
@@ -277,7 +285,7 @@ class McapRecorder(Sink):
         try:
             row, last_step, last_t_ns = self._last or (b"", -1, 0)
             if self._last is not None and last_step != self._last_written_step and (
-                    not self._block or self._block_last_step != last_step):
+                    not self._block or self._rows.frame(self._block[-len(row):]).step != last_step):
                 self._block += row
             if self._block:
                 self._write_block()
@@ -295,6 +303,17 @@ class McapRecorder(Sink):
             raise RecordingError(f"cannot finish recording {str(self.path)!r}: {err.strerror or err}") from err
         finally:
             self._file.close()
+
+
+def _tf_numbers(rows: FrameRows) -> struct.Struct:
+    """Unpacks what a row's /tf message needs, in one call: its joint values, the pad's pose and the
+    objects' poses, as one flat tuple of doubles."""
+    form, at = ["<"], 0
+    for name in ("joint_q", "pad_pose", "object_poses"):
+        dtype, offset = rows.dtype.fields[name][:2]
+        form.append(f"{offset - at}x{dtype.itemsize // 8}d")
+        at = offset + dtype.itemsize
+    return struct.Struct("".join(form))
 
 
 def _log_message(event: Event) -> bytes:

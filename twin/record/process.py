@@ -1,22 +1,24 @@
-"""Recording on the machine's other core: a sink that batches the twin's stream to recorder
-processes, which run the same MCAP and Rerun writers (one process each).
+"""Recording on the machine's other core: a sink that hands the twin's stream to recorder processes,
+which run the same MCAP and Rerun writers (one process each).
 
-The stepping thread then does one to two microseconds of work a frame (the Frame packed into a
-preallocated row buffer, model.rows, and a share of one pipe write per batch) instead of the writers'
-encoding and compression; the writers take each batch's rows as columns. (In wall time a step costs
-more than that work: the recorder processes share the second core, and slow the first; README.) Files are
-byte-for-byte what the in-process writers make, since the same writer code sees the same stream.
-If the twin's process dies, the recorder sees the pipe close and leaves the MCAP file unfinalized
-(and recoverable, as NAME.partial) with everything that reached it. Ctrl-C, SIGTERM and SIGHUP are
-the twin's to handle (it then finalizes the files): the recorder ignores them.
+The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
+microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
+events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
+timer (every millisecond while rows come), takes in what was published and says how far it read; the
+twin waits only when a recorder falls behind (the MCAP one by more than 0.4 s of simulated time, which
+bounds what a kill -9 loses), and then wakes it through the pipe. Files are byte-for-byte what the
+in-process writers make, since the same writer code sees the same stream. If the twin's process dies,
+the recorder sees the pipe close, takes in every row that was published and leaves the MCAP file
+unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it
+then finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
 
+import collections
 import marshal
 import os
 import pickle
-import struct
 import sys
 from pathlib import Path
 
@@ -27,44 +29,55 @@ from twin.model.images import CameraImage
 from twin.model.rows import FrameRows
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
+from twin.record.ring import FrameRing
 
-BATCH_S = 32 / 240  # simulated time per pipe write: 32 frames at 240 Hz
-MAX_IN_FLIGHT = 2  # batches sent but not yet taken in by the MCAP writer: bounds what a kill -9 loses
-MAX_IN_FLIGHT_VIEW = 16  # the same for the .rrd (about 2 s of simulated time): slack for its bursts
-_ACK = b"+"  # the recorder took in one batch
-_BATCH, _CLOSE = b"B", b"C"
+PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames at 240 Hz
+MAX_AHEAD_S = 0.4  # simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
+RING_S = 2048 / 240  # simulated time the ring holds: slack for the Rerun writer's bursts (every 2048 frames)
+POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
+IDLE_POLL_S = 0.016
+WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
+_OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
 _HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}  # item kind -> the sinks' method
-_HEAD = struct.Struct("<cI")  # tag, frames in the batch; then their rows, then the marshalled others
+
+
+def _frames(config: TwinConfig, seconds: float) -> int:
+    return max(1, round(seconds * 1e9 / config.dt_ns))
 
 
 class RecorderProcess(Sink):
     """A sink (on_frame/on_command/on_event/on_image) whose writers run in child processes: one for
-    the MCAP file, one for the .rrd, each fed the same batches. Apart, a burst of the Rerun writer
+    the MCAP file, one for the .rrd, both reading the same ring. Apart, a burst of the Rerun writer
     (it sends its columns every 2048 frames) cannot hold the MCAP writer, nor the twin, up."""
 
     def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
                  mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
         self._rows = FrameRows(len(config.profile.joint_names), len(config.objects))
-        self._batch_frames = max(1, round(BATCH_S * 1e9 / config.dt_ns))
-        self._buf = bytearray(_HEAD.size + self._batch_frames * self._rows.size)  # the next batch
-        self._frames = 0
-        self._others: list[tuple[int, int, bytes]] = []  # (frames before it in the batch, kind, pickle)
+        self._publish_every = _frames(config, PUBLISH_S)
+        mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
+        capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
+        writers = [(w, p, ahead) for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
+                   if p is not None]
+        self._ring = FrameRing(self._rows, capacity, len(writers))
+        self._memory, self._at, self._end = self._ring.memory, self._ring.offset(0), self._ring.offset(capacity - 1)
+        self._written = 0
+        self._next_publish = self._publish_every
+        self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
         self._closed = False
+        self.waits = 0  # how often the twin waited for a recorder (tools/bench_record.py reports it)
         # Load the writers here, once: every forked recorder inherits them instead of importing anew
         # (rerun alone takes ~0.3 s to import).
         import twin.record.mcap.writer
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
         self._children: list[_Child] = []
-        writers = [("mcap", mcap_path, MAX_IN_FLIGHT), ("rrd", rrd_path, MAX_IN_FLIGHT_VIEW)]
         starting = None
         try:
-            for writer, path, max_in_flight in writers:
-                if path is not None:
-                    self._children.append(_Child(writer, max_in_flight, self._children, (
-                        config, run, urdf, meshes, path, rate)))
+            for reader, (writer, path, ahead) in enumerate(writers):
+                self._children.append(_Child(writer, reader, ahead, self._children, (
+                    self._ring, config, run, urdf, meshes, path, rate)))
             for starting in self._children:  # they start side by side; each says when it is ready
                 starting.expect_ok("recording could not start")
         except BaseException:
@@ -80,42 +93,51 @@ class RecorderProcess(Sink):
 
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        self._rows.pack_into(self._buf, _HEAD.size + self._frames * self._rows.size, frame)
-        self._frames += 1
-        if self._frames >= self._batch_frames:
-            self._send()
+        at = self._at
+        self._rows.pack_into(self._memory, at, frame)
+        self._at = at + self._rows.size if at < self._end else self._ring.offset(0)
+        self._written += 1
+        if self._written == self._next_publish:
+            self._publish()
 
     # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
     # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
     def on_command(self, command: Command) -> None:
-        self._others.append((self._frames, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append((self._written, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
 
     def on_event(self, event: Event) -> None:
-        self._others.append((self._frames, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append((self._written, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
 
     def on_image(self, image: CameraImage) -> None:
-        self._others.append((self._frames, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append((self._written, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
 
-    def _send(self) -> None:
-        """One batch to every recorder."""
-        end = _HEAD.size + self._frames * self._rows.size
-        _HEAD.pack_into(self._buf, 0, _BATCH, self._frames)
-        payload = b"".join((memoryview(self._buf)[:end], marshal.dumps(self._others)))
-        self._others.clear()
-        self._frames = 0
-        for child in self._children:
-            child.send(payload)
+    def _publish(self) -> None:
+        """The others down the pipes, then the rows up to here published; then room for the next ones
+        (the others first: a recorder that sees the rows must find every message that came before them)."""
+        if self._others:
+            message = _OTHERS + marshal.dumps(self._others)
+            self._others.clear()
+            for child in self._children:
+                child.send(message)
+        written = self._written
+        reads = self._ring.publish(written)
+        self._next_publish = written + self._publish_every
+        for child, read in zip(self._children, reads, strict=True):
+            if self._next_publish - read > child.ahead:
+                self.waits += 1
+                child.wait_until_read(self._ring, self._next_publish - child.ahead)
+            elif written - read > child.ahead // 2:
+                child.nudge(read)
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Send what is buffered, have the writers finalize, wait for them (the first failure is
+        """Publish what is left, have the writers finalize, wait for them (the first failure is
         raised once all have finished). Idempotent."""
         if self._closed:
             return
         self._closed = True
         failure: RecordingError | None = None
         try:
-            if self._frames or self._others:
-                self._send()
+            self._publish_rest()
         except RecordingError as err:
             failure = err
         for child in self._children:
@@ -126,36 +148,53 @@ class RecorderProcess(Sink):
         if failure is not None:
             raise failure
 
+    def _publish_rest(self) -> None:
+        if self._others:
+            message = _OTHERS + marshal.dumps(self._others)
+            self._others.clear()
+            for child in self._children:
+                child.send(message)
+        self._ring.publish(self._written)
+
 
 class _Child:
-    """One recorder process and the twin's end of its pipe. At most `max_in_flight` batches wait in
-    the pipe or the writer's intake: for the MCAP file that bounds what a kill -9 loses (a full pipe,
-    64 KiB or ~6 batches, would hold ~0.8 s more of simulated time: measured up to 1.8 s lost with
-    --rrd when it was not bounded); the view gets more slack, so its bursts do not stall the twin."""
+    """One recorder process, the twin's end of its pipe, and how far ahead of it the twin may go
+    (`ahead` rows: for the MCAP file that bounds what a kill -9 loses; the view gets the whole ring)."""
 
-    def __init__(self, writer: str, max_in_flight: int, siblings: list[_Child], args: tuple) -> None:
+    def __init__(self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple) -> None:
         self.writer = writer
-        self.max_in_flight = max_in_flight
-        self.in_flight = 0
-        self.conn, self.process = start_helper(self, _serve, (writer, *args), name=f"twin-recorder-{writer}",
+        self.reader = reader
+        self.ahead = ahead
+        self.wakes = 0  # wake-ups the twin sent it (it falls behind)
+        self._nudged_at = -1
+        self.conn, self.process = start_helper(self, _serve, (writer, reader, *args), name=f"twin-recorder-{writer}",
                                                other_ends=[s.conn for s in siblings])
 
-    def send(self, payload: bytes) -> None:
+    def send(self, message: bytes) -> None:
         try:
-            while self.in_flight >= self.max_in_flight:
-                if self.conn.recv_bytes() != _ACK:
-                    raise EOFError("unexpected reply")
-                self.in_flight -= 1
-            self.conn.send_bytes(payload)
-            self.in_flight += 1
-        except (EOFError, BrokenPipeError, ConnectionResetError, OSError) as err:
+            self.conn.send_bytes(message)
+        except OSError as err:
             raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
+
+    def nudge(self, read: int) -> None:
+        """Half its slack is used up: wake the recorder if it may be waiting for its timer (once for
+        each point it has read to, so a recorder busy writing is not woken again and again)."""
+        if read != self._nudged_at:
+            self._nudged_at = read
+            self.wakes += 1
+            self.send(_WAKE)
+
+    def wait_until_read(self, ring: FrameRing, read: int) -> None:
+        """Wake the recorder and wait until it has taken in rows [0, read)."""
+        self.wakes += 1
+        self.send(_WAKE)
+        while ring.read(self.reader) < read:
+            if self.conn.poll(WAIT_S):  # it says nothing before the close: this is the pipe's end
+                raise RecordingError(f"the recorder process stopped: {self._exit_text()}")
 
     def expect_ok(self, what: str) -> None:
         try:
             reply = self.conn.recv_bytes()
-            while reply == _ACK:  # batches taken in before the answer
-                reply = self.conn.recv_bytes()
         except (EOFError, OSError) as err:
             raise RecordingError(f"{what}: the recorder process stopped ({self._exit_text()})") from err
         if reply != b"OK":
@@ -184,17 +223,18 @@ class _Child:
         return "still running" if code is None else f"exit code {code}"
 
 
-def _serve(conn, writer: str, config: TwinConfig, run: dict, urdf: str, meshes: list[Path],
-           path: str | Path, rate: int) -> None:
-    """A recorder process: build its writer ("mcap" or "rrd"), feed it each batch, finish on request.
+def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, run: dict, urdf: str,
+           meshes: list[Path], path: str | Path, rate: int) -> None:
+    """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes, finish
+    on request.
 
     A writer that fails stops the recording there (what was written is kept, unfinalized, as after a
-    crash); the process then waits for the close request and answers it with the failure, so the
-    twin reports it as one line instead of losing the run's remaining output."""
+    crash); the process goes on reading (so the twin never waits for it) until the close request and
+    answers it with the failure, so the twin reports it as one line instead of losing the run's
+    remaining output."""
     if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
         sys.meta_path.insert(0, _NoPandas())  # whether arrays are pandas objects: they never are here
     from twin.record.mcap.writer import McapRecorder  # already loaded by the parent
-    rows = FrameRows(len(config.profile.joint_names), len(config.objects))
 
     sinks = []
     try:
@@ -209,51 +249,79 @@ def _serve(conn, writer: str, config: TwinConfig, run: dict, urdf: str, meshes: 
         conn.send_bytes(str(err).encode())
         os._exit(0)
     conn.send_bytes(b"OK")
-    failure = ""
+    feed = _Feed(ring, sinks)
+    timeout = POLL_S
     while True:
-        try:
-            message = conn.recv_bytes()
-        except (EOFError, OSError):  # the twin's process died: keep what arrived, unfinalized
-            if not failure:
+        conn.poll(timeout)  # a message, or the timer
+        written = ring.written()
+        end = _take_messages(conn, feed)  # all the twin sent before publishing `written`, and maybe more
+        if end is not None:
+            written = ring.written()  # the twin publishes its last rows before it closes (or has died)
+        came = written > feed.read
+        feed.take(written, final=end is not None)
+        ring.release(reader, feed.read)
+        # More rows while it wrote (a block, a burst): at once; rows: the timer; none: a slower one.
+        timeout = 0.0 if ring.written() > feed.read else POLL_S if came else min(2 * timeout, IDLE_POLL_S)
+        if end == "died":  # the twin's process died: keep what arrived, unfinalized
+            if not feed.failure:
                 _abandon(sinks)
             os._exit(0)
-        tag, body = message[:1], message[1:]
-        if tag == _CLOSE:
-            if not failure:
-                failure = _close_all(sinks, *marshal.loads(body))
+        if end is not None:
+            failure = feed.failure or _close_all(sinks, *end)
             conn.send_bytes(failure.encode() if failure else b"OK")
             os._exit(0)
-        if not failure:  # after a failure: drain until the twin closes, it learns of the failure then
-            try:
-                _feed(message, rows, sinks)
-            except Exception as err:  # noqa: BLE001 - e.g. a full disk
-                failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
-                _abandon(sinks)
+
+
+def _take_messages(conn, feed: _Feed):
+    """Read every message waiting in the pipe: the others go to the feed's queue. Returns None, the
+    close request's (outcome, error), or "died" when the pipe has closed (the twin's process died)."""
+    while conn.poll(0):
         try:
-            conn.send_bytes(_ACK)
-        except OSError:  # the twin's process died: keep what arrived, unfinalized
-            if not failure:
-                _abandon(sinks)
-            os._exit(0)
+            message = conn.recv_bytes()
+        except (EOFError, OSError):
+            return "died"
+        tag, body = message[:1], message[1:]
+        if tag == _OTHERS:
+            feed.queue.extend(marshal.loads(body))
+        elif tag == _CLOSE:
+            return marshal.loads(body)
+    return None
 
 
-def _feed(batch: bytes, rows: FrameRows, sinks: list) -> None:
-    """One batch to every sink in the order the twin made it: runs of frames (as rows), and between
-    them the commands and events that came after the frames before them."""
-    n_frames = _HEAD.unpack_from(batch)[1]
-    view = memoryview(batch)
-    at = _HEAD.size
-    done = 0
-    for before, kind, data in [*marshal.loads(view[at + n_frames * rows.size:]), (n_frames, None, b"")]:
-        if before > done:
-            run = view[at + done * rows.size:at + before * rows.size]
-            for sink in sinks:
-                sink.on_rows(rows, run)
-            done = before
-        if kind is not None:
-            message = pickle.loads(data)
-            for sink in sinks:
-                getattr(sink, _HANDLERS[kind])(message)
+class _Feed:
+    """Rows from the ring and the others from the pipe, to the writers in the order the twin made them."""
+
+    def __init__(self, ring: FrameRing, sinks: list) -> None:
+        self.ring, self.sinks = ring, sinks
+        self.read = 0  # rows taken in (or, after a failure, passed over)
+        self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()  # (frames before it, kind, pickle)
+        self.failure = ""
+
+    def take(self, written: int, *, final: bool) -> None:
+        """Rows [read, written) and the others that come before row `written` (all of them when final)."""
+        try:
+            while self.queue and (final or self.queue[0][0] <= written):
+                before, kind, data = self.queue.popleft()
+                self._rows(min(before, written))
+                if not self.failure:
+                    message = pickle.loads(data)
+                    for sink in self.sinks:
+                        getattr(sink, _HANDLERS[kind])(message)
+            self._rows(written)
+        except Exception as err:  # noqa: BLE001 - e.g. a full disk
+            self.failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
+            _abandon(self.sinks)
+        self.read = max(self.read, written)
+
+    def _rows(self, upto: int) -> None:
+        if upto <= self.read:
+            return
+        if not self.failure:
+            rows = self.ring.rows
+            for run in self.ring.runs(self.read, upto):
+                for sink in self.sinks:
+                    sink.on_rows(rows, run)
+        self.read = upto
 
 
 class _NoPandas:

@@ -1,0 +1,61 @@
+"""The ring of rows the twin shares with its recorder processes: rows come back as they went in, across
+the ring's end, and a recorder that falls behind makes the twin wait rather than lose or overwrite rows."""
+
+from __future__ import annotations
+
+import numpy as np
+from support.runs import record_pick_place
+
+from twin.model.rows import FrameRows
+from twin.record import process
+from twin.record.mcap.reader import load
+from twin.record.ring import FrameRing
+from twin.sim.twin import Twin
+
+TWO_CYCLES = {"cycles": 2}  # about 2,240 frames: more than the ring's 2,048 rows at 240 Hz
+
+
+def test_rows_come_back_in_order_across_the_rings_end():
+    twin = Twin()
+    rows = FrameRows(4, 1)
+    ring = FrameRing(rows, capacity=5, readers=1)
+    frames = []
+    for written in range(8):
+        frames.append(twin.step())
+        rows.pack_into(ring.memory, ring.offset(written), frames[-1])
+    twin.close()
+    assert ring.publish(8) == [0]
+    runs = ring.runs(3, 8)
+    assert [rows.count(run) for run in runs] == [2, 3]  # rows 3-4 at the ring's end, 5-7 from its start
+    steps = np.concatenate([rows.records(run)["step"] for run in runs])
+    assert steps.tolist() == [f.step for f in frames[3:8]]
+    assert rows.frame(runs[1], 2) == frames[7]
+    ring.release(0, 8)
+    assert ring.read(0) == 8 and ring.written() == 8
+
+
+def test_a_run_longer_than_the_ring_makes_the_same_bytes_as_the_in_process_writer(tmp_path):
+    record_pick_place(tmp_path / "bg.mcap", params=TWO_CYCLES, background=True)
+    record_pick_place(tmp_path / "fg.mcap", params=TWO_CYCLES, background=False)
+    assert len(load(tmp_path / "bg.mcap").frames) > 2048
+    assert (tmp_path / "bg.mcap").read_bytes() == (tmp_path / "fg.mcap").read_bytes()
+
+
+def test_a_recorder_behind_the_twin_is_woken_and_waited_for(tmp_path, monkeypatch):
+    """A recorder whose timer wakes it every 0.3 s would let the twin run ~1,000 frames ahead: the twin
+    wakes it instead (once half its slack is used, and when it must wait), and nothing is lost."""
+    monkeypatch.setattr(process, "POLL_S", 0.3)  # the recorders are forked: they see it
+    monkeypatch.setattr(process, "IDLE_POLL_S", 0.3)
+    made = []
+    original = process.RecorderProcess.__init__
+
+    def keep(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(process.RecorderProcess, "__init__", keep)
+    record_pick_place(tmp_path / "slow.mcap", background=True)
+    monkeypatch.undo()
+    record_pick_place(tmp_path / "fg.mcap", background=False)
+    assert made and sum(child.wakes for child in made[0]._children) > 3
+    assert (tmp_path / "slow.mcap").read_bytes() == (tmp_path / "fg.mcap").read_bytes()

@@ -1,0 +1,73 @@
+"""A ring of packed Frame rows in memory shared with the recorder processes.
+
+The twin packs each Frame straight into the ring (model.rows) and, every few frames, publishes how
+many it has written; each recorder takes in the published rows when it wakes and says how far it has
+read. No system call and no wake-up of the other core per frame or per batch: the recorders wake on
+their own timer, and the twin wakes one only when it has to wait for it (see RecorderProcess).
+
+The counters sit in the shared page and change only under one lock, whose acquire and release order
+the row bytes before the counter that publishes them on every processor, not only on x86.
+"""
+
+from __future__ import annotations
+
+import mmap
+import multiprocessing
+import struct
+
+from twin.model.rows import FrameRows
+
+_COUNTER = struct.Struct("<Q")
+
+
+class FrameRing:
+    """`capacity` rows of `rows.size` bytes, a written counter and one read counter per reader.
+    Made before the recorders are forked: they inherit the mapping and the lock."""
+
+    def __init__(self, rows: FrameRows, capacity: int, readers: int) -> None:
+        if capacity < 1 or readers < 1:
+            raise ValueError(f"a ring of {capacity} rows for {readers} readers; expected at least one of each")
+        self.rows = rows
+        self.capacity = capacity
+        self.readers = readers
+        self._header = _COUNTER.size * (1 + readers)  # written, then each reader's read
+        self.memory = mmap.mmap(-1, self._header + capacity * rows.size)  # anonymous, shared with forks
+        self._lock = multiprocessing.get_context("fork").Lock()
+
+    def offset(self, frame: int) -> int:
+        """Where the row of frame number `frame` (counted from the run's first) lives in `memory`."""
+        return self._header + (frame % self.capacity) * self.rows.size
+
+    # -- the twin's side ------------------------------------------------------------------------
+    def publish(self, written: int) -> list[int]:
+        """Say that rows [0, written) are in the ring; returns each reader's read counter."""
+        with self._lock:
+            _COUNTER.pack_into(self.memory, 0, written)
+            return [_COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + i))[0] for i in range(self.readers)]
+
+    def read(self, reader: int) -> int:
+        """How many rows reader `reader` has taken in."""
+        with self._lock:
+            return _COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + reader))[0]
+
+    # -- a recorder's side ----------------------------------------------------------------------
+    def written(self) -> int:
+        """How many rows the twin has published."""
+        with self._lock:
+            return _COUNTER.unpack_from(self.memory, 0)[0]
+
+    def release(self, reader: int, read: int) -> None:
+        """Reader `reader` is done with rows [0, read): the twin may write over them."""
+        with self._lock:
+            _COUNTER.pack_into(self.memory, _COUNTER.size * (1 + reader), read)
+
+    def runs(self, start: int, end: int) -> list[memoryview]:
+        """Rows [start, end) as views into the ring: one run, or two where they wrap around. Valid until
+        `release` passes them."""
+        view, runs = memoryview(self.memory), []
+        while start < end:
+            stop = min(end, start - start % self.capacity + self.capacity)  # the ring's end, or `end`
+            runs.append(view[self.offset(start):self.offset(start) + (stop - start) * self.rows.size])
+            start = stop
+        return runs
+

@@ -331,6 +331,30 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
     assert write(tmp_path / "rows.mcap", by_rows=True) == write(tmp_path / "frames.mcap", by_rows=False)
 
 
+def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
+    """The writer gathers its block messages from the rows in one go; field by field from numpy columns
+    (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame count and
+    in whatever order the counts come (the gather's index is kept for the last count)."""
+    from twin.model import fields as F
+    from twin.model.rows import FrameRows
+    from twin.record.mcap.blocks import BlockEncoder
+
+    _, collector = recorded
+    rows = FrameRows(4, 1)
+    names = {b: wire.str_field(S.NAMES, b) for b in F.BLOCKS}
+    encoder = BlockEncoder(rows, names)
+    at = 0
+    for n in (60, 1, 7, 60, 60, 2):
+        block = b"".join(rows.pack(f) for f in collector.frames[at:at + n])
+        at += n
+        records = rows.records(block)
+        expected = [b"".join([wire.packed(f.number, records[f.name].reshape(n, -1), f.wire) for f in fields[:2]]
+                             + [names[b]] + [wire.packed(f.number, records[f.name].reshape(n, -1), f.wire)
+                                             for f in fields[2:]])
+                    for b, fields in ((b, F.block_fields(b)) for b in F.BLOCKS)]
+        assert encoder.messages(block) == expected
+
+
 def test_a_user_urdf_travels_with_its_meshes_and_drives_the_transforms(tmp_path, capsys):
     from support.user_robot import write_user_robot  # the STL-mesh SCARA the URDF tests build
 

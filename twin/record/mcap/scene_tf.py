@@ -9,7 +9,7 @@ import struct
 from operator import itemgetter
 
 from twin.model.quat import quat_from_rpy, quat_mul, rotate
-from twin.record.mcap.wire import len_field, tag, varint
+from twin.record.mcap.wire import VARINT, len_field, tag, varint
 from twin.robot.urdf import UrdfJoint, parse_urdf, urdf_joints
 
 WORLD = "world"
@@ -21,6 +21,7 @@ IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
 _TAIL = (b"\x22\x1b\x09", 0, b"\x11", 1, b"\x19", 2, b"\x2a\x24\x09", 3, b"\x11", 4, b"\x19", 5, b"\x21", 6)
 _TAIL_BYTES = sum(len(p) if isinstance(p, bytes) else 8 for p in _TAIL)
 _DOUBLE = struct.Struct("<d")
+_SECONDS_TAG, _NANOS_TAG = tag(1, VARINT), tag(2, VARINT)  # a Timestamp's fields
 
 
 class _Joint:
@@ -58,7 +59,7 @@ def _tail(xyz: tuple[float, ...], quat: tuple[float, ...]) -> bytes:
 def timestamp_field(t_ns: int) -> bytes:
     """google.protobuf.Timestamp as field 1 of the enclosing message."""
     seconds, nanos = divmod(t_ns, 1_000_000_000)
-    body = tag(1, 0) + varint(seconds) + tag(2, 0) + varint(nanos)
+    body = _SECONDS_TAG + varint(seconds) + _NANOS_TAG + varint(nanos)
     return b"\x0a" + varint(len(body)) + body
 
 

@@ -30,6 +30,7 @@ from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire
+from twin.record.mcap.blocks import BlockEncoder
 from twin.record.mcap.scene_tf import WORLD, SceneTransforms
 from twin.record.metadata import check_run, portable_config, run_metadata
 from twin.record.outputs import partial_path, publish
@@ -81,12 +82,12 @@ class McapRecorder(Sink):
         self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
         self._tf = SceneTransforms(urdf, config.profile.joint_names, tuple(o.name for o in config.objects))
         self._rows = FrameRows(len(config.profile.joint_names), self.n_objects)
-        self._tf_numbers = _tf_numbers(self._rows).unpack_from
+        self._tf_numbers = _row_struct(self._rows, ("joint_q", "pad_pose", "object_poses")).unpack_from
+        self._step_time = _row_struct(self._rows, ("step", "t_ns"))
         self._block_bytes = self.block_frames * self._rows.size
         self._block = bytearray()  # the next block's frames, as packed rows
-        names = {"JointBlock": self._joint_names}  # every other block names the scene's objects
-        self._blocks = tuple((topic, names.get(b, self._object_names), F.block_fields(b)[2:])
-                             for b, topic in S.BLOCK_TOPICS.items())
+        self._blocks = BlockEncoder(self._rows, {b: self._joint_names if b == "JointBlock" else self._object_names
+                                                 for b in F.BLOCKS})  # every other block names the objects
         self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
         self._last: tuple[bytes, int, int] | None = None  # the last frame seen: (row, step, t_ns)
         self._last_written_step = -1
@@ -117,6 +118,7 @@ class McapRecorder(Sink):
             schema_id = self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
             self._channel[spec.topic] = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id)
         self._tf_channel = self._channel[S.TF.topic]
+        self._block_channels = [self._channel[S.BLOCK_TOPICS[b]] for b in F.BLOCKS]
         self._register_cameras(config)
         extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
                  "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
@@ -131,25 +133,26 @@ class McapRecorder(Sink):
 
     # -- sink -----------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        self._take(memoryview(self._rows.pack(frame)), (frame.step,), (frame.t_ns,))
+        self._take(memoryview(self._rows.pack(frame)))
 
     def on_rows(self, rows: FrameRows, buf) -> None:
         """Frames packed as rows (the recorder process's feed), each one as on_frame takes it."""
-        if rows.size != self._rows.size:
-            raise RecordingError(f"rows of {rows.size} bytes fed to a recorder of {self._rows.size}-byte rows")
-        records = rows.records(buf)
-        if len(records):
-            self._take(memoryview(buf).cast("B"), records["step"].tolist(), records["t_ns"].tolist())
+        view = memoryview(buf).cast("B")
+        if rows.size != self._rows.size or len(view) % rows.size:
+            raise RecordingError(f"{len(view)} bytes of {rows.size}-byte rows fed to a recorder of "
+                                 f"{self._rows.size}-byte rows")
+        if len(view):
+            self._take(view)
 
-    def _take(self, view: memoryview, steps, times) -> None:
-        """Frames as rows, one after another in `view`, with their steps and times: each one's transforms
-        at the viewing rate, its row into the block at the recording rate. What it keeps it copies (the
-        sender may reuse the memory behind `view` as soon as this returns)."""
+    def _take(self, view: memoryview) -> None:
+        """Frames as rows, one after another in `view`: each one's transforms at the viewing rate, its
+        row into the block at the recording rate. What it keeps it copies (the sender may reuse the
+        memory behind `view` as soon as this returns)."""
         # locals, not attributes, in this loop over every frame (0.3 us a frame less; 0.86 it cost)
         size, n_joints, view_every, rate = self._rows.size, self._rows.n_joints, self.view_every, self.rate
         block, full, far = self._block, self._block_bytes, 2 * self.flush_ns
         at = 0
-        for step, t_ns in zip(steps, times, strict=True):
+        for step, t_ns in self._step_time.iter_unpack(view):
             if not step % view_every:
                 numbers = self._tf_numbers(view, at)  # joint values, then the poses
                 self._pending.append((t_ns, self._tf_channel,
@@ -163,7 +166,7 @@ class McapRecorder(Sink):
             if t_ns - self._last_flush_ns >= far:  # blocks far apart (a high --rate)
                 self._write_pending()
                 self._flush(t_ns)
-        self._last = (bytes(view[at - size:at]), steps[-1], times[-1])
+        self._last = (bytes(view[at - size:at]), step, t_ns)
 
     def on_command(self, command: Command) -> None:
         body = _json({"step": command.step, "kind": command.kind, "args": command.args})
@@ -234,23 +237,15 @@ class McapRecorder(Sink):
 
     def _write_block(self) -> None:
         """The buffered frames as one message per block channel (model.fields says which field goes where)."""
-        records = self._rows.records(bytes(self._block))
+        size = self._rows.size
+        last_step, t_last = self._step_time.unpack_from(self._block, len(self._block) - size)
+        messages = self._blocks.messages(bytes(self._block))
+        self.frames_written += len(self._block) // size
         self._block.clear()
-        head = wire.packed(S.STEP, records["step"], "<i8") + wire.packed(S.T_NS, records["t_ns"], "<i8")
-        messages = []
-        for topic, names, fields in self._blocks:
-            body = [head, names]
-            for f in fields:
-                values = records[f.name]
-                body.append(wire.packed(f.number, values.reshape(len(records), -1) if values.ndim > 2 else values,
-                                        f.wire))
-            messages.append((topic, b"".join(body)))
-        t_last = int(records["t_ns"][-1])
         self._write_pending()
-        for topic, data in messages:
-            self._add(topic, t_last, data)
-        self.frames_written += len(records)
-        self._last_written_step = int(records["step"][-1])
+        for channel_id, data in zip(self._block_channels, messages, strict=True):
+            self._add_id(channel_id, t_last, data)
+        self._last_written_step = last_step
         if t_last - self._last_flush_ns >= self.flush_ns:
             self._flush(t_last)
 
@@ -285,7 +280,7 @@ class McapRecorder(Sink):
         try:
             row, last_step, last_t_ns = self._last or (b"", -1, 0)
             if self._last is not None and last_step != self._last_written_step and (
-                    not self._block or self._rows.frame(self._block[-len(row):]).step != last_step):
+                    not self._block or self._step_time.unpack_from(self._block, len(self._block) - len(row))[0] != last_step):
                 self._block += row
             if self._block:
                 self._write_block()
@@ -305,14 +300,15 @@ class McapRecorder(Sink):
             self._file.close()
 
 
-def _tf_numbers(rows: FrameRows) -> struct.Struct:
-    """Unpacks what a row's /tf message needs, in one call: its joint values, the pad's pose and the
-    objects' poses, as one flat tuple of doubles."""
+def _row_struct(rows: FrameRows, names: tuple[str, ...]) -> struct.Struct:
+    """A row's struct that unpacks only the named int64 or float64 fields (in row order), as one flat
+    tuple: what the loop over frames and a /tf message need, without a Frame or a numpy array."""
     form, at = ["<"], 0
-    for name in ("joint_q", "pad_pose", "object_poses"):
+    for name in names:
         dtype, offset = rows.dtype.fields[name][:2]
-        form.append(f"{offset - at}x{dtype.itemsize // 8}d")
+        form.append(f"{offset - at}x{dtype.itemsize // 8}{'q' if dtype.base.kind == 'i' else 'd'}")
         at = offset + dtype.itemsize
+    form.append(f"{rows.size - at}x")
     return struct.Struct("".join(form))
 
 

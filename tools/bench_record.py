@@ -64,6 +64,7 @@ class Timed(NamedTuple):
     finish_s: float  # last Frame to files finalized
     cpu_s: float  # this process's threads and the recorder process it waited for
     mcap_bytes: int
+    waits: int  # how often the twin waited for a recorder to catch up
 
 
 def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
@@ -77,17 +78,17 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
         twin = Twin(config, sinks=[*sinks, clock])
         run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
         twin.close()
+        waits = sum(getattr(sink, "waits", 0) for sink in sinks)
     t1, cpu_s = time.perf_counter(), _cpu_s() - cpu0
     return Timed(twin.step_index, clock.last_s - clock.first_s, t1 - t0, clock.first_s - t0, t1 - clock.last_s,
-                 cpu_s, mcap_path.stat().st_size if mcap_path else 0)
+                 cpu_s, mcap_path.stat().st_size if mcap_path else 0, waits)
 
 
-def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
-    """Process CPU time the MCAP recorder spends per frame, fed a recorded run's frames as the recorder
-    process feeds it (packed rows, 32 a batch; no physics)."""
+def recorder_cpu_us_per_frame(folder: Path, repeats: int, writer: str = "mcap") -> float:
+    """Process CPU time (all its threads) a writer ("mcap" or "rrd") spends per frame, fed a recorded
+    run's frames as its recorder process feeds it (packed rows, 32 at a time; no physics)."""
     from twin.model.collectors import FrameCollector
     from twin.model.rows import FrameRows
-    from twin.record.mcap.writer import McapRecorder
     from twin.robot.urdf import urdf_text
 
     config = TwinConfig()
@@ -100,10 +101,20 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int) -> float:
     packed = bytearray(n * rows.size)
     for i, frame in enumerate(collector.frames):
         rows.pack_into(packed, i * rows.size, frame)
+    if writer == "mcap":
+        from twin.record.mcap.writer import McapRecorder
+
+        def make():
+            return McapRecorder(folder / "cpu.mcap", config, RUN, urdf=urdf_text(config.profile))
+    else:
+        from twin.record.rerun.writer import RerunRecorder
+
+        def make():
+            return RerunRecorder(folder / "cpu.rrd", config, urdf_text(config.profile))
     best = float("inf")
     for _ in range(max(3, repeats)):
+        recorder = make()  # the start (static scene, meshes) is not per frame
         t0 = time.process_time()
-        recorder = McapRecorder(folder / "cpu.mcap", config, RUN, urdf=urdf_text(config.profile))
         for start in range(0, n, 32):
             recorder.on_rows(rows, memoryview(packed)[start * rows.size:min(n, start + 32) * rows.size])
         for event in collector.events:
@@ -162,8 +173,10 @@ def bench(ctx) -> list[tuple[str, str]]:
                          f"{_rate_text(ctx, key)}; CPU {cpu_us[name]:.1f} us/step (whole run)"))
             start_ms = statistics.median(t.start_s for t in timed) * 1e3
             finish_ms = statistics.median(t.finish_s for t in timed) * 1e3
+            waits = statistics.median(t.waits for t in timed)
             rows.append((f"{name}: whole run, start and finish included",
-                         f"{_rate_text(ctx, key + '_run')}; start {start_ms:.0f} ms, finish {finish_ms:.0f} ms"))
+                         f"{_rate_text(ctx, key + '_run')}; start {start_ms:.0f} ms, finish {finish_ms:.0f} ms"
+                         + (f"; the twin waited for a recorder {waits:.0f} times a run" if key != "record_none" else "")))
             if key != "record_none":
                 ctx.figures[f"{key}_start_ms"] = start_ms
                 ctx.figures[f"{key}_finish_ms"] = finish_ms
@@ -177,8 +190,12 @@ def bench(ctx) -> list[tuple[str, str]]:
                          f"{both / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"))
             rows.append(("MCAP + Rerun recorders cost per step (wall, in the run)",
                          f"{(1 / both - 1 / plain) * 1e6:.2f} us"))
-        rows.append(("MCAP recorder CPU per frame (isolated, best of repeats)",
-                     f"{recorder_cpu_us_per_frame(folder, repeats):.2f} us"))
+        for writer, label in (("mcap", "MCAP"), ("rrd", "Rerun")):
+            if writer == "rrd" and "twin + MCAP + Rerun" not in rates:
+                continue
+            cpu = recorder_cpu_us_per_frame(folder, repeats, writer)
+            ctx.figures[f"record_{writer}_writer_cpu_us_per_frame"] = cpu
+            rows.append((f"{label} writer CPU per frame (its process, isolated, best of repeats)", f"{cpu:.2f} us"))
         sim_min = steps * TwinConfig().dt_ns * 1e-9 / 60.0
         rows.append(("MCAP bytes per simulated minute", f"{mcap_bytes / sim_min / 1e6:.2f} MB"))
         ctx.figures["mcap_mb_per_sim_min"] = mcap_bytes / sim_min / 1e6

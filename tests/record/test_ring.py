@@ -12,7 +12,7 @@ from twin.record.mcap.reader import load
 from twin.record.ring import FrameRing
 from twin.sim.twin import Twin
 
-TWO_CYCLES = {"cycles": 2}  # about 2,240 frames: more than the ring's 2,048 rows at 240 Hz
+FOUR_CYCLES = {"cycles": 4}  # about 4,480 frames: more than the ring's 4,096 rows at 240 Hz
 
 
 def test_rows_come_back_in_order_across_the_rings_end():
@@ -35,9 +35,9 @@ def test_rows_come_back_in_order_across_the_rings_end():
 
 
 def test_a_run_longer_than_the_ring_makes_the_same_bytes_as_the_in_process_writer(tmp_path):
-    record_pick_place(tmp_path / "bg.mcap", params=TWO_CYCLES, background=True)
-    record_pick_place(tmp_path / "fg.mcap", params=TWO_CYCLES, background=False)
-    assert len(load(tmp_path / "bg.mcap").frames) > 2048
+    record_pick_place(tmp_path / "bg.mcap", params=FOUR_CYCLES, background=True)
+    record_pick_place(tmp_path / "fg.mcap", params=FOUR_CYCLES, background=False)
+    assert len(load(tmp_path / "bg.mcap").frames) > 4096
     assert (tmp_path / "bg.mcap").read_bytes() == (tmp_path / "fg.mcap").read_bytes()
 
 

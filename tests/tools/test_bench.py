@@ -51,7 +51,8 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
     assert done.returncode == 0, done.stderr
     data = json.loads(out.read_text())
     for key in ("record_both_vs_motion", "record_both_vs_idle", "record_mcap_vs_motion", "twin_vs_motion",
-                "mcap_mb_per_sim_min", "physics_steps_per_s", "motion_physics_steps_per_s"):
+                "mcap_mb_per_sim_min", "physics_steps_per_s", "motion_physics_steps_per_s",
+                "record_mcap_writer_cpu_us_per_frame", "record_rrd_writer_cpu_us_per_frame"):
         assert isinstance(data[key], float) and data[key] > 0, key
     # the record section pairs each repeat with its own sample of the same motion's baseline (one repeat: that one)
     assert abs(data["record_both_vs_motion"] - data["record_both_steps_per_s"] / data["record_motion_steps_per_s"]) < 1e-5

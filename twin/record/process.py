@@ -33,7 +33,7 @@ from twin.record.ring import FrameRing
 
 PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames at 240 Hz
 MAX_AHEAD_S = 0.4  # simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
-RING_S = 2048 / 240  # simulated time the ring holds: slack for the Rerun writer's bursts (every 2048 frames)
+RING_S = 4096 / 240  # simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
 POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
 IDLE_POLL_S = 0.016
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
@@ -50,7 +50,7 @@ def _frames(config: TwinConfig, seconds: float) -> int:
 class RecorderProcess(Sink):
     """A sink (on_frame/on_command/on_event/on_image) whose writers run in child processes: one for
     the MCAP file, one for the .rrd, both reading the same ring. Apart, a burst of the Rerun writer
-    (it sends its columns every 2048 frames) cannot hold the MCAP writer, nor the twin, up."""
+    (it sends its columns every 8192 frames) cannot hold the MCAP writer, nor the twin, up."""
 
     def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
                  mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:

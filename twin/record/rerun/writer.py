@@ -29,7 +29,9 @@ from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
 from twin.robot.urdf import urdf_text as profile_urdf_text
 
-DEFAULT_BATCH_STEPS = 2048
+# Each send costs ~0.1 ms of the SDK's Python whatever its length, 16 sends a batch: the recorder
+# process's CPU per frame was 3.6 us at 2048 frames, 3.1 at 4096, 2.6 at 8192 (medians of 3).
+DEFAULT_BATCH_STEPS = 8192
 
 
 def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStream:

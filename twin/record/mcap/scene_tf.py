@@ -93,8 +93,8 @@ class SceneTransforms:
     def _encoder(self, ts_len: int) -> tuple[struct.Struct, itemgetter, tuple[bytes, ...]]:
         """The whole message as one struct, given the timestamp's encoded length, and which value goes
         in each of its places: message() fills it from one tuple (timestamp, the moving joints' numbers,
-        the poses' numbers, the constant pieces), so a message costs one pack (about 4 us where
-        building it transform by transform from a Frame cost 15, on pick_place's scene)."""
+        the poses' numbers, the constant pieces), so a message costs one pack (pick_place's scene: about
+        5 us a message from a row, where a Frame from the row and a pack per transform cost 7.3)."""
         pieces: list[bytes | int] = []  # constant bytes, or a value's index in that tuple
         at = 1  # the next number's index (0 is the timestamp)
         for names, tail in self._transforms:

@@ -148,7 +148,7 @@ class McapRecorder(Sink):
         """Frames as rows, one after another in `view`: each one's transforms at the viewing rate, its
         row into the block at the recording rate. What it keeps it copies (the sender may reuse the
         memory behind `view` as soon as this returns)."""
-        # locals, not attributes, in this loop over every frame (0.3 us a frame less; 0.86 it cost)
+        # locals, not attributes, in this loop over every frame (its bare loop: 0.19 us a frame, 0.22 with attributes)
         size, n_joints, view_every, rate = self._rows.size, self._rows.n_joints, self.view_every, self.rate
         block, full, far = self._block, self._block_bytes, 2 * self.flush_ns
         at = 0

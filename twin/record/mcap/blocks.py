@@ -26,8 +26,8 @@ class BlockEncoder:
         self._names = names
         self._plan: tuple[int, np.ndarray, bytes, list[int]] | None = None  # the last frame count's
 
-    def messages(self, block: bytes) -> list[bytes]:
-        """The block messages of the rows in `block` (at least one row)."""
+    def messages(self, block: bytes | bytearray) -> list[bytes]:
+        """The block messages of the rows in `block` (at least one row; read, not kept)."""
         n = len(block) // self._rows.size
         if self._plan is None or self._plan[0] != n:
             self._plan = self._make_plan(n)

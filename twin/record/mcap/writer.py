@@ -239,7 +239,7 @@ class McapRecorder(Sink):
         """The buffered frames as one message per block channel (model.fields says which field goes where)."""
         size = self._rows.size
         last_step, t_last = self._step_time.unpack_from(self._block, len(self._block) - size)
-        messages = self._blocks.messages(bytes(self._block))
+        messages = self._blocks.messages(self._block)
         self.frames_written += len(self._block) // size
         self._block.clear()
         self._write_pending()

@@ -38,6 +38,7 @@ class Suction:
         self.held = NO_BODY
         self._held_this_period = False
         self._broken_this_period = False  # a broken hold stays broken until the pad is switched off
+        self.idle_on: bool | None = False  # the `on` for which update() changes nothing (_idle_on)
 
     def update(self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]) -> list[SuctionEvent]:
         """Advance the pad's state for the coming step from the latest Frame; returns what happened.
@@ -77,7 +78,16 @@ class Suction:
             self.held = self.sensed
             self._held_this_period = True
             events.append(SuctionEvent("attach", self.held, "suction attached"))
+        self.idle_on = self._idle_on()
         return events
+
+    def _idle_on(self) -> bool | None:
+        """The one `on` that leaves the pad as it is: False while it is off, True while it holds on with
+        infinite strength (sensed stays held), else None. The twin calls update() only for another `on`
+        (pick_place: 198 calls instead of 1495 in 2517 steps)."""
+        if not self.on:
+            return False
+        return True if self.held != NO_BODY and self.params.infinite_strength else None
 
     def _inside(self, frame: Frame, point: tuple[float, float, float]) -> int:
         """The first scene object (a box) whose volume holds point, or NO_BODY."""

@@ -86,12 +86,11 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
         world.close()
 
 
-def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
-    """One sample of the bare PyBullet loop doing pick_place's work (see the module docstring)."""
+def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
+    """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
+    targets it set and the holds it made and ended (from one twin run)."""
     from twin.model.collectors import FrameCollector
-    from twin.model.config import TwinConfig
     from twin.sim.twin import Twin
-    from twin.sim.world import World
     from twin.tasks import TASKS
 
     collector = FrameCollector()
@@ -111,19 +110,33 @@ def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
             actions.setdefault(e.step, []).append(("attach", 0, root, yaw))
         elif e.kind in ("release", "break"):
             actions.setdefault(e.step, []).append(("detach",))
-    world = World(TwinConfig())
+    return n_steps, actions
+
+
+def replay_motion(world, n_steps: int, actions: dict[int, list[tuple]]) -> None:
+    """Step the bare World through a motion from motion_actions."""
     v_max = world.max_velocities()
+    for step in range(n_steps):
+        for action in actions.get(step, ()):
+            if action[0] == "motor":
+                world.set_motor(action[1], action[2], v_max[action[1]])
+            elif action[0] == "attach":
+                world.attach(action[1], action[2], action[3])
+            else:
+                world.detach()
+        world.step()
+
+
+def pick_place_physics_steps_per_s(cycles: int = 2) -> float:
+    """One sample of the bare PyBullet loop doing pick_place's work (see the module docstring)."""
+    from twin.model.config import TwinConfig
+    from twin.sim.world import World
+
+    n_steps, actions = motion_actions(cycles)
+    world = World(TwinConfig())
     try:
         t0 = time.perf_counter()
-        for step in range(n_steps):
-            for action in actions.get(step, ()):
-                if action[0] == "motor":
-                    world.set_motor(action[1], action[2], v_max[action[1]])
-                elif action[0] == "attach":
-                    world.attach(action[1], action[2], action[3])
-                else:
-                    world.detach()
-            world.step()
+        replay_motion(world, n_steps, actions)
         return n_steps / (time.perf_counter() - t0)
     finally:
         world.close()

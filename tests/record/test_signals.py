@@ -127,7 +127,7 @@ def test_an_exception_whose_str_raises_is_one_line(tmp_path):
 
 
 def test_kill_9_of_the_group_with_both_writers_loses_under_a_second(tmp_path):
-    """The bound holds by construction (< 0.5 s unflushed + at most 3 batches of 0.133 s), wherever the
+    """The bound holds by construction (< 0.5 s unflushed + at most 0.4 s not taken in from the ring), wherever the
     kill lands; one kill at a wall-clock moment of no importance checks it."""
     task, progress = tmp_path / "progress_task.py", tmp_path / "progress"
     task.write_text(PROGRESS)

@@ -4,9 +4,10 @@ which run the same MCAP and Rerun writers (one process each).
 The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
 microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
 events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
-timer (every millisecond while rows come), takes in what was published and says how far it read; the
-twin waits only when a recorder falls behind (the MCAP one by more than 0.4 s of simulated time, which
-bounds what a kill -9 loses), and then wakes it through the pipe. Files are byte-for-byte what the
+timer (every millisecond while rows come), takes in what was published and says how far it read. The
+twin wakes a recorder through the pipe when it has used half its slack, and waits for it only when it
+has used all of it (the MCAP writer's: 0.4 s of simulated time, which bounds what a kill -9 loses; the
+Rerun writer's: the ring). Files are byte-for-byte what the
 in-process writers make, since the same writer code sees the same stream. If the twin's process dies,
 the recorder sees the pipe close, takes in every row that was published and leaves the MCAP file
 unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it
@@ -114,11 +115,7 @@ class RecorderProcess(Sink):
     def _publish(self) -> None:
         """The others down the pipes, then the rows up to here published; then room for the next ones
         (the others first: a recorder that sees the rows must find every message that came before them)."""
-        if self._others:
-            message = _OTHERS + marshal.dumps(self._others)
-            self._others.clear()
-            for child in self._children:
-                child.send(message)
+        self._send_others()
         written = self._written
         reads = self._ring.publish(written)
         self._next_publish = written + self._publish_every
@@ -149,12 +146,15 @@ class RecorderProcess(Sink):
             raise failure
 
     def _publish_rest(self) -> None:
+        self._send_others()
+        self._ring.publish(self._written)
+
+    def _send_others(self) -> None:
         if self._others:
             message = _OTHERS + marshal.dumps(self._others)
             self._others.clear()
             for child in self._children:
                 child.send(message)
-        self._ring.publish(self._written)
 
 
 class _Child:

@@ -13,6 +13,7 @@ every tools/bench_*.py, sorted by name, each defining `bench(ctx) -> list[tuple[
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import json
 import os
@@ -86,9 +87,10 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
         world.close()
 
 
+@functools.cache  # the run is deterministic: every baseline sample of a bench run replays the same motion
 def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
-    targets it set and the holds it made and ended (from one twin run)."""
+    targets it set and the holds it made and ended (from one twin run; read it, do not change it)."""
     from twin.model.collectors import FrameCollector
     from twin.sim.twin import Twin
     from twin.tasks import TASKS

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from twin.model.config import TwinConfig
+from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
@@ -84,12 +85,10 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
                  cpu_s, mcap_path.stat().st_size if mcap_path else 0, waits)
 
 
-def recorder_cpu_us_per_frame(folder: Path, repeats: int, writer: str = "mcap") -> float:
-    """Process CPU time (all its threads) a writer ("mcap" or "rrd") spends per frame, fed a recorded
-    run's frames as its recorder process feeds it (packed rows, 32 at a time; no physics)."""
+def packed_run() -> tuple[TwinConfig, FrameRows, bytearray, list]:
+    """pick_place's 16-cycle run as its recorder processes get it: (config, row layout, the rows
+    packed one after another, its events)."""
     from twin.model.collectors import FrameCollector
-    from twin.model.rows import FrameRows
-    from twin.robot.urdf import urdf_text
 
     config = TwinConfig()
     collector = FrameCollector()
@@ -97,10 +96,19 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int, writer: str = "mcap") 
     run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
     twin.close()
     rows = FrameRows(len(config.profile.joint_names), len(config.objects))
-    n = len(collector.frames)
-    packed = bytearray(n * rows.size)
+    packed = bytearray(len(collector.frames) * rows.size)
     for i, frame in enumerate(collector.frames):
         rows.pack_into(packed, i * rows.size, frame)
+    return config, rows, packed, collector.events
+
+
+def recorder_cpu_us_per_frame(folder: Path, repeats: int, run: tuple, writer: str = "mcap") -> float:
+    """Process CPU time (all its threads) a writer ("mcap" or "rrd") spends per frame, fed `run`
+    (packed_run) as its recorder process feeds it (packed rows, 32 at a time; no physics)."""
+    from twin.robot.urdf import urdf_text
+
+    config, rows, packed, events = run
+    n = rows.count(packed)
     if writer == "mcap":
         from twin.record.mcap.writer import McapRecorder
 
@@ -117,7 +125,7 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int, writer: str = "mcap") 
         t0 = time.process_time()
         for start in range(0, n, 32):
             recorder.on_rows(rows, memoryview(packed)[start * rows.size:min(n, start + 32) * rows.size])
-        for event in collector.events:
+        for event in events:
             recorder.on_event(event)
         recorder.close()
         best = min(best, time.process_time() - t0)
@@ -190,10 +198,11 @@ def bench(ctx) -> list[tuple[str, str]]:
                          f"{both / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"))
             rows.append(("MCAP + Rerun recorders cost per step (wall, in the run)",
                          f"{(1 / both - 1 / plain) * 1e6:.2f} us"))
+        run = packed_run()  # one run fed to each writer
         for writer, label in (("mcap", "MCAP"), ("rrd", "Rerun")):
             if writer == "rrd" and "twin + MCAP + Rerun" not in rates:
                 continue
-            cpu = recorder_cpu_us_per_frame(folder, repeats, writer)
+            cpu = recorder_cpu_us_per_frame(folder, repeats, run, writer)
             ctx.figures[f"record_{writer}_writer_cpu_us_per_frame"] = cpu
             rows.append((f"{label} writer CPU per frame (its process, isolated, best of repeats)", f"{cpu:.2f} us"))
         sim_min = steps * TwinConfig().dt_ns * 1e-9 / 60.0

@@ -62,7 +62,10 @@ class RecorderProcess(Sink):
         writers = [(w, p, ahead) for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
                    if p is not None]
         self._ring = FrameRing(self._rows, capacity, len(writers))
-        self._memory, self._at, self._end = self._ring.memory, self._ring.offset(0), self._ring.offset(capacity - 1)
+        # what on_frame needs, bound once: it runs every step
+        self._pack, self._row_size, self._memory = self._rows.pack_into, self._rows.size, self._ring.memory
+        self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)  # the ring's first and last rows
+        self._at = self._first  # where the next row goes
         self._written = 0
         self._next_publish = self._publish_every
         self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
@@ -95,8 +98,8 @@ class RecorderProcess(Sink):
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
         at = self._at
-        self._rows.pack_into(self._memory, at, frame)
-        self._at = at + self._rows.size if at < self._end else self._ring.offset(0)
+        self._pack(self._memory, at, frame)
+        self._at = at + self._row_size if at < self._last else self._first
         self._written += 1
         if self._written == self._next_publish:
             self._publish()
@@ -181,16 +184,18 @@ class _Child:
         each point it has read to, so a recorder busy writing is not woken again and again)."""
         if read != self._nudged_at:
             self._nudged_at = read
-            self.wakes += 1
-            self.send(_WAKE)
+            self._wake()
 
     def wait_until_read(self, ring: FrameRing, read: int) -> None:
         """Wake the recorder and wait until it has taken in rows [0, read)."""
-        self.wakes += 1
-        self.send(_WAKE)
+        self._wake()
         while ring.read(self.reader) < read:
             if self.conn.poll(WAIT_S):  # it says nothing before the close: this is the pipe's end
                 raise RecordingError(f"the recorder process stopped: {self._exit_text()}")
+
+    def _wake(self) -> None:
+        self.wakes += 1
+        self.send(_WAKE)
 
     def expect_ok(self, what: str) -> None:
         try:

@@ -13,6 +13,7 @@ from twin.model.types import Command, Event
 
 META_FINALIZED = "twin.finalized"  # the metadata record a cleanly closed file ends with (outcome, error)
 META_RECORDING = "twin.recording"  # the recording's layout: rate_steps, block_frames, ...
+META_MACHINE = "twin.machine"  # where it was made: cpu, blas_core, ...; older files have none
 
 
 @dataclass
@@ -61,6 +62,12 @@ class Recording:
         except ImportError:
             raise ImportError("Recording.to_pandas needs the pandas package: pip install pandas") from None
         return self.to_arrow(table).to_pandas()
+
+    @property
+    def machine(self) -> dict[str, str]:
+        """Where the file was made (its twin.machine record: cpu, cpu_flags, blas_core, libc,
+        libm_hwcaps, numpy_simd); empty in memory and in files written before the record."""
+        return dict(self.meta.get(META_MACHINE) or {})
 
     @property
     def rate_steps(self) -> int:

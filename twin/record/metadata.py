@@ -1,5 +1,6 @@
-"""The metadata records a recording starts with: configuration, run, engine, recording layout and
-versions — strings only, sorted, and no wall-clock time (identical runs give identical files)."""
+"""The metadata records a recording starts with: configuration, run, engine, recording layout,
+versions and machine — strings only, sorted, and no wall-clock time (identical runs give identical
+files; the machine record differs only between machines or their floating-point settings)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
 from twin.model.versions import ENGINE
+from twin.record.machine import machine
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json
 
@@ -100,6 +102,7 @@ def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str]) -> di
         "twin.engine": engine,
         S.META_RECORDING: dict(sorted(layout.items())),
         S.META_VERSIONS: dict(sorted(versions().items())),
+        S.META_MACHINE: machine(),
     }
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from twin.errors import RecordingError
 from twin.model.config import TwinConfig
 from twin.model.types import Event
+from twin.record.machine import machine_text
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json
 from twin.record.mcap.reader import block_steps, parse_event, scan
@@ -42,6 +43,7 @@ class Info:
     attachments: list[tuple[str, int]] = field(default_factory=list)
     config: TwinConfig | None = None  # what the run was: robot, scene, pad, cameras
     event_list: list[Event] = field(default_factory=list)  # every readable event, in file order
+    machine: dict[str, str] = field(default_factory=dict)  # where it was made; empty in older files
 
 
 def _steps(messages: list) -> np.ndarray:
@@ -81,6 +83,7 @@ def describe(path: str | Path) -> Info:
         metadata={k: v for k, v in sorted(s.metadata.items()) if k != S.META_CONFIG},
         attachments=[(a.name, len(a.data)) for a in s.attachments],
         config=config, event_list=_events(topics.get(S.EVENTS.topic, []), s.path),
+        machine=dict(s.metadata.get(S.META_MACHINE, {})),
     )
 
 
@@ -115,6 +118,7 @@ def format_info(info: Info, *, all_events: bool = False) -> list[str]:
         lines.append(f"a replay of {replay_of.get('file', '?')} (sha256 {str(replay_of.get('sha256', '?'))[:12]}...)")
     lines.append(f"robot: {info.robot or '?'}; objects: {', '.join(info.objects) or 'none'}; "
                  f"time step {info.dt_ns:,} ns")
+    lines.append(f"machine: {machine_text(info.machine) if info.machine else 'not recorded'}")
     if info.frames:
         duration_s = info.last_step * info.dt_ns * 1e-9
         lines.append(f"duration: {duration_s:.3f} s simulated; steps {info.first_step}..{info.last_step}, "

@@ -15,7 +15,11 @@ from functools import cache
 from google.protobuf import descriptor_pb2
 
 from twin.model import fields as F
-from twin.model.recording import META_FINALIZED, META_RECORDING  # noqa: F401 - named once, in the model
+from twin.model.recording import (  # noqa: F401 - named once, in the model
+    META_FINALIZED,
+    META_MACHINE,
+    META_RECORDING,
+)
 from twin.model.types import COMMAND_ARGS
 
 BLOCKS_PROTO = "twin/blocks.proto"

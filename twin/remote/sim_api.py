@@ -164,8 +164,8 @@ class SimApi:
         if j == 0:
             return (0.0, 0.0, p.shoulder_height_m, *yaw_quat(q1))
         if j == 1:
-            (ex, ey), _ = kinematics.elbow_and_wrist_xy(p, frame.joint_q)
-            return (float(ex), float(ey), p.elbow_height_m, *yaw_quat(q2))
+            # math, not numpy: numpy's cos/sin take SIMD paths that differ by CPU, and a client acts on this
+            return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *yaw_quat(q2))
         if j == 2:
             return (pad.x_m, pad.y_m, p.elbow_height_m, *yaw_quat(q2))
         return (pad.x_m, pad.y_m, pad.z_m + p.pad_length_m, *yaw_quat(pad.heading_rad))

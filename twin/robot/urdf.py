@@ -8,8 +8,6 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from twin.errors import ConfigError
 from twin.model.profiles import RobotProfile
 
@@ -63,21 +61,69 @@ def _link(name: str, geom: str, origin_xyz: tuple[float, float, float], mass: fl
 def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, float, float]]]
               ) -> tuple[float, tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]:
     """Mass, centre of mass, principal moments and the rpy of the principal axes of rigid parts
-    given as (mass, centre, principal moments about that centre, axes along the link frame's)."""
+    given as (mass, centre, principal moments about that centre, axes along the link frame's).
+    Plain float arithmetic and Jacobi rotations, no BLAS or LAPACK (whose kernel numpy picks by CPU),
+    and moments and angles rounded to URDF_DIGITS: every x86-64 CPU writes the same URDF."""
     mass = sum(m for m, _c, _i in parts)
-    com = np.sum([m * np.asarray(c) for m, c, _i in parts], axis=0) / mass
-    tensor = np.zeros((3, 3))
+    com = [sum(m * c[k] for m, c, _i in parts) / mass for k in range(3)]
+    tensor = [[0.0] * 3 for _ in range(3)]
     for m, c, moments in parts:
-        d = np.asarray(c) - com
-        tensor += np.diag(moments) + m * (d @ d * np.eye(3) - np.outer(d, d))
-    moments, axes = np.linalg.eigh(tensor)
-    order = [int(np.argmax(np.abs(axes[k]))) for k in range(3)]  # keep each axis near the link's own
-    moments, axes = moments[order], axes[:, order]
-    axes *= np.sign(np.diag(axes))
-    roll = math.atan2(axes[2, 1], axes[2, 2])
-    pitch = math.atan2(-axes[2, 0], math.hypot(axes[0, 0], axes[1, 0]))
-    yaw = math.atan2(axes[1, 0], axes[0, 0])
-    return mass, tuple(com.tolist()), tuple(moments.tolist()), (roll, pitch, yaw)
+        d = [c[k] - com[k] for k in range(3)]
+        d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+        for i in range(3):
+            tensor[i][i] += moments[i] + m * d2
+            for j in range(3):
+                tensor[i][j] -= m * d[i] * d[j]
+    values, axes = _jacobi_eigen(tensor)
+    order = [max(range(3), key=lambda j, k=k: abs(axes[k][j])) for k in range(3)]  # keep each axis near the link's own
+    values = [values[j] for j in order]
+    axes = [[axes[i][j] for j in order] for i in range(3)]
+    for j in range(3):
+        if axes[j][j] < 0:
+            for i in range(3):
+                axes[i][j] = -axes[i][j]
+    roll = math.atan2(axes[2][1], axes[2][2])
+    pitch = math.atan2(-axes[2][0], math.hypot(axes[0][0], axes[1][0]))
+    yaw = math.atan2(axes[1][0], axes[0][0])
+    return (mass, (com[0], com[1], com[2]), tuple(_rounded(v) for v in values),  # type: ignore[return-value]
+            tuple(_rounded(a) for a in (roll, pitch, yaw)))  # type: ignore[return-value]
+
+
+URDF_DIGITS = 12  # significant digits of computed inertias and inertial angles: far above the last bits a libm may change
+
+
+def _rounded(x: float) -> float:
+    """x to URDF_DIGITS significant digits (Python's decimal rounding: the same on every platform);
+    below 1e-15 (a rounding residue of an exact zero) it is 0."""
+    return 0.0 if abs(x) < 1e-15 else float(f"{x:.{URDF_DIGITS}g}")
+
+
+def _jacobi_eigen(a: list[list[float]]) -> tuple[list[float], list[list[float]]]:
+    """Eigenvalues and eigenvectors (columns) of a symmetric 3x3 matrix by cyclic Jacobi rotations,
+    in plain float arithmetic (the same bits on every CPU)."""
+    a = [row[:] for row in a]
+    v = [[1.0 if i == j else 0.0 for j in range(3)] for i in range(3)]
+    for _sweep in range(50):
+        if a[0][1] == 0.0 and a[0][2] == 0.0 and a[1][2] == 0.0:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            if a[p][q] == 0.0:
+                continue
+            theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q])
+            t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            for k in range(3):  # columns p, q of a·J
+                akp, akq = a[k][p], a[k][q]
+                a[k][p], a[k][q] = c * akp - s * akq, s * akp + c * akq
+            for k in range(3):  # rows p, q of Jᵀ·(a·J)
+                apk, aqk = a[p][k], a[q][k]
+                a[p][k], a[q][k] = c * apk - s * aqk, s * apk + c * aqk
+            a[p][q] = a[q][p] = 0.0
+            for k in range(3):
+                vkp, vkq = v[k][p], v[k][q]
+                v[k][p], v[k][q] = c * vkp - s * vkq, s * vkp + c * vkq
+    return [a[0][0], a[1][1], a[2][2]], v
 
 
 def _joint(name: str, kind: str, parent: str, child: str, xyz: tuple[float, float, float], axis: str,

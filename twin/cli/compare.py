@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 
 from twin.cli.args import whole_number
-from twin.compare.tolerances import FIELDS, PRESETS, Tolerances
+from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.errors import ConfigError
 
 _TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
@@ -70,19 +70,20 @@ def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
-    from twin.compare.engine import compare
     from twin.record.mcap.reader import load
+    from twin.verify.check import remade
+    from twin.verify.noise import judge
 
     tol = _tolerances(args)
     _check_outputs(args, [args.golden, args.candidate])
     golden, candidate = load(args.golden), load(args.candidate)
-    result = compare(golden, candidate, tol, force=args.force)
+    result = judge(golden, candidate, tol, remade, force=args.force)
     return _emit(result, golden, candidate, args)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from twin.compare.engine import compare
     from twin.record.mcap.reader import load
+    from twin.verify.noise import judge
     from twin.verify.replay import REPLAYED_EVENT_KINDS, replay, replay_run, replayed_event_kinds
 
     tol = _tolerances(args)
@@ -97,7 +98,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     else:
         new = replay(rec)
     kinds = replayed_event_kinds(rec)
-    result = compare(rec, new, tol, event_kinds=kinds)
+    result = judge(rec, new, tol, replay, source=rec, event_kinds=kinds)
     if kinds is not None:
         result.notes.append("this recording predates recorded task and client events: replay compares only the "
                             "events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS)))
@@ -149,7 +150,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
                                     "3 not comparable)")
     p.add_argument("golden", help="the reference recording (.mcap)")
     p.add_argument("candidate", help="the recording to check (.mcap)")
-    _add_tolerance_options(p, "exact")
+    _add_tolerance_options(p, DEFAULT)
     p.add_argument("--force", action="store_true",
                    help="compare even when robot profile, time step or scene objects differ")
     _add_report_options(p)
@@ -158,7 +159,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="rebuild the twin from a recording, feed its commands back, compare")
     p.add_argument("recording", help="the recording to replay (.mcap)")
     p.add_argument("--record", default=None, metavar="NEW.mcap", help="also record the replayed run")
-    _add_tolerance_options(p, "exact")
+    _add_tolerance_options(p, DEFAULT)
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)
 
@@ -177,5 +178,5 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", default=None, metavar="ADDR", help="with --executor dask: tcp://HOST:8786")
     p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
     p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")
-    _add_tolerance_options(p, "exact")
+    _add_tolerance_options(p, DEFAULT)
     p.set_defaults(func=cmd_check)

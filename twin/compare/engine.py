@@ -17,6 +17,7 @@ import numpy as np
 
 from twin.compare.events import EventDiff, match_events
 from twin.compare.metrics import REVOLUTE, abs_error, differs, discrete_error, joint_error, norm_error, quat_angle
+from twin.compare.noise import NoiseFloor, command_number_difference
 from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
 from twin.errors import RecordingError, TwinError
 from twin.model.fields import COMPARED
@@ -47,6 +48,7 @@ class Divergence:
     difference: float
     tolerance: float
     unit: str
+    floor: float = 0.0  # the measured noise floor there (times its margin); 0 when none was measured
 
     @property
     def name(self) -> str:
@@ -64,6 +66,8 @@ class FieldStat:
     rms: float
     steps_over: int  # steps where some element is over tolerance
     first: Divergence | None = None
+    floor: float = 0.0  # the largest noise floor allowed (times its margin); 0 when none was measured
+    identical: bool = False  # every value bit for bit the same
 
     @property
     def ok(self) -> bool:
@@ -98,6 +102,7 @@ class DiffResult:
     first_command: Divergence | None = None  # the first difference in the command sequences
     likely_cause: str = ""  # the command nearest before the first divergence, in the golden
     events_compared: bool = True  # False: the tolerances pair no events (outcome); counts still compare
+    floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
 
     @property
     def match(self) -> bool:
@@ -119,6 +124,7 @@ class DiffResult:
 
         out = asdict(self)
         out["tolerances"] = self.tolerances.to_dict()
+        out["floor"] = self.floor.to_dict() if self.floor is not None else None
         out["match"] = self.match
         return clean(out)
 
@@ -159,43 +165,66 @@ def comparable(golden: Recording, candidate: Recording) -> list[str]:
     return why
 
 
-def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | None = None, *,
-            force: bool = False, event_kinds: frozenset[str] | None = None) -> DiffResult:
-    """Compare candidate with golden; raises NotComparable for structurally different runs unless force.
-
-    event_kinds: the event kinds to pair one by one (None: all).
-    """
-    tol = tolerances or Tolerances()
+def refuse_incomparable(golden: Recording, candidate: Recording, force: bool) -> list[str]:
+    """NotComparable unless the runs compare (or force); with force, the notes on what was compared despite."""
     why = comparable(golden, candidate)
     if why and not force:
         raise NotComparable("the runs are not comparable: " + "; ".join(why) + " (use --force to compare anyway)")
-    notes = [f"compared despite: {w}" for w in why]
+    return [f"compared despite: {w}" for w in why]
+
+
+def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | None = None, *,
+            force: bool = False, event_kinds: frozenset[str] | None = None,
+            floor: NoiseFloor | None = None) -> DiffResult:
+    """Compare candidate with golden; raises NotComparable for structurally different runs unless force.
+
+    event_kinds: the event kinds to pair one by one (None: all). floor: the candidate's measured noise
+    floor; each field then allows the larger of its tolerance and the floor at that step.
+    """
+    tol = tolerances or Tolerances()
+    notes = refuse_incomparable(golden, candidate, force)
     g, c = golden.frames, candidate.frames
     if len(g) == 0 or len(c) == 0:
         raise RecordingError(f"cannot compare a run without frames (golden {golden.path or '<memory>'}: {len(g)} "
                              f"frames, candidate {candidate.path or '<memory>'}: {len(c)} frames)")
     gi, ci = align(g.step, c.step)
     common, g_obj, c_obj = _common_objects(golden, candidate)
-    fields = [_field_stat(name, a, b, metric, tol[name], elements, g.step[gi], g.t_ns[gi])
+    steps = g.step[gi]
+    fields = [_field_stat(name, a, b, metric, tol[name], elements, steps, g.t_ns[gi],
+                          floor.at(name, steps) if floor is not None else None)
               for name, a, b, metric, elements in _field_arrays(golden, candidate, gi, ci, common, g_obj, c_obj)]
 
     dt_ns = golden.config.dt_ns
     length = (int(g.step[-1]), int(c.step[-1]))
-    fields.append(_length_stat(length, tol["run.length"], dt_ns))
-    finals = _final_poses(g.object_poses[-1][g_obj], c.object_poses[-1][c_obj], common, tol)
-    fields.extend(_final_stats(finals, tol, max(length), dt_ns))
-    fields.append(_command_stat(golden.commands, candidate.commands, tol["commands.sequence"], dt_ns))
-    fields.append(_task_stat(golden, candidate, tol["outcome.task"], max(length), dt_ns))
-    fields.extend(_count_stats(golden.events, candidate.events, tol, max(length), dt_ns))
+    scalar = tol.values if floor is None else {name: max(t, floor.scalar(name)) for name, t in tol.values.items()}
+    fields.append(_length_stat(length, scalar["run.length"], dt_ns))
+    finals = _final_poses(g.object_poses[-1][g_obj], c.object_poses[-1][c_obj], common, scalar)
+    fields.extend(_final_stats(finals, scalar, max(length), dt_ns))
+    commands_tol, commands_until = tol["commands.sequence"], None
+    if floor is not None:
+        commands_tol, commands_until = max(commands_tol, floor.commands), floor.commands_split_step
+        if commands_until is not None:
+            notes.append(f"the candidate's own commands change with last-bit noise from step {commands_until} on "
+                         "(its noise run took other ones): commands are compared up to there")
+    fields.append(_command_stat(golden.commands, candidate.commands, commands_tol, dt_ns, commands_until))
+    task_tol = INF if floor is not None and floor.outcome_differs else tol["outcome.task"]
+    fields.append(_task_stat(golden, candidate, task_tol, max(length), dt_ns))
+    fields.extend(_count_stats(golden.events, candidate.events, scalar, max(length), dt_ns))
     if golden.config.cameras or candidate.config.cameras:
-        fields.append(_image_stat(golden, candidate, tol["images.pixels"], dt_ns))
+        fields.append(_image_stat(golden, candidate, scalar["images.pixels"], dt_ns))
         if tol["images.pixels"] == INF:
             notes.append("camera pictures are not compared under these tolerances (images.pixels = inf)")
-    if tol.event_window_steps is None:
+    window = tol.event_window_steps
+    if floor is not None and window is not None:
+        window = max(window, floor.event_shift_steps)
+    if window is None:
         matched, shifted, event_diffs = 0, 0, []
     else:
-        matched, shifted, event_diffs = match_events(golden.events, candidate.events, tol.event_window_steps,
-                                                     event_kinds)
+        matched, shifted, event_diffs = match_events(golden.events, candidate.events, window, event_kinds)
+        if floor is not None and floor.events_split_step is not None:
+            event_diffs = [d for d in event_diffs if d.step < floor.events_split_step]
+            notes.append(f"the candidate's own events change with last-bit noise from step {floor.events_split_step} "
+                         "on: events are paired up to there")
     notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
 
     result = DiffResult(
@@ -204,12 +233,12 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
         length=length, steps_compared=int(gi.shape[0]),
         config_differences=config_differences({**golden.config.to_dict(), "run": golden.run or {}},
                                               {**candidate.config.to_dict(), "run": candidate.run or {}}),
-        notes=notes, events_compared=tol.event_window_steps is not None,
+        notes=notes, events_compared=tol.event_window_steps is not None, floor=floor,
     )
-    result.first = _first(fields, event_diffs, dt_ns, tol.event_window_steps)
+    result.first = _first(fields, event_diffs, dt_ns, window)
     result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
     if result.first is not None:
-        result.likely_cause = likely_cause(golden.commands, result.first.step)
+        result.likely_cause = likely_cause(golden.commands, result.first, golden.config.profile.joint_names)
     return result
 
 
@@ -267,14 +296,18 @@ def _remap_bodies(b: np.ndarray, c_names: list[str], g_names: list[str]) -> np.n
 
 
 def _field_stat(name: str, a: np.ndarray, b: np.ndarray, metric, tolerance: float, elements: list[str],
-                steps: np.ndarray, t_ns: np.ndarray) -> FieldStat:
+                steps: np.ndarray, t_ns: np.ndarray, floor: np.ndarray | None = None) -> FieldStat:
+    """One field over the aligned steps; floor: the noise floor per step (allowed where above tolerance)."""
     unit = FIELDS[name][0]
     n = a.shape[0]
     if n == 0 or a.shape[1] == 0:
-        return FieldStat(name, unit, tolerance, 0.0, -1, "", 0.0, 0)
+        return FieldStat(name, unit, tolerance, 0.0, -1, "", 0.0, 0, identical=True)
     err = metric(a, b)
-    if tolerance == 0:
-        over = differs(a, b)
+    bits = differs(a, b)
+    if floor is not None and tolerance != INF:
+        over = ~(err <= np.maximum(tolerance, floor)[:, None])
+    elif tolerance == 0:
+        over = bits
     else:
         over = ~(err <= tolerance)
     over_steps = over.any(axis=1)
@@ -282,7 +315,9 @@ def _field_stat(name: str, a: np.ndarray, b: np.ndarray, metric, tolerance: floa
     flat = int(np.argmax(finite))
     w_i, w_k = divmod(flat, finite.shape[1])
     stat = FieldStat(name, unit, tolerance, float(finite[w_i, w_k]), int(steps[w_i]), elements[w_k],
-                     float(np.sqrt(np.mean(np.square(finite)))), int(over_steps.sum()))
+                     float(np.sqrt(np.mean(np.square(finite)))), int(over_steps.sum()),
+                     floor=float(floor.max()) if floor is not None and len(floor) else 0.0,
+                     identical=not bool(bits.any()))
     if stat.steps_over and tolerance != INF:
         i = int(np.argmax(over_steps))
         k = int(np.argmax(over[i]))
@@ -290,7 +325,8 @@ def _field_stat(name: str, a: np.ndarray, b: np.ndarray, metric, tolerance: floa
         if channel == "joints":
             unit = JOINT_UNITS[name][0 if REVOLUTE[k] else 1]
         stat.first = Divergence(int(steps[i]), int(t_ns[i]) * 1e-9, channel, fld, elements[k], _values(a[i, k]),
-                                _values(b[i, k]), float(err[i, k]), tolerance, unit)
+                                _values(b[i, k]), float(err[i, k]), tolerance, unit,
+                                float(floor[i]) if floor is not None else 0.0)
     elif tolerance == INF:
         stat.steps_over = 0
     return stat
@@ -310,7 +346,7 @@ def _length_stat(length: tuple[int, int], tolerance: float, dt_ns: int) -> Field
     return stat
 
 
-def _final_poses(g: np.ndarray, c: np.ndarray, names: list[str], tol: Tolerances) -> list[FinalPose]:
+def _final_poses(g: np.ndarray, c: np.ndarray, names: list[str], tol: dict[str, float]) -> list[FinalPose]:
     dist = np.linalg.norm(g[:, :3] - c[:, :3], axis=-1)
     ang = quat_angle(g[:, 3:], c[:, 3:])
     out = []
@@ -324,7 +360,7 @@ def _final_poses(g: np.ndarray, c: np.ndarray, names: list[str], tol: Tolerances
     return out
 
 
-def _final_stats(finals: list[FinalPose], tol: Tolerances, last_step: int, dt_ns: int) -> list[FieldStat]:
+def _final_stats(finals: list[FinalPose], tol: dict[str, float], last_step: int, dt_ns: int) -> list[FieldStat]:
     stats = []
     for name, attr, part in (("final.position", "distance_m", slice(0, 3)), ("final.orientation", "angle_rad",
                                                                               slice(3, 7))):
@@ -349,10 +385,14 @@ def _command_text(c: Command) -> str:
     return f"step {c.step} {c.kind}({args})"
 
 
-def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: int) -> FieldStat:
-    """The two command sequences, entry by entry: step, kind and arguments (exact, or off with inf)."""
+def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: int,
+                  until_step: int | None = None) -> FieldStat:
+    """The two command sequences, entry by entry: step, kind and text exactly, the numbers in their
+    arguments within tolerance (0: equal; inf: the field is off); entries from until_step on are not judged."""
+    if until_step is not None:
+        g, c = [x for x in g if x.step < until_step], [x for x in c if x.step < until_step]
     n = max(len(g), len(c))
-    differing = [i for i in range(n) if i >= len(g) or i >= len(c) or g[i] != c[i]]
+    differing = [i for i in range(n) if i >= len(g) or i >= len(c) or not _commands_agree(g[i], c[i], tolerance)]
     first_i = differing[0] if differing else -1
     step = -1 if first_i < 0 else min(x[first_i].step for x in (g, c) if first_i < len(x))
     stat = FieldStat("commands.sequence", "", tolerance, float(len(differing)), step, "", float(len(differing)),
@@ -366,9 +406,33 @@ def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: i
     return stat
 
 
-def likely_cause(commands: list[Command], step: int) -> str:
-    """The golden's command nearest at or before step (the input most likely to explain a divergence there)."""
-    before = [c for c in commands if c.step <= step]
+def _commands_agree(a: Command, b: Command, tolerance: float) -> bool:
+    if tolerance == 0:
+        return a == b
+    d = command_number_difference(a, b)
+    return d is not None and d <= tolerance
+
+
+def on_path(command: Command, d: Divergence, joint_names: tuple[str, ...] | list[str]) -> bool:
+    """Whether a command acts on the diverging field: a joint's command on that joint's fields, any joint,
+    suction or key command on the pad, the hold and the objects; an annotation (`event`) on nothing."""
+    if command.kind == "event":
+        return False
+    if d.channel == "joints":
+        if command.kind == "key":
+            return True
+        joint = command.args.get("joint")
+        if isinstance(joint, int) and not isinstance(joint, bool) and 0 <= joint < len(joint_names):
+            joint = joint_names[joint]
+        return command.kind.startswith("joint_") and joint == d.element
+    return d.channel in ("suction", "hold", "pad", "objects", "final", "counts", "events", "outcome", "run", "images")
+
+
+def likely_cause(commands: list[Command], d: Divergence, joint_names: tuple[str, ...] | list[str] = ()) -> str:
+    """The golden's last command at or before the divergence that acts on the diverging field, or ""."""
+    if d.channel == "commands":
+        return ""
+    before = [c for c in commands if c.step <= d.step and on_path(c, d, joint_names)]
     return _command_text(max(before, key=lambda c: c.step)) if before else ""
 
 

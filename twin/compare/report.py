@@ -20,7 +20,8 @@ FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}
 
 
 def fmt(x: float, unit: str = "") -> str:
-    """A number for people: inf/nan spelled out, 4 significant digits, unit appended."""
+    """A number for people: inf/nan spelled out, 4 significant digits (an exact 0 only for a true zero:
+    2.85e-51 stays 2.85e-51), unit appended."""
     if isinstance(x, float) and math.isinf(x):
         text = "inf"
     elif isinstance(x, float) and math.isnan(x):
@@ -59,8 +60,35 @@ def first_detail(d: Divergence) -> str:
             return f"the candidate has it at step {d.actual[0]}; the golden has no such event"
         return (f"expected at step {d.expected[0]}, actual at step {d.actual[0]}: moved {fmt(d.difference, 'steps')}, "
                 f"more than the event window")
-    return (f"expected {fmt_values(d.expected)}, actual {fmt_values(d.actual)}, "
+    text = (f"expected {fmt_values(d.expected)}, actual {fmt_values(d.actual)}, "
             f"difference {fmt(d.difference, d.unit)}, tolerance {fmt(d.tolerance, d.unit)}")
+    if d.floor > 0:
+        text += f", noise floor {fmt(d.floor, d.unit)}"
+    return text
+
+
+def noise_summary(result: DiffResult) -> str:
+    """One line on how the candidate stands to the golden: bit-identical; within numerical noise (the
+    largest difference against what was allowed there); or changed (how much, where, how many times the
+    allowance: the larger of the tolerance and the measured noise floor)."""
+    if result.first is not None:
+        d = result.first
+        if not d.unit:
+            return f"changed at step {d.step} ({d.name})"
+        limit = max(d.tolerance, d.floor)
+        what = f"changed: {fmt(d.difference, d.unit)} at step {d.step} ({d.name}" + (
+            f" [{d.element}])" if d.element else ")")
+        if limit > 0 and result.floor is not None:
+            what += (f", {d.difference / limit:.3g}x the allowance (noise floor {fmt(d.floor, d.unit)}, "
+                     f"tolerance {fmt(d.tolerance, d.unit)})")
+        return what
+    moved = [f for f in result.fields if not f.identical and f.worst > 0 and f.unit and math.isfinite(f.worst)]
+    if not moved:
+        return "bit-identical"
+    worst = max(moved, key=lambda f: f.worst / max(f.floor, f.tolerance, 1e-300))
+    unit = worst.unit.split("|")[0]
+    return (f"within numerical noise (max {fmt(worst.worst, unit)} in {worst.name}; noise floor "
+            f"{fmt(worst.floor, unit)}, tolerance {fmt(worst.tolerance, unit)})")
 
 
 def _run_line(info: dict) -> str:
@@ -72,12 +100,13 @@ def _run_line(info: dict) -> str:
 
 
 def _field_row(f: FieldStat) -> list[str]:
-    status = "ok" if f.ok else ("off" if f.tolerance == math.inf else "FAIL")
+    status = "off" if f.tolerance == math.inf else ("FAIL" if not f.ok else "identical" if f.identical else "ok")
     where = f"{f.worst_step}" + (f" [{f.worst_element}]" if f.worst_element else "")
-    return [f.name, f.unit, fmt(f.tolerance), fmt(f.worst), where, fmt(f.rms), str(f.steps_over), status]
+    return [f.name, f.unit, fmt(f.tolerance), fmt(f.floor), fmt(f.worst), where, fmt(f.rms), str(f.steps_over),
+            status]
 
 
-_FIELD_HEAD = ["field", "unit", "tolerance", "worst", "at step", "rms", "steps over", "status"]
+_FIELD_HEAD = ["field", "unit", "tolerance", "noise floor", "worst", "at step", "rms", "steps over", "status"]
 
 
 def _window_text(result: DiffResult) -> str:
@@ -134,6 +163,9 @@ def render_text(result: DiffResult) -> str:
                                                                  result.config_differences[:8])
                      + (f"; and {len(result.config_differences) - 8} more" if len(result.config_differences) > 8
                         else ""))
+    if result.floor is not None:
+        lines.append(f"  noise floor: measured on a run with {result.floor.perturbation}, times {result.floor.margin:g}")
+    lines.append(f"  {noise_summary(result)}")
     if result.first is None:
         lines.append(f"no divergence over {result.steps_compared} common steps")
     else:
@@ -156,6 +188,7 @@ def render_markdown(result: DiffResult) -> str:
     out += [f"- note: {n}" for n in result.notes]
     out += [f"- configuration differs: `{k}` {a} → {b}" for k, a, b in result.config_differences]
     out.append("")
+    out += [f"**{noise_summary(result)}**", ""]
     if result.first is None:
         out.append(f"No divergence over {result.steps_compared} common steps.")
     else:

@@ -3,8 +3,10 @@
 Names are `channel.field`. Joint values are rad for the revolute joints and m for the prismatic Z
 joint (one number covers both: 2.5e-4 means 0.25 mrad or 0.25 mm). A tolerance of 0 means
 bit-identical; `inf` switches a field off. Discrete fields (suction state, run length, the command
-sequence, the task outcome) compare exactly unless off; event counts allow that many events more or
-fewer. Events pair within a window of steps; a window of None (the `outcome` preset) leaves them out.
+sequence, the task outcome) compare exactly unless off; the numbers in commands' arguments compare within
+the commands.sequence tolerance; event counts allow that many events more or fewer. Events pair within a
+window of steps; a window of None (the `outcome` preset) leaves them out. The `noise` preset, the default,
+is `tight` that also allows each field the candidate's measured noise floor (compare.noise).
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ FIELDS: dict[str, tuple[str, str]] = {
     "final.position": ("m", "distance between final object positions"),
     "final.orientation": ("rad", "angle between final object orientations"),
     "run.length": ("steps", "difference in the last step"),
-    "commands.sequence": ("", "every Command's step, kind and arguments, in order (exact or off)"),
+    "commands.sequence": ("", ("every Command's step, kind and text exactly, in order; the numbers in its "
+                          "arguments within the tolerance")),
     "outcome.task": ("", "whether the task ended ok: no task_error, finalized ok (exact or off)"),
     "counts.attach": ("events", "number of attach events"),
     "counts.release": ("events", "number of release events"),
@@ -61,14 +64,20 @@ _PHYSICAL = _ALWAYS | {
 # outcome: where the objects ended, whether the task ended ok, how often the pad took and let go
 _OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
 
+# tight: 1e-9 on every number (frames of another libm stayed within it over 44k steps), commands' numbers too
+_TIGHT = {name: 0.0 if name in DISCRETE - {"commands.sequence"} or name == "run.length" or name in _ALWAYS else 1e-9
+          for name in FIELDS} | {"images.pixels": IMAGE_TIGHT_LEVELS}
 # preset -> (field tolerances, event window in steps; None: events are not paired)
 PRESETS: dict[str, tuple[dict[str, float], int | None]] = {
+    "noise": (_TIGHT, 0),
     "exact": (_ALL_ZERO, 0),
-    "tight": ({name: 0.0 if name in DISCRETE or name == "run.length" or name in _ALWAYS else 1e-9
-               for name in FIELDS} | {"images.pixels": IMAGE_TIGHT_LEVELS}, 0),
+    "tight": (_TIGHT, 0),
     "physical": (_PHYSICAL, 12),
     "outcome": (_OUTCOME, None),
 }
+# presets judged against the candidate's measured noise floor, times this margin (compare.noise)
+NOISE_MARGINS: dict[str, float] = {"noise": 10.0}
+DEFAULT = "noise"
 
 
 @dataclass(frozen=True)
@@ -80,13 +89,14 @@ class Tolerances:
     values: dict[str, float] = field(default_factory=lambda: dict(_ALL_ZERO))
     event_window_steps: int | None = 0
     overrides: tuple[str, ...] = ()
+    noise_margin: float | None = None  # judge against the measured noise floor times this (None: do not)
 
     @staticmethod
     def from_preset(name: str) -> Tolerances:
         if name not in PRESETS:
             raise ConfigError(f"unknown tolerance preset {name!r}; expected one of {', '.join(PRESETS)}")
         values, window = PRESETS[name]
-        return Tolerances(name, dict(values), window)
+        return Tolerances(name, dict(values), window, noise_margin=NOISE_MARGINS.get(name))
 
     def __getitem__(self, name: str) -> float:
         return self.values[name]
@@ -112,6 +122,7 @@ class Tolerances:
             "preset": self.preset,
             "event_window_steps": self.event_window_steps,
             "overrides": list(self.overrides),
+            "noise_margin": self.noise_margin,
             "fields": {name: _json_number(self.values[name]) for name in FIELDS},
         }
 

@@ -16,7 +16,7 @@ from twin.model.recording import Recording
 
 @dataclass
 class Source:
-    """One input recording and what is known of it: `replay` is "exact", "differs: ...", or
+    """One input recording and what is known of it: `replay` is "exact", "within numerical noise (...)", "differs: ...", or
     "not checked" (no --verify); `verified` True, False or None (not checked)."""
 
     path: str
@@ -46,21 +46,23 @@ def load_source(path: str) -> Source:
 
 
 def verify(source: Source) -> Source:
-    """Replay the recording and compare exactly, as `twin replay` does; sets replay and verified."""
-    from twin.compare.engine import compare
-    from twin.compare.report import first_line
-    from twin.compare.tolerances import Tolerances
+    """Replay the recording and compare it as `twin replay` does (the default `noise` verdict: bits, or
+    within the replay's measured noise floor on another machine); sets replay and verified."""
+    from twin.compare.report import first_line, noise_summary
+    from twin.compare.tolerances import DEFAULT, Tolerances
+    from twin.verify.noise import judge
     from twin.verify.replay import replay, replayed_event_kinds
 
     try:
         again = replay(source.rec)
-        result = compare(source.rec, again, Tolerances.from_preset("exact"),
-                         event_kinds=replayed_event_kinds(source.rec))
+        result = judge(source.rec, again, Tolerances.from_preset(DEFAULT), replay, source=source.rec,
+                       event_kinds=replayed_event_kinds(source.rec))
     except TwinError as err:  # not replayable (no step 0, a malformed command, not comparable)
         source.replay, source.verified = f"not replayable: {err}", False
         return source
     if result.match:
-        source.replay, source.verified = "exact", True
+        summary = noise_summary(result)
+        source.replay, source.verified = "exact" if summary == "bit-identical" else summary, True
     else:
         source.replay, source.verified = f"differs: {first_line(result.first)}", False
     return source

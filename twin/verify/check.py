@@ -19,8 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from twin.compare.engine import compare
-from twin.compare.report import first_line, render_text
+from twin.compare.report import first_line, noise_summary, render_text
 from twin.compare.tolerances import Tolerances
 from twin.errors import ConfigError, TwinError
 from twin.model.collectors import ColumnCollector
@@ -28,6 +27,7 @@ from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin
 from twin.tasks import TimeLimit, resolve, run_task
+from twin.verify.noise import judge
 from twin.verify.replay import collected, replay, replayed_event_kinds
 
 DEFAULT_DIR = "recordings"
@@ -87,6 +87,11 @@ def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, 
     return replay(golden, sinks=sinks), replayed_event_kinds(golden)
 
 
+def remade(rec: Recording) -> Recording:
+    """rerun's new run alone (a noise floor run)."""
+    return rerun(rec)[0]
+
+
 @dataclass
 class Outcome:
     """What checking one golden gave."""
@@ -119,14 +124,16 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
                 new, kinds = rerun(golden, sinks=sinks)
         else:
             new, kinds = rerun(golden)
-        result = compare(golden, new, tolerances, event_kinds=kinds)
+        result = judge(golden, new, tolerances, remade, source=golden, event_kinds=kinds)
         if sha_now is not None and sha_now != recorded_sha:
             result.notes.append(f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
                                 f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)")
         report = render_text(result)
         if result.match:
-            return Outcome(path, "match", 0, "matches", report, len(golden.frames), time.perf_counter() - t0)
+            return Outcome(path, "match", 0, noise_summary(result), report, len(golden.frames), time.perf_counter() - t0)
         summary = first_line(result.first)
+        if result.floor is not None:
+            summary += ": " + noise_summary(result).split(", ", 1)[-1]
         if update and new.outcome != "ok" and not allow_error:
             why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
             return Outcome(path, "refused", 1, f"not rewritten: the re-run's task failed ({why}); the golden is "

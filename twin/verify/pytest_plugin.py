@@ -2,7 +2,7 @@
 
     def test_pick_place(golden):
         run = record_task(TwinConfig(), "pick_place", {"cycles": 1})
-        golden.check(run, "pick_place_one_cycle")             # exact by default
+        golden.check(run, "pick_place_one_cycle")   # default: within the run's measured noise floor
         golden.check(run, "pick_place_one_cycle", tolerance="physical", tol=["hold=inf"])
 
 Goldens live in the `twin_goldens_dir` ini folder (default `recordings/`, relative to the rootdir).
@@ -19,9 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from twin.compare.engine import DiffResult, compare
+from twin.compare.engine import DiffResult
 from twin.compare.report import render_text, write_report
-from twin.compare.tolerances import Tolerances
+from twin.compare.tolerances import DEFAULT, Tolerances
 from twin.model.recording import Recording
 
 
@@ -35,11 +35,15 @@ class GoldenChecker:
     def path(self, name: str) -> Path:
         return self.directory / f"{name}.mcap"
 
-    def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = "exact",
+    def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = DEFAULT,
               tol: Sequence[str] = (), event_window_steps: int | None = None,
               event_kinds: frozenset[str] | None = None, allow_error: bool = False) -> DiffResult:
-        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff."""
+        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff. Under
+        the default `noise` preset the run is made once more with its math perturbed (its task re-run, or its
+        commands replayed) to measure its noise floor."""
         from twin.record.mcap.reader import load
+        from twin.verify.check import remade
+        from twin.verify.noise import judge
         from twin.verify.replay import save
 
         candidate = run if isinstance(run, Recording) else load(run)
@@ -53,7 +57,7 @@ class GoldenChecker:
             pytest.fail(f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
                         pytrace=False)
         golden = load(golden_path)
-        result = compare(golden, candidate, tolerances, event_kinds=event_kinds)
+        result = judge(golden, candidate, tolerances, remade, event_kinds=event_kinds)
         if result.match:
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)
@@ -66,7 +70,8 @@ class GoldenChecker:
         save(candidate, obtained)
         write_report(result, report)
         pytest.fail(f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
-                    f"{report.name}; rerun with --update-goldens to accept)\n{render_text(result)}", pytrace=False)
+                    f"{report.name}; if the change is intended, rerun with --update-goldens: it rewrites the golden "
+                    f"with this run)\n{render_text(result)}", pytrace=False)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -31,7 +31,7 @@ class NoiseFloor:
     margin: float
     steps: np.ndarray
     envelopes: dict[str, np.ndarray]
-    scalars: dict[str, float] = field(default_factory=dict)  # final.*, run.length, counts.*, images.pixels
+    scalars: dict[str, float] = field(default_factory=dict)  # final.*, run.length, counts.* (pictures: tolerance only)
     commands: float = 0.0
     commands_split_step: int | None = None
     event_shift_steps: int = 0

@@ -100,7 +100,7 @@ class DiffResult:
     notes: list[str] = field(default_factory=list)
     first: Divergence | None = None
     first_command: Divergence | None = None  # the first difference in the command sequences
-    likely_cause: str = ""  # the command nearest before the first divergence, in the golden
+    likely_cause: str = ""  # the golden's last command at or before the first divergence acting on its field
     events_compared: bool = True  # False: the tolerances pair no events (outcome); counts still compare
     floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
 

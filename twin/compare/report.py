@@ -67,6 +67,16 @@ def first_detail(d: Divergence) -> str:
     return text
 
 
+def allowance_text(d: Divergence) -> str:
+    """How far a divergence passed what was allowed there: "3.2x the allowance (noise floor F, tolerance T)";
+    "" for a field without a unit (commands, outcome) or an allowance of 0."""
+    limit = max(d.tolerance, d.floor)
+    if not d.unit or not limit > 0:
+        return ""
+    return (f"{d.difference / limit:.3g}x the allowance (noise floor {fmt(d.floor, d.unit)}, "
+            f"tolerance {fmt(d.tolerance, d.unit)})")
+
+
 def noise_summary(result: DiffResult) -> str:
     """One line on how the candidate stands to the golden: bit-identical; within numerical noise (the
     largest difference against what was allowed there); or changed (how much, where, how many times the
@@ -75,13 +85,10 @@ def noise_summary(result: DiffResult) -> str:
         d = result.first
         if not d.unit:
             return f"changed at step {d.step} ({d.name})"
-        limit = max(d.tolerance, d.floor)
         what = f"changed: {fmt(d.difference, d.unit)} at step {d.step} ({d.name}" + (
             f" [{d.element}])" if d.element else ")")
-        if limit > 0 and result.floor is not None:
-            what += (f", {d.difference / limit:.3g}x the allowance (noise floor {fmt(d.floor, d.unit)}, "
-                     f"tolerance {fmt(d.tolerance, d.unit)})")
-        return what
+        allowance = allowance_text(d) if result.floor is not None else ""
+        return f"{what}, {allowance}" if allowance else what
     moved = [f for f in result.fields if not f.identical and f.worst > 0 and f.unit and math.isfinite(f.worst)]
     if not moved:
         return "bit-identical"

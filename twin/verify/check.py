@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from twin.compare.report import first_line, noise_summary, render_text
+from twin.compare.report import allowance_text, first_line, noise_summary, render_text
 from twin.compare.tolerances import Tolerances
 from twin.errors import ConfigError, TwinError
 from twin.model.collectors import ColumnCollector
@@ -132,8 +132,8 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
         if result.match:
             return Outcome(path, "match", 0, noise_summary(result), report, len(golden.frames), time.perf_counter() - t0)
         summary = first_line(result.first)
-        if result.floor is not None:
-            summary += ": " + noise_summary(result).split(", ", 1)[-1]
+        if result.floor is not None and allowance_text(result.first):
+            summary += ": " + allowance_text(result.first)
         if update and new.outcome != "ok" and not allow_error:
             why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
             return Outcome(path, "refused", 1, f"not rewritten: the re-run's task failed ({why}); the golden is "

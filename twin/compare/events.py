@@ -21,20 +21,22 @@ class EventDiff:
         return min(s for s in (self.expected_step, self.actual_step) if s is not None)
 
 
+def by_key(events: list[Event], kinds: frozenset[str] | None = None) -> dict[tuple[str, str], list[Event]]:
+    """Events grouped by (kind, body), each group in order; only `kinds` when given."""
+    out: dict[tuple[str, str], list[Event]] = {}
+    for e in events:
+        if kinds is None or e.kind in kinds:
+            out.setdefault((e.kind, e.body), []).append(e)
+    return out
+
+
 def match_events(golden: list[Event], candidate: list[Event], window_steps: int,
                  kinds: frozenset[str] | None = None) -> tuple[int, int, list[EventDiff]]:
     """Pair events by (kind, body) in order: the i-th golden with the i-th candidate of that key.
 
     Returns (matched, shifted within the window, [missing / extra / moved beyond the window]).
     """
-    def keyed(events: list[Event]) -> dict[tuple[str, str], list[Event]]:
-        out: dict[tuple[str, str], list[Event]] = {}
-        for e in events:
-            if kinds is None or e.kind in kinds:
-                out.setdefault((e.kind, e.body), []).append(e)
-        return out
-
-    gk, ck = keyed(golden), keyed(candidate)
+    gk, ck = by_key(golden, kinds), by_key(candidate, kinds)
     matched = shifted = 0
     diffs: list[EventDiff] = []
     for key in sorted(set(gk) | set(ck)):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twin.compare.events import match_events
+from twin.compare.events import by_key
 from twin.compare.metrics import quat_angle
 from twin.model.recording import Recording
 from twin.model.types import Command
@@ -24,8 +24,9 @@ class NoiseFloor:
     """Per-field floors of a run (FIELDS units), already multiplied by margin.
 
     steps and envelopes: per compared field, the running maximum over the run's steps; the rest
-    judged on the whole run. commands: the largest number in a command argument that moved;
-    inf from commands_split_step on when the perturbed run's commands differ in kind, step or text."""
+    judged on the whole run. commands: the largest number in a command argument that moved; from
+    commands_split_step on (the perturbed run's commands differ in kind, step or text) commands are
+    not judged, nor events from events_split_step on (an event one run has and the other lacks)."""
 
     perturbation: str
     margin: float
@@ -116,16 +117,17 @@ def measure(run: Recording, perturbed: Recording, perturbation: str, margin: flo
     if split is None and len(run.commands) != len(perturbed.commands):
         longer = run.commands if len(run.commands) > len(perturbed.commands) else perturbed.commands
         split = longer[min(len(run.commands), len(perturbed.commands))].step
-    _matched, _shifted, unpaired = match_events(run.events, perturbed.events, 1 << 62)  # no window: all pair
-    shift = max((abs(x.step - y.step) for x, y in _pairs(run.events, perturbed.events)), default=0)
-    return NoiseFloor(perturbation, margin, np.asarray(steps), envelopes, scalars, margin * commands, split, shift, min(d.step for d in unpaired) if unpaired else None,
-                      run.outcome != perturbed.outcome)
+    shift, unpaired = _event_drift(run.events, perturbed.events)
+    return NoiseFloor(perturbation, margin, np.asarray(steps), envelopes, scalars, margin * commands, split,
+                      shift, unpaired, run.outcome != perturbed.outcome)
 
 
-def _pairs(a: list, b: list) -> list[tuple]:
-    """Events of a and b paired by (kind, body) in order, as match_events pairs them."""
-    keyed: dict[tuple[str, str], tuple[list, list]] = {}
-    for side, events in ((0, a), (1, b)):
-        for e in events:
-            keyed.setdefault((e.kind, e.body), ([], []))[side].append(e)
-    return [p for xs, ys in keyed.values() for p in zip(xs, ys, strict=False)]
+def _event_drift(a: list, b: list) -> tuple[int, int | None]:
+    """Events of a and b paired by (kind, body) in order, as compare.events pairs them: the largest step
+    shift of a pair, and the first step of an event left without a pair (None: all paired)."""
+    ka, kb = by_key(a), by_key(b)
+    shift, unpaired = 0, []
+    for xs, ys in ((ka.get(k, []), kb.get(k, [])) for k in ka.keys() | kb.keys()):
+        shift = max([shift] + [abs(x.step - y.step) for x, y in zip(xs, ys, strict=False)])
+        unpaired += [e.step for e in (xs[len(ys):] or ys[len(xs):])]
+    return shift, min(unpaired, default=None)

@@ -112,6 +112,8 @@ def test_far_task_is_one_line_on_stderr_and_exit_code_1(tmp_path):
     (["run", "no/such/task.py"], "task file 'no/such/task.py' does not exist"),
     (["run", "pick_place", "--cycles", "0"], "argument --cycles: '0' is not a whole number >= 1"),
     (["run", "pick_place", "--cycles", "two"], "'two' is not a whole number >= 1"),
+    (["run", "pick_place", "--cycles", "9223372036854775808"], "is not a whole number 1..2**63-1 (int64)"),
+    (["run", "pick_place", "--param", "cycles=1e400"], "--param cycles=1e400 is invalid: 1e400 is not a finite"),
     (["run", "pick_place", "--rate-hz", "0"], "physics rate 0.0 Hz is out of range"),
 ])
 def test_bad_input_is_one_line_and_exit_code_2(args, expected, tmp_path, monkeypatch, capsys):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from collections.abc import Callable
 
@@ -11,6 +10,7 @@ from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
 from twin.model.images import CAMERAS, DEFAULT_RATE_HZ, DEFAULT_SIZE_PX, MAX_SIDE_PX, camera
 from twin.robot.profile_files import get_profile
+from twin.sweep.dists import INT64_MAX, BadValue, read_value
 
 
 def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
@@ -66,24 +66,26 @@ def add_param_option(p: argparse.ArgumentParser) -> None:
     """--param NAME=VALUE (repeatable): a task parameter, checked against the task function's signature."""
     p.add_argument("--param", action="append", type=param_pair, default=[], metavar="NAME=VALUE",
                    help="a task parameter (repeatable); VALUE as JSON when it parses (1, 0.5, true, "
-                        '"text"), else a string')
+                        '"text", [1, 2]), else a string; NaN, infinities (1e400, inf) and integers outside '
+                        "int64 are refused")
 
 
 def param_pair(text: str) -> tuple[str, object]:
     """An argparse type: NAME=VALUE, VALUE parsed as JSON when it parses (numbers, true/false, null,
-    lists), else kept as a string; NaN and infinities are refused."""
+    lists), else kept as a string; NaN, infinities (also a bare nan or inf) and integers outside int64
+    are refused, anywhere in the value."""
     name, sep, raw = text.partition("=")
     if not sep or not name.isidentifier():
         raise argparse.ArgumentTypeError(f"--param {text!r} is invalid; expected NAME=VALUE, NAME a Python identifier")
     try:
-        value = json.loads(raw, parse_constant=_no_constant)
-    except ValueError:
-        value = raw
+        value = read_value(raw)
+    except BadValue as err:
+        raise argparse.ArgumentTypeError(f"--param {name}={_short(raw)} is invalid: {err}") from None
     return name, value
 
 
-def _no_constant(name: str) -> object:
-    raise ValueError(f"{name} is not a finite number")
+def _short(text: str) -> str:
+    return text if len(text) <= 60 else f"{text[:40]}...({len(text)} characters)"
 
 
 def params_dict(pairs: list[tuple[str, object]]) -> dict:
@@ -97,15 +99,17 @@ def params_dict(pairs: list[tuple[str, object]]) -> dict:
 
 
 def whole_number(minimum: int = 1) -> Callable[[str], int]:
-    """An argparse type: an integer >= minimum."""
+    """An argparse type: an integer >= minimum that fits int64."""
 
     def parse(text: str) -> int:
         try:
-            value = int(text)
+            value = int(text) if len(text) <= 24 else INT64_MAX + 1  # no int() of thousands of digits
         except ValueError:
             value = minimum - 1
         if value < minimum:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= {minimum}")
+            raise argparse.ArgumentTypeError(f"{_short(text)!r} is not a whole number >= {minimum}")
+        if value > INT64_MAX:
+            raise argparse.ArgumentTypeError(f"{_short(text)!r} is not a whole number {minimum}..2**63-1 (int64)")
         return value
 
     return parse

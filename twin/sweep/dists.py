@@ -7,6 +7,7 @@ import json
 import math
 import re
 from dataclasses import dataclass
+from typing import NoReturn
 
 import numpy as np
 
@@ -14,6 +15,15 @@ from twin.errors import ConfigError
 
 _CALL = re.compile(r"^\s*([a-z_]+)\s*\((.*)\)\s*$", re.DOTALL)
 MAX_CHOICES = 1000
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1  # a Parquet int64 column, as every integer a value meets
+NORMAL_REACH = 40  # normal(mu,sigma) needs mu +- 40 sigma finite: numpy's standard normal stays within +-13.8
+FINITE = "a finite number (at most +-1.8e308)"
+WHOLE = "a whole number -2**63..2**63-1 (int64)"
+
+
+class BadValue(ValueError):
+    """A number a value cannot carry (an integer outside int64, NaN, an infinity, 1e400); the message
+    names the number and what was expected."""
 
 
 @dataclass(frozen=True)
@@ -50,7 +60,8 @@ class Dist:
 
 def parse_dist(text: str, key: str = "") -> Dist:
     """A distribution from its text; ConfigError (one line, naming the key and what was expected)."""
-    where = f"--vary {key}={text}" if key else f"distribution {text!r}"
+    shown = _short(text, 80) if isinstance(text, str) else text
+    where = f"--vary {key}={shown}" if key else f"distribution {shown!r}"
     if not isinstance(text, str) or not text.strip():
         raise ConfigError(f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), choice(v1,v2,...) or a value")
     m = _CALL.match(text)
@@ -64,8 +75,13 @@ def parse_dist(text: str, key: str = "") -> Dist:
         a, b = (float(v) for v in values)
         if kind == "uniform" and not a < b:
             raise ConfigError(f"{where} is invalid; expected uniform(a,b) with a < b")
+        if kind == "uniform" and not math.isfinite(b - a):  # numpy draws a + (b - a) * u
+            raise ConfigError(f"{where} is invalid; expected uniform(a,b) with b - a finite (at most +-1.8e308)")
         if kind == "normal" and not b > 0:
             raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with sigma > 0")
+        if kind == "normal" and not math.isfinite(abs(a) + NORMAL_REACH * b):  # numpy draws mu + sigma * z
+            raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with mu +- {NORMAL_REACH}*sigma "
+                              "finite (at most +-1.8e308)")
         return Dist(kind, (a, b), text.strip())
     if kind == "choice":
         if not values or len(values) > MAX_CHOICES:
@@ -96,17 +112,59 @@ def _split(inner: str, where: str) -> list[str]:
 
 
 def _value(text: str, where: str) -> object:
-    """A value as JSON when it parses (numbers, true/false, "quoted text"), else the bare text; a
-    non-finite number is refused."""
+    """A value as JSON when it parses (numbers, true/false, "quoted text"), else the bare text; an
+    integer outside int64 or a number that is not finite is refused."""
     try:
-        value = json.loads(text, parse_constant=lambda name: float("nan"))
-    except ValueError:
-        return text
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ConfigError(f"{where} is invalid: {text} is not a finite number")
+        value = read_value(text)
+    except BadValue as err:
+        raise ConfigError(f"{where} is invalid: {err}") from None
     if isinstance(value, (list, dict)) or value is None:
         raise ConfigError(f"{where} is invalid: {text} is not a number, true/false or text")
     return value
+
+
+def read_value(text: str) -> object:
+    """text as JSON when it parses (numbers, true/false, "text", null, lists, tables), else the text
+    itself. BadValue for a number that cannot be carried, anywhere in it: an integer outside int64,
+    NaN, an infinity, a float beyond +-1.8e308 (1e400), or a bare nan or inf that is not JSON."""
+    try:
+        return json.loads(text, parse_int=_int64, parse_float=_finite, parse_constant=_not_finite)
+    except BadValue:
+        raise
+    except ValueError:
+        pass
+    try:
+        number = float(text)
+    except ValueError:
+        return text
+    if not math.isfinite(number):  # nan, inf, -Infinity, +1e400: meant as numbers, never as text
+        _finite(text.strip())
+    return text
+
+
+def _int64(text: str) -> int:
+    """A JSON integer; BadValue outside int64 (checked before converting: no 4300-digit int())."""
+    value = int(text) if len(text.lstrip("-")) <= 19 else None
+    if value is None or not INT64_MIN <= value <= INT64_MAX:
+        raise BadValue(f"{_short(text)} is outside int64; expected {WHOLE}")
+    return value
+
+
+def _finite(text: str) -> float:
+    """A JSON real number; BadValue when it is not finite (1e400 reads as inf)."""
+    value = float(text)
+    if not math.isfinite(value):
+        _not_finite(text)
+    return value
+
+
+def _not_finite(text: str) -> NoReturn:
+    raise BadValue(f"{_short(text)} is not a finite number; expected {FINITE}")
+
+
+def _short(text: str, most: int = 40) -> str:
+    """A value as written, cut to fit one line of an error."""
+    return text if len(text) <= most else f"{text[:most - 16]}...({len(text)} characters)"
 
 
 def _is_number(v: object) -> bool:

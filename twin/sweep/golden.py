@@ -2,15 +2,21 @@
 beside it. Checking re-runs the sweep and judges it by statistics, not bytes: the success rate
 must lie in the golden's Wilson 95 % interval, and the placement-error percentiles (p50, p95, max)
 within the definition's tolerances (`[tolerance]`, else spec.TOLERANCES). `update` rewrites the
-summary when it changed at all."""
+summary when it changed at all (atomically: a temporary file beside it, renamed into place). A
+golden's files are read only when regular files of at most MAX_BYTES, and its summary is validated
+before it judges anything: a NaN or an infinite interval would otherwise pass every run."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import tempfile
 import time
+import tomllib
 from collections.abc import Sequence
 from pathlib import Path
+from stat import S_IMODE, S_ISREG
 
 from twin.errors import ConfigError, TwinError
 from twin.sweep.results import summary, summary_text
@@ -20,6 +26,8 @@ from twin.sweep.worker import Job
 from twin.verify.check import Outcome
 
 PERCENTILES = (("p50", "placement_p50_mm"), ("p95", "placement_p95_mm"), ("max", "placement_max_mm"))
+DEFINITION_KEYS = ("task", "scenarios", "seed")  # what makes a .toml a sweep definition (a robot profile has none)
+MAX_BYTES = 4 * 2**20  # the largest definition or summary read: a golden is a few kB
 
 
 def summary_path(definition: str | os.PathLike) -> Path:
@@ -29,22 +37,73 @@ def summary_path(definition: str | os.PathLike) -> Path:
 
 def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
     """The arguments of `twin check` split into what verify.check expands (.mcap files and folders
-    of them) and sweep definitions (.toml files, and the .toml files of a folder). A folder without
-    .toml files goes to the first list as it is (so an empty one is still reported there)."""
+    of them) and sweep definitions: a named .toml file (which must be one) and the .toml files of a
+    folder that are (task, scenarios and seed; a robot profile kept beside the goldens is not). A
+    folder without definitions goes to the first list as it is (so an empty one is still reported
+    there). A folder's .toml with NAME.summary.json beside it is a golden: one that is not a
+    definition is an error, never skipped."""
     recordings, sweeps = [], []
     for p in paths:
         path = Path(p)
         if p.endswith(".toml"):
-            if not path.is_file():
-                raise ConfigError(f"sweep definition {p!r} does not exist")
+            problem = _not_a_definition(path)
+            if problem is not None:
+                raise ConfigError(f"sweep definition {p!r} {problem}")
             sweeps.append(p)
-        elif path.is_dir() and any(path.glob("*.toml")):
-            sweeps += sorted(str(t) for t in path.glob("*.toml"))
-            if any(path.glob("*.mcap")):
+        elif path.is_dir():
+            found = []
+            for t in sorted(path.glob("*.toml")):
+                problem = _not_a_definition(t)
+                if problem is None:
+                    found.append(str(t))
+                elif summary_path(t).exists():
+                    raise ConfigError(f"sweep golden {str(t)!r} (beside {summary_path(t).name}) {problem}")
+            sweeps += found
+            if not found or any(path.glob("*.mcap")):
                 recordings.append(p)
         else:
             recordings.append(p)
     return recordings, sweeps
+
+
+def _not_a_definition(path: Path) -> str | None:
+    """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why not."""
+    try:
+        data = tomllib.loads(_regular_text(path))
+    except tomllib.TOMLDecodeError as err:
+        return f"is not valid TOML: {err}"
+    except ValueError as err:
+        return str(err)
+    missing = [k for k in DEFINITION_KEYS if k not in data]
+    if missing:
+        return f"lacks {', '.join(missing)}; expected a sweep definition with {', '.join(DEFINITION_KEYS)}"
+    return None
+
+
+def _regular_text(path: Path) -> str:
+    """path's text when it is a regular file of at most MAX_BYTES, else ValueError saying why. A FIFO,
+    device or folder is refused before it is opened (reading a FIFO waits for a writer for ever)."""
+    try:
+        st = os.stat(path)
+        if not S_ISREG(st.st_mode):
+            raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
+        if st.st_size > MAX_BYTES:
+            raise ValueError(f"holds {st.st_size} bytes; expected at most {MAX_BYTES}")
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # never blocks, even if swapped for a FIFO
+        with os.fdopen(fd, "rb") as f:
+            if not S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
+            data = f.read(MAX_BYTES + 1)
+    except FileNotFoundError:
+        raise ValueError("does not exist") from None
+    except OSError as err:
+        raise ValueError(f"cannot be read: {err.strerror or err}") from err
+    if len(data) > MAX_BYTES:
+        raise ValueError(f"holds more than {MAX_BYTES} bytes; expected at most {MAX_BYTES}")
+    try:
+        return data.decode()
+    except UnicodeDecodeError as err:
+        raise ValueError(f"is not UTF-8 text: {err}") from err
 
 
 def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
@@ -62,7 +121,7 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
         before, now = g_pe.get(stat), pe[stat]
         if (before is None) != (now is None):
             problems.append(f"placement_error_mm.{stat} was {before} and is {now} now")
-        elif before is not None and abs(now - before) > tolerances[tol_name]:
+        elif before is not None and not abs(now - before) <= tolerances[tol_name]:  # a NaN moved too
             problems.append(f"placement_error_mm.{stat} moved {now - before:+.3f} mm (golden {before:.3f}, now "
                             f"{now:.3f}; tolerance {tolerances[tol_name]:g} mm)")
     return problems
@@ -87,7 +146,7 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
         problems = judge(golden, new, spec.tolerances()) if golden is not None else ["no golden summary yet"]
         seconds = time.perf_counter() - t0
         if update and new != golden:
-            expected_path.write_text(summary_text(new))
+            _write_atomically(expected_path, new)
             return Outcome(definition, "updated", 0, "rewritten; was: " + ("; ".join(problems) or "within tolerance"),
                            report, spec.scenarios, seconds)
         if problems:
@@ -99,13 +158,100 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
 
 
 def _read(path: Path) -> dict:
+    """A golden summary, validated (check_summary)."""
     try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as err:
-        raise ConfigError(f"sweep golden summary {str(path)!r} is unreadable: {err}") from err
-    if not isinstance(data, dict) or not isinstance(data.get("placement_error_mm"), dict):
-        raise ConfigError(f"sweep golden summary {str(path)!r} is not a sweep summary")
+        text = _regular_text(path)
+    except ValueError as err:
+        raise ConfigError(f"sweep golden summary {str(path)!r} {err}") from err
+    try:
+        data = json.loads(text)
+    except ValueError as err:
+        raise ConfigError(f"sweep golden summary {str(path)!r} is not valid JSON: {err}") from err
+    return check_summary(data, str(path))
+
+
+def check_summary(data: object, where: str) -> dict:
+    """data when it is a sweep summary that can judge a run: whole counts that add up, a finite
+    success_rate in [0, 1] inside its finite wilson95 interval, finite ordered placement-error
+    percentiles (all null when count is 0) and failures_by_reason counting the failures. Else a
+    one-line ConfigError naming where, the field, its value and what was expected."""
+    def bad(name: str, value: object, expected: str) -> ConfigError:
+        shown = json.dumps(value) if not isinstance(value, str) else repr(value)
+        return ConfigError(f"sweep golden summary {where!r}: {name} {shown[:80]} is invalid; expected {expected}")
+
+    if not isinstance(data, dict):
+        raise bad("the summary", type(data).__name__, "a JSON object (a sweep's summary.json)")
+    for name in ("scenarios", "ok", "failed"):
+        if not _whole(data.get(name)):
+            raise bad(name, data.get(name), "a whole number >= 0")
+    n, ok, failed = data["scenarios"], data["ok"], data["failed"]
+    if ok + failed != n:
+        raise bad("ok + failed", ok + failed, f"scenarios ({n})")
+    rate = data.get("success_rate")
+    if not _finite(rate) or not 0 <= rate <= 1:
+        raise bad("success_rate", rate, "a finite number 0..1")
+    if n and abs(rate - ok / n) > 1e-9:
+        raise bad("success_rate", rate, f"ok / scenarios = {ok}/{n}")
+    lo_hi = data.get("wilson95")
+    if not (isinstance(lo_hi, list) and len(lo_hi) == 2 and all(_finite(v) for v in lo_hi)):
+        raise bad("wilson95", lo_hi, "[lo, hi], two finite numbers")
+    if not 0 <= lo_hi[0] <= rate <= lo_hi[1] <= 1:
+        raise bad("wilson95", lo_hi, f"0 <= lo <= success_rate ({rate}) <= hi <= 1")
+    pe = data.get("placement_error_mm")
+    if not isinstance(pe, dict):
+        raise bad("placement_error_mm", pe, "an object with count, p50, p95 and max")
+    count = pe.get("count")
+    if not _whole(count) or count > n:
+        raise bad("placement_error_mm.count", count, f"a whole number 0..scenarios ({n})")
+    for stat_name, _ in PERCENTILES:
+        value = pe.get(stat_name)
+        if count == 0 and value is not None:
+            raise bad(f"placement_error_mm.{stat_name}", value, "null (count is 0)")
+        if count > 0 and not _finite(value):
+            raise bad(f"placement_error_mm.{stat_name}", value, f"a finite number of mm (count is {count})")
+    if count > 0 and not pe["p50"] <= pe["p95"] <= pe["max"]:
+        raise bad("placement_error_mm", {s: pe[s] for s, _ in PERCENTILES}, "p50 <= p95 <= max")
+    reasons = data.get("failures_by_reason")
+    if not (isinstance(reasons, dict) and all(_whole(v) for v in reasons.values())):
+        raise bad("failures_by_reason", reasons, "an object of reason -> whole number")
+    if sum(reasons.values()) != failed:
+        raise bad("failures_by_reason", reasons, f"counts adding up to failed ({failed})")
     return data
+
+
+def _whole(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _finite(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _write_atomically(path: Path, data: dict) -> None:
+    """Write the summary to a temporary file beside path and rename it into place: an interrupted
+    --update leaves the old golden or the new one, never half of one."""
+    try:
+        text = summary_text(data)
+    except ValueError as err:  # a NaN or infinity from the task's placements
+        raise ConfigError(f"the new summary of {path.name} holds a non-finite number ({err}); not written") from err
+    if len(text.encode()) > MAX_BYTES:
+        raise ConfigError(f"the new summary of {path.name} would hold {len(text.encode())} bytes; expected at most "
+                          f"{MAX_BYTES}; not written")
+    try:
+        mode = S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        mode = 0o644
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".partial", dir=path.parent)
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except OSError as err:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        raise ConfigError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
 
 
 def _moves(golden: dict, new: dict) -> str:
@@ -127,5 +273,6 @@ def _report(golden: dict | None, new: dict) -> str:
              row("success_rate", g.get("success_rate"), new["success_rate"]),
              row("wilson95", g.get("wilson95"), [round(v, 4) for v in new["wilson95"]])]
     lines += [row(f"placement_error_mm.{s}", g_pe.get(s), pe[s]) for s, _ in PERCENTILES]
-    lines.append(row("failures_by_reason", json.dumps(g.get("failures_by_reason")), json.dumps(new["failures_by_reason"])))
+    lines.append(row("failures_by_reason", json.dumps(g.get("failures_by_reason")),
+                     json.dumps(new["failures_by_reason"])))
     return "\n".join(lines) + "\n"

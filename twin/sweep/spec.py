@@ -13,7 +13,7 @@ from pathlib import Path
 from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
 from twin.robot.profile_files import get_profile
-from twin.sweep.dists import Dist, parse_dist
+from twin.sweep.dists import INT64_MAX, INT64_MIN, Dist, parse_dist
 from twin.sweep.keys import Key, check_dist, resolve_key
 from twin.tasks import TaskFn, check_params, resolve
 
@@ -55,9 +55,10 @@ class SweepSpec:
                                                math.isfinite(self.timeout_s) and self.timeout_s > 0):
             raise ConfigError(f"timeout_s {self.timeout_s!r} is invalid; expected seconds of simulated time > 0")
         for name, value in self.tolerance.items():
-            if name not in TOLERANCES or isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
-                raise ConfigError(f"tolerance {name} = {value!r} is invalid; expected one of "
-                                  f"{', '.join(TOLERANCES)} = a number >= 0 (mm)")
+            if name not in TOLERANCES or isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                    not math.isfinite(value) or value < 0:  # a NaN tolerance would pass any move
+                raise ConfigError(f"tolerance {name} = {value!r:.60} is invalid; expected one of "
+                                  f"{', '.join(TOLERANCES)} = a finite number >= 0 (mm)")
 
     def tolerances(self) -> dict[str, float]:
         return {**TOLERANCES, **self.tolerance}
@@ -124,6 +125,15 @@ def load_spec(path: str | Path) -> SweepSpec:
     for name, kind in (("task", str), ("robot", str), ("params", dict), ("vary", dict), ("tolerance", dict)):
         if name in data and not isinstance(data[name], kind):
             raise ConfigError(f"sweep definition {str(path)!r}: {name} must be a {'string' if kind is str else 'table'}")
+    for name in ("rate_hz", "timeout_s"):
+        if name in data and (isinstance(data[name], bool) or not isinstance(data[name], (int, float))):
+            raise ConfigError(f"sweep definition {str(path)!r}: {name} = {data[name]!r:.60} is invalid; "
+                              "expected a number")
+    for name, value in data.get("params", {}).items():
+        bad = _not_json_like(value)
+        if bad is not None:
+            raise ConfigError(f"sweep definition {str(path)!r}: params.{name} holds {bad}; expected a finite "
+                              "number, an int64 whole number, true/false, text, or a list or table of them")
     if "task" not in data or "scenarios" not in data:
         raise ConfigError(f"sweep definition {str(path)!r} needs task and scenarios")
     if not all(isinstance(v, str) for v in data.get("vary", {}).values()):
@@ -140,6 +150,23 @@ def load_spec(path: str | Path) -> SweepSpec:
         raise ConfigError(f"sweep definition {str(path)!r}: {err}") from err
     except (TypeError, ValueError) as err:
         raise ConfigError(f"sweep definition {str(path)!r} holds a bad value: {err}") from err
+
+
+def _not_json_like(value: object) -> str | None:
+    """None when value is what JSON holds (a task parameter, as --param gives), else the first part
+    that is not, described: a TOML date or time, a NaN or an infinity."""
+    if isinstance(value, (str, bool)):
+        return None
+    if isinstance(value, int):  # Python's TOML reader takes any size; results and tasks take int64
+        return None if INT64_MIN <= value <= INT64_MAX else f"{str(value)[:60]} (beyond int64)"
+    if isinstance(value, float):
+        return None if math.isfinite(value) else f"{value!r}"
+    if isinstance(value, list):
+        return next((bad for v in value if (bad := _not_json_like(v)) is not None), None)
+    if isinstance(value, dict):
+        return next((bad for v in value.values() if (bad := _not_json_like(v)) is not None), None)
+    shown = value.isoformat() if hasattr(value, "isoformat") else repr(value)
+    return f"{shown:.60} (a TOML {type(value).__name__})"
 
 
 def _beside(name: str, folder: Path, suffix: str) -> str:

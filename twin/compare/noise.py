@@ -92,11 +92,10 @@ def _value_difference(a: object, b: object) -> float | None:
     return None if None in parts else max(parts, default=0.0)
 
 
-def measure(run: Recording, perturbed: Recording, perturbation: str, margin: float) -> NoiseFloor:
-    """The floor of `run` from `perturbed`, a run of the same inputs with its math nudged."""
-    from twin.compare.engine import error_series  # the engine uses this module's NoiseFloor
-
-    steps, _t, errors = error_series(run, perturbed)
+def measure(run: Recording, perturbed: Recording, series: tuple, perturbation: str, margin: float) -> NoiseFloor:
+    """The floor of `run` from `perturbed`, a run of the same inputs with its math nudged; series is
+    engine.error_series(run, perturbed) (the engine uses this module, not the other way round)."""
+    steps, _t, errors = series
     envelopes = {name: margin * np.maximum.accumulate(np.where(np.isnan(e), math.inf, e)) for name, e in errors.items()}
     a, b = run.frames.object_poses[-1], perturbed.frames.object_poses[-1]
     scalars = {

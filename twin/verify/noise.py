@@ -12,7 +12,7 @@ import dataclasses
 import math
 from collections.abc import Callable
 
-from twin.compare.engine import DiffResult, compare, refuse_incomparable
+from twin.compare.engine import DiffResult, compare, error_series, refuse_incomparable
 from twin.compare.noise import measure
 from twin.compare.tolerances import Tolerances
 from twin.errors import TwinError
@@ -48,7 +48,8 @@ def judge(golden: Recording, candidate: Recording, tolerances: Tolerances, remak
     floor, note = None, ""
     try:
         base = candidate if source is not None else remake(candidate)
-        floor = measure(base, remake(perturbed(source or candidate)), PERTURBATION, tolerances.noise_margin)
+        nudged = remake(perturbed(source or candidate))
+        floor = measure(base, nudged, error_series(base, nudged), PERTURBATION, tolerances.noise_margin)
     except TwinError as err:
         note = (f"the noise floor could not be measured ({err}); judged by the {tolerances.preset} preset's "
                 "tolerances alone")

@@ -7,13 +7,10 @@ LocalCluster of 2 workers (its start reported apart: a cluster is started once; 
 pair, closed before the local pool of the pair runs), and what the sweep adds per scenario (CPU
 time, on its first 48 scenarios) over building the twin and running the task alone in a loop.
 
-Every process that runs scenarios keeps the memory they free (worker.keep_freed_memory). Before,
-a scenario's cost depended on the process's past: 47 ms in a fresh one (7,100 page faults), 34 ms
-once it had imported dask. So the 1-worker rate was measured before this process started Dask and
-the 2-worker pool forked from it after (beside the cluster: up to 2.6x the 1-worker rate on 2
-cores), while Dask's freshly spawned workers paid the faults. The runs in this process (1 worker;
-the loop without a sweep, which keeps freed memory too so that the overhead is the sweep's own) go
-to a forked child, so the setting does not stay in this process for the sections measured after it.
+Every process that runs scenarios keeps the memory they free (worker.keep_freed_memory), so a
+scenario's cost does not depend on the process's past. The sweep runs its scenarios in forked
+children, with one worker too; the loop without a sweep, and the sweep it is compared with, run in
+a forked child of this process, so the allocator setting does not stay here for the sections after.
 tools/bench.py calls bench(ctx); `python tools/bench_sweep.py` runs it alone.
 """
 
@@ -22,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import multiprocessing
+import os
 import statistics
 import sys
 import time
@@ -86,8 +84,6 @@ def _in_child(fn) -> float:
 
 
 def _local_rate(jobs: int) -> float:
-    if jobs == 1:  # in-process, as twin sweep -j 1 runs: in a child, which the sweep's allocator setting stays in
-        return _in_child(lambda: _sweep_rate(LocalExecutor(1)))
     executor = LocalExecutor(jobs)
     try:
         return _sweep_rate(executor)
@@ -113,11 +109,20 @@ def _bare_cpu_s(scenarios: int = OVERHEAD_SCENARIOS) -> float:
 
 
 def _sweep_cpu_s() -> float:
-    """CPU seconds per scenario of a 1-worker sweep (in the calling process) of the same scenarios."""
+    """CPU seconds per scenario of a 1-worker sweep of the same scenarios: this process's and its
+    worker's (a child, counted once it has ended)."""
     spec = _spec(OVERHEAD_SCENARIOS)
-    t0 = time.process_time()
-    run_sweep(Job(spec, None, "none"), range(spec.scenarios), LocalExecutor(1))
-    return (time.process_time() - t0) / spec.scenarios
+    t0 = _cpu_s()
+    executor = LocalExecutor(1)
+    run_sweep(Job(spec, None, "none"), range(spec.scenarios), executor)
+    executor.close()
+    return (_cpu_s() - t0) / spec.scenarios
+
+
+def _cpu_s() -> float:
+    """CPU seconds of this process and its ended children."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
 
 
 def _overhead_ms() -> float:

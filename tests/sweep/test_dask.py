@@ -25,7 +25,8 @@ def _table(folder):
 
 
 def _workers(pid: int) -> list[psutil.Process]:
-    """The Dask worker processes the sweep started (spawned by its nannies)."""
+    """The Dask worker processes the sweep started (spawned by its nannies; not the children the
+    workers fork to run their scenarios in)."""
     out = []
     for child in psutil.Process(pid).children(recursive=True):
         try:
@@ -33,7 +34,8 @@ def _workers(pid: int) -> list[psutil.Process]:
                 out.append(child)
         except psutil.NoSuchProcess:
             pass
-    return out
+    pids = {w.pid for w in out}
+    return [w for w in out if w.ppid() not in pids]
 
 
 def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):

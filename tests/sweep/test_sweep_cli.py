@@ -64,6 +64,8 @@ def test_one_or_two_jobs_give_the_same_results_and_failures_replay(tmp_path, cap
     (["--vary", "task.cycles=choice(1,2)", "--param", "cycles=1"], "task parameter 'cycles' is both --param and --vary"),
     (["--only", "10"], "--only 10 is out of range; the sweep has scenarios 0..9"),
     (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler needs --executor dask"),
+    (["--dashboard"], "--dashboard needs --executor dask without --scheduler"),
+    (["--executor", "dask", "--scheduler", "udp://127.0.0.1:1"], "--scheduler 'udp://127.0.0.1:1' is invalid"),
 ])
 def test_bad_input_is_one_line_exit_2_before_anything_runs(tmp_path, capsys, args, message):
     out = tmp_path / "out"

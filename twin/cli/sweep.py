@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -10,6 +11,8 @@ from pathlib import Path
 
 from twin.cli.args import add_param_option, params_dict, whole_number
 from twin.errors import ConfigError, TwinError
+
+NO_RESULT = ("worker died", "killed: ", "timed out: ")  # a scenario that gave no result (twin.sweep.guard)
 
 
 class BelowThreshold(TwinError):
@@ -26,6 +29,17 @@ def rate(text: str) -> float:
         value = -1.0
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"--fail-under {text!r} is invalid; expected a rate 0..1 or a percentage")
+    return value
+
+
+def seconds(text: str) -> float:
+    """An argparse type: a wall-clock duration in seconds, finite and > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"--scenario-timeout {text!r} is invalid; expected seconds > 0")
     return value
 
 
@@ -60,19 +74,29 @@ def add_sweep_command(sub) -> None:
     add_param_option(p)
     p.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                    help="a scenario whose task runs past this much simulated time fails")
+    p.add_argument("--scenario-timeout", type=seconds, default=None, metavar="S",
+                   help="a scenario that gives no result within S seconds of wall time (hung without stepping) "
+                        "is ended and fails with that reason")
     p.add_argument("--jobs", "-j", type=whole_number(1), default=os.cpu_count() or 1, metavar="N",
                    help=f"worker processes (default: every core, {os.cpu_count()})")
     p.add_argument("--executor", choices=("local", "dask"), default="local",
                    help="local: a process pool on this machine (default); dask: Dask's distributed scheduler")
     p.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 (default: a "
-                        "LocalCluster of --jobs workers on 127.0.0.1)")
+                   help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or tls://HOST:8786 "
+                        "(certificates from Dask's configuration; default: a cluster of --jobs workers on "
+                        "127.0.0.1 that only this sweep can reach, TLS with a certificate made for the run)")
+    p.add_argument("--dashboard", action="store_true",
+                   help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on a free "
+                        "port (its address is printed); without it no HTTP server runs")
     p.add_argument("--batch", type=whole_number(1), default=None, metavar="N",
                    help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on Dask; at most 16)")
     p.add_argument("--out", required=True, metavar="DIR", help="the output folder (created; its parent must exist, or be runs/, which is made)")
     p.add_argument("--save", choices=("failures", "all", "none"), default="failures",
                    help="which scenarios to record as MCAP (default failures: DIR/failures/scenario-<i>.mcap; "
                         "all: also DIR/scenarios/scenario-<i>.mcap)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue a sweep that was stopped or killed: run only the scenarios missing from "
+                        "DIR/journal.jsonl (same definition), then write the results as an uninterrupted sweep")
     p.add_argument("--only", type=only_list, default=None, metavar="I[,J...]",
                    help="re-run only these scenarios (recorded per --save; results.parquet is left alone)")
     p.add_argument("--fail-under", type=rate, default=None, metavar="RATE",
@@ -102,6 +126,7 @@ def sweep_spec(args: argparse.Namespace):
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from twin.sweep.executors import make_executor
+    from twin.sweep.journal import JOURNAL, Journal
     from twin.sweep.results import write_definition, write_results
     from twin.sweep.runner import run_sweep
     from twin.sweep.spec import prepare
@@ -109,20 +134,45 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     spec = sweep_spec(args)
     prepare(spec)  # every key, distribution and parameter checked before anything runs
-    scenarios = args.only if args.only is not None else list(range(spec.scenarios))
+    if args.only is not None and args.resume:
+        raise ConfigError("--only and --resume cannot go together; expected one of them")
     if args.only is not None and max(args.only) >= spec.scenarios:
         raise ConfigError(f"--only {max(args.only)} is out of range; the sweep has scenarios 0..{spec.scenarios - 1}")
-    out = _out_dir(args.out, clear=args.only is None)
+    out = _out_dir(args.out, clear=args.only is None and not args.resume)
+    journal = None
     if args.only is None:
+        if args.resume and not (out / JOURNAL).exists():
+            raise ConfigError(f"--resume: {str(out / JOURNAL)!r} does not exist; expected the folder of a sweep "
+                              "that was stopped (or run without --resume)")
+        journal = Journal(out, spec, resume=args.resume)
         write_definition(out, spec)
-    executor = make_executor(args.executor, min(args.jobs, len(scenarios)) if args.executor == "local" else args.jobs,
-                             args.scheduler)
-    progress = Progress(len(scenarios), quiet=args.quiet)
+        if journal.rows:
+            print(f"resuming: {len(journal.rows)} of {spec.scenarios} scenarios are in {out / JOURNAL}",
+                  file=sys.stderr)
+        scenarios = (i for i in range(spec.scenarios) if not journal.done(i))
+        count = spec.scenarios - len(journal.rows)
+    else:
+        scenarios, count = args.only, len(args.only)
+    jobs = max(1, min(args.jobs, count)) if args.executor == "local" else args.jobs
+    executor = make_executor(args.executor, jobs, args.scheduler, dashboard=args.dashboard)
+    if getattr(executor, "dashboard_url", None):
+        print(f"Dask dashboard: {executor.dashboard_url}", file=sys.stderr)
+    progress = Progress(count, quiet=args.quiet)
+
+    def on_row(row: dict) -> None:
+        if journal is not None:
+            journal.add(row)
+        progress(row)
+
     try:
-        done = run_sweep(Job(spec, str(out), args.save), scenarios, executor, batch_size=args.batch, on_rows=progress)
+        done = run_sweep(Job(spec, str(out), args.save), scenarios, executor, count=count, batch_size_n=args.batch,
+                         scenario_timeout_s=args.scenario_timeout, on_row=on_row,
+                         rows=journal.rows if journal else None, planned=spec.scenarios if journal else None)
     finally:
         progress.close()
         executor.close()
+        if journal is not None:
+            journal.close()
     if args.only is not None:
         _print_only(done.rows, out, args.save)
     else:
@@ -131,6 +181,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             print(line)
         print(f"wrote {out / 'results.parquet'}, {out / 'summary.json'}, {out / 'sweep.toml'}")
     if done.stopped_by is not None:
+        print(f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` runs the rest",
+              file=sys.stderr)
         raise done.stopped_by  # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
     if args.fail_under is not None and args.only is None and summary["success_rate"] < args.fail_under:
         raise BelowThreshold(f"success rate {summary['success_rate']:.4f} is under --fail-under {args.fail_under:g}")
@@ -189,9 +241,18 @@ def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> 
         lines.append("failures by reason:")
         lines += [f"  {count:6d}  {why}" for why, count in summary["failures_by_reason"].items()]
         if save != "none":
-            first = next(r["scenario"] for r in done.rows if r["outcome"] != "ok")
-            lines.append(f"failures recorded in {out / 'failures'}/ (e.g. twin replay "
-                         f"{out / 'failures' / f'scenario-{first}.mcap'})")
+            recorded = [r["scenario"] for r in done.rows
+                        if r["outcome"] != "ok" and (out / "failures" / f"scenario-{r['scenario']}.mcap").exists()]
+            if recorded:
+                lines.append(f"failures recorded in {out / 'failures'}/ (e.g. twin replay "
+                             f"{out / 'failures' / f'scenario-{recorded[0]}.mcap'})")
+        lost = [r for r in done.rows if r["outcome"] != "ok" and r["error"].startswith(NO_RESULT)]
+        for r in lost[:5]:  # the scenarios that killed their process or hung: named, with their recording
+            cut = out / "failures" / f"scenario-{r['scenario']}.mcap.partial"
+            hint = f"; twin recover {cut.with_suffix('')} restores its recording" if cut.exists() else ""
+            lines.append(f"scenario {r['scenario']}: {r['error']}{hint}")
+        if len(lost) > 5:
+            lines.append(f"... and {len(lost) - 5} more such scenarios (results.parquet names them)")
     return lines
 
 
@@ -211,13 +272,13 @@ class Progress:
 
             self._bar = tqdm(total=total, file=self.stream, unit="scenario", dynamic_ncols=True, leave=True)
 
-    def __call__(self, rows: list[dict]) -> None:
-        self.done += len(rows)
-        self.ok += sum(r["outcome"] == "ok" for r in rows)
+    def __call__(self, row: dict) -> None:
+        self.done += 1
+        self.ok += row["outcome"] == "ok"
         text = f"ok {100 * self.ok / self.done:.1f} %"
         if self._bar is not None:
             self._bar.set_postfix_str(text, refresh=False)
-            self._bar.update(len(rows))
+            self._bar.update(1)
         elif not self.quiet and (time.perf_counter() - self._last >= 1.0 or self.done == self.total):
             self._last = time.perf_counter()
             elapsed = self._last - self._t0

@@ -1,14 +1,15 @@
-"""Where work runs: `LocalExecutor` (this machine's cores: a process pool whose workers are reused)
-or `DaskExecutor` (Dask's distributed scheduler: a cluster at --scheduler, or a LocalCluster on
-127.0.0.1 only). Both offer one call, `map_unordered(fn, items)`, which runs fn(*item) for each item
-and yields (index of the item, result) as each finishes; the sweep sends batches of scenarios
-through it, and `twin check --executor dask` sends goldens.
+"""Where work runs: `LocalExecutor` (this machine's cores) or `DaskExecutor` (Dask's distributed
+scheduler: a cluster at --scheduler, or a TLS-secured cluster of its own on 127.0.0.1, cluster.py). Both offer two calls:
+`run_scenarios(job, batches, scenario_timeout_s)`, which runs a sweep's batches (taken from the
+iterator only as workers free up) and yields each scenario's row as it finishes, a scenario that
+kills its process or hangs becoming a failed row (guard.py); and `map_unordered(fn, items)`, which
+runs fn(*item) for each item and yields (index of the item, result) as each finishes
+(`twin check` sends goldens through it).
 """
 
 from __future__ import annotations
 
 import itertools
-import logging
 import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
@@ -16,27 +17,13 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
 from twin.errors import ConfigError, TwinError
+from twin.sweep.guard import GuardedPool, run_batch_guarded
+from twin.sweep.worker import failed_row
 
 EXECUTORS = ("local", "dask")
 POOL_RESTARTS = 3  # a local worker that dies (killed, out of memory): its work is sent again, this often
 DASK_RETRIES = 2  # a task that raised is tried again this often; a worker that dies is handled by Dask itself
-
-
-# A LocalCluster's scheduler, nannies and workers take this configuration. Their event loops' periodic
-# work runs beside the simulation (in a worker, a thread that takes the GIL from it; the scheduler on
-# the same cores): idle, with Dask's defaults, the scheduler's process took 4.4 % of a core and each
-# worker 1.7-1.9 %; with the tick and memory-check intervals below 1.1 % and 0.3-0.4 %, and the
-# scheduler's process used 0.06-0.09 s of CPU per 150-scenario sweep instead of 0.14-0.20 s (measured).
-WORKER_CONFIG = {
-    "distributed.worker.profile.enabled": False,  # its 10 ms stack sampling takes the GIL from the simulation
-    "distributed.admin.system-monitor.interval": "2s",
-    "distributed.admin.tick.interval": "500ms",  # an event-loop health check (for warnings), default 20 ms
-    "distributed.worker.memory.monitor-interval": "1s",  # spill/pause/terminate checks, default 100 ms
-    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return memory at every
-    # free and turns off its adaptive threshold; the simulation allocates all the time (and run_batch
-    # keeps freed memory: worker.keep_freed_memory). Threads stay at 1.
-    "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
-}
+DASK_WINDOW_PER_JOB = 4  # batches in flight per Dask worker: enough to keep it busy, few enough to stay small
 
 
 class WorkerLost(TwinError):
@@ -54,15 +41,24 @@ def _worker_signals() -> None:
 
 
 class LocalExecutor:
-    """jobs == 1: in this process (no pool); else a process pool of `jobs` workers, each importing
-    twin once and serving many items. A pool whose worker died is rebuilt and the unfinished items
-    sent again (up to POOL_RESTARTS times)."""
+    """A sweep's scenarios run in `jobs` guarded child processes (guard.GuardedPool). map_unordered
+    (goldens): jobs == 1 in this process; else a process pool of `jobs` workers, each importing twin
+    once and serving many items, rebuilt when a worker died and the unfinished items sent again (up
+    to POOL_RESTARTS times)."""
 
     name = "local"
 
     def __init__(self, jobs: int) -> None:
         self.jobs = jobs
         self._pool: ProcessPoolExecutor | None = None
+        self._guarded: GuardedPool | None = None
+
+    def run_scenarios(self, job, batches: Iterator[list[int]],
+                      scenario_timeout_s: float | None = None) -> Iterator[dict]:
+        """A sweep's rows, from `jobs` guarded child processes (also with one job: a scenario that
+        kills its process must not take the sweep along)."""
+        self._guarded = GuardedPool(job, self.jobs, scenario_timeout_s)
+        yield from self._guarded.run(batches)
 
     def map_unordered(self, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, object]]:
         if self.jobs == 1:
@@ -91,6 +87,9 @@ class LocalExecutor:
 
     def close(self) -> None:
         """Stop the workers now (also part-way: Ctrl-C), dropping queued work."""
+        guarded, self._guarded = self._guarded, None
+        if guarded is not None:
+            guarded.close()
         if self._pool is not None:
             pool, self._pool = self._pool, None
             for proc in list(getattr(pool, "_processes", {}).values()):  # queued work is dropped, not finished
@@ -100,43 +99,79 @@ class LocalExecutor:
 
 
 class DaskExecutor:
-    """Dask distributed: `Client(scheduler)` for a running cluster (workers there need twin
-    installed), else a LocalCluster of `jobs` single-threaded worker processes bound to 127.0.0.1,
-    without a dashboard. Items are submitted as tasks and streamed back as they finish; a worker
-    that dies has its tasks rescheduled on the others by Dask (the results stay the same: a
-    scenario's run depends on its inputs alone)."""
+    """Dask distributed: `cluster.connect(scheduler)` for a running cluster (workers there need twin
+    installed), else `cluster.start_local`: `jobs` single-threaded worker processes on 127.0.0.1 that
+    speak TLS with a certificate made for the run, and no HTTP server unless `dashboard`. Batches
+    are submitted as tasks from a bounded window and streamed back as they finish; a worker that
+    dies has its tasks rescheduled on the others by Dask (the results stay the same: a scenario's
+    run depends on its inputs alone)."""
 
     name = "dask"
     batches_per_job = 2  # a task costs Dask a few round trips: fewer, longer ones (measured: 2 per worker kept
     #                      pace with the local pool where 4 lost 10-25 %)
 
-    def __init__(self, jobs: int, scheduler: str | None = None) -> None:
-        try:
-            from distributed import Client, LocalCluster
-        except ImportError as err:
-            raise ConfigError("--executor dask needs Dask's distributed scheduler; "
-                              "install it with pip install 'twin[dask]'") from err
-        import dask
+    def __init__(self, jobs: int, scheduler: str | None = None, *, dashboard: bool = False) -> None:
+        from twin.sweep.cluster import connect, start_local
 
         self.jobs, self.scheduler = jobs, scheduler
-        self._cluster = None
-        dask.config.set(WORKER_CONFIG)  # a LocalCluster's workers take this configuration
-        try:
-            if scheduler:
-                self._client = Client(scheduler, timeout=10, set_as_default=False)
-                self.jobs = max(1, self.worker_count())  # batches sized for the cluster's workers
-            else:
-                self._cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                             dashboard_address=None, silence_logs=logging.ERROR,
-                                             preload=["twin.sweep.worker"])  # twin imported as workers start
-                self._client = Client(self._cluster, set_as_default=False)
-        except (OSError, TimeoutError, RuntimeError) as err:  # RuntimeError: a worker process could not start
-            self.close()
-            raise ConfigError(f"cannot start or reach the Dask scheduler {scheduler or 'LocalCluster'!r}: {err} "
-                              "(a script that starts one needs the if __name__ == '__main__': guard)") from err
+        self._cluster = self._client = None
+        self.dashboard_url: str | None = None
+        if scheduler:
+            self._client = connect(scheduler)
+            self.jobs = max(1, self.worker_count())  # batches sized for the cluster's workers
+        else:
+            self._cluster, self._client, self.dashboard_url = start_local(jobs, dashboard=dashboard)
 
     def worker_count(self) -> int:
         return len(self._client.scheduler_info().get("workers", {}))
+
+    def run_scenarios(self, job, batches: Iterator[list[int]],
+                      scenario_timeout_s: float | None = None) -> Iterator[dict]:
+        """A sweep's rows, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker in flight.
+        Each task runs its batch in a guarded child of the Dask worker; a batch whose Dask worker was
+        lost anyway (Dask gave up: KilledWorker) is sent again one scenario per task, and a scenario
+        that loses its worker alone is a failed row."""
+        from distributed import as_completed
+
+        token = os.urandom(6).hex()
+        counter = itertools.count()
+        pending: dict[str, list[int]] = {}
+
+        def submit(batch: list[int]):
+            key = f"twin-{token}-{next(counter)}"
+            pending[key] = batch
+            return self._client.submit(run_batch_guarded, job, batch, scenario_timeout_s, key=key, pure=False,
+                                       retries=DASK_RETRIES)
+
+        window = max(1, self.jobs * DASK_WINDOW_PER_JOB)
+        source = iter(batches)
+        done = as_completed([], loop=self._client.loop, with_results=True, raise_errors=False)
+        for batch in itertools.islice(source, window):
+            done.add(submit(batch))
+        try:
+            for fut, result in done:
+                batch = pending.pop(fut.key)
+                if fut.status == "error":
+                    err = fut.exception()
+                    if isinstance(err, TwinError):
+                        raise err
+                    if len(batch) > 1:  # find the scenario that loses its worker: one task each
+                        for i in batch:
+                            done.add(submit([i]))
+                        continue
+                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})".splitlines()[0]
+                    result = [failed_row(job, batch[0], why, 0.0)]
+                nxt = next(source, None)
+                if nxt is not None:
+                    done.add(submit(nxt))
+                yield from result
+        finally:
+            self._cancel(done)
+
+    def _cancel(self, done) -> None:
+        futures = list(getattr(done, "futures", ()))
+        if futures:
+            self._client.cancel(futures)
 
     def map_unordered(self, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, object]]:
         from distributed import as_completed
@@ -169,12 +204,15 @@ class DaskExecutor:
             cluster.close()
 
 
-def make_executor(name: str, jobs: int, scheduler: str | None = None):
-    """The executor --executor names; --scheduler only with dask."""
+def make_executor(name: str, jobs: int, scheduler: str | None = None, *, dashboard: bool = False):
+    """The executor --executor names; --scheduler and --dashboard only with dask."""
     if name not in EXECUTORS:
         raise ConfigError(f"executor {name!r} is unknown; expected one of {', '.join(EXECUTORS)}")
     if scheduler and name != "dask":
         raise ConfigError("--scheduler needs --executor dask")
-    if scheduler and not scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        raise ConfigError(f"--scheduler {scheduler!r} is invalid; expected an address such as tcp://HOST:8786")
-    return DaskExecutor(jobs, scheduler) if name == "dask" else LocalExecutor(jobs)
+    if dashboard and (name != "dask" or scheduler):
+        raise ConfigError("--dashboard needs --executor dask without --scheduler (a cluster of your own has its own)")
+    if scheduler and not scheduler.startswith(("tcp://", "tls://")):
+        raise ConfigError(f"--scheduler {scheduler!r} is invalid; expected an address such as tcp://HOST:8786 "
+                          "or tls://HOST:8786")
+    return DaskExecutor(jobs, scheduler, dashboard=dashboard) if name == "dask" else LocalExecutor(jobs)

@@ -1,16 +1,18 @@
-"""Running a sweep: the scenarios cut into batches, the batches sent through an executor, the rows
-collected as they come back. Ctrl-C (or SIGTERM/SIGHUP) stops the executor and keeps the rows of
-the batches that finished, so the caller can still write them."""
+"""Running a sweep: the scenarios cut into batches (made one at a time, as workers free up), sent
+through an executor, each finished scenario's row kept and told to `on_row` (the journal, the
+progress) as it comes back. Ctrl-C (or SIGTERM/SIGHUP) stops the executor and keeps the rows that
+finished, so the caller can still write them."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 from twin.signals import Terminated
-from twin.sweep.worker import Job, run_batch
+from twin.sweep.worker import Job
 
 MAX_BATCH = 16  # scenarios per task: long enough to amortize sending it, short enough for steady progress
 BATCHES_PER_JOB = 4  # at least this many batches per worker, so the last ones finish together
@@ -27,33 +29,40 @@ class SweepRun:
     stopped_by: BaseException | None = None
 
 
-def batches(scenarios: Sequence[int], jobs: int, size: int | None = None,
-            per_job: int = BATCHES_PER_JOB) -> list[list[int]]:
-    """scenarios cut into batches of at most `size` (default: about `per_job` batches per job, at most
-    MAX_BATCH), all of nearly one length: a short last batch would leave a worker idle at the end."""
-    if size is None:
-        size = 1 if jobs == 1 else max(1, min(MAX_BATCH, math.ceil(len(scenarios) / (jobs * per_job))))
-    count = math.ceil(len(scenarios) / size)
-    n = len(scenarios)
-    return [list(scenarios[k * n // count:(k + 1) * n // count]) for k in range(count)]
+def batch_size(count: int, jobs: int, per_job: int = BATCHES_PER_JOB) -> int:
+    """About `per_job` batches per job, at most MAX_BATCH scenarios each (1 with one job)."""
+    return 1 if jobs == 1 else max(1, min(MAX_BATCH, math.ceil(count / (jobs * per_job))))
 
 
-def run_sweep(job: Job, scenarios: Sequence[int], executor, *, batch_size: int | None = None,
-              on_rows: Callable[[list[dict]], None] | None = None) -> SweepRun:
-    """Run the scenarios; on_rows is told each finished batch's rows. The caller closes the executor
-    (it may run more); an interrupted sweep closes it at once."""
+def batches(scenarios: Iterable[int], n: int, size: int) -> Iterator[list[int]]:
+    """The n scenarios cut into batches of at most `size`, all of nearly one length (a short last batch
+    would leave a worker idle at the end), made as they are asked for: 10M planned cost nothing."""
+    source = iter(scenarios)
+    count = math.ceil(n / size)
+    for k in range(count):
+        yield list(itertools.islice(source, (k + 1) * n // count - k * n // count))
+
+
+def run_sweep(job: Job, scenarios: Iterable[int], executor, *, count: int | None = None,
+              batch_size_n: int | None = None, scenario_timeout_s: float | None = None,
+              on_row: Callable[[dict], None] | None = None, rows: list[dict] | None = None,
+              planned: int | None = None) -> SweepRun:
+    """Run the scenarios (count of them: len(scenarios) when not given); on_row is told each finished
+    one. rows: those already finished (a resumed sweep); planned: how many the whole sweep has. The
+    caller closes the executor (it may run more); an interrupted sweep closes it at once."""
     t0 = time.perf_counter()
-    rows: list[dict] = []
+    rows = list(rows or [])
+    count = len(scenarios) if count is None else count
     per_job = getattr(executor, "batches_per_job", BATCHES_PER_JOB)
-    items = [(job, batch) for batch in batches(scenarios, executor.jobs, batch_size, per_job)]
+    size = batch_size_n or batch_size(count, executor.jobs, per_job)
     stopped_by = None
     try:
-        for _, batch_rows in executor.map_unordered(run_batch, items):
-            rows.extend(batch_rows)
-            if on_rows is not None:
-                on_rows(batch_rows)
+        for row in executor.run_scenarios(job, batches(scenarios, count, size), scenario_timeout_s):
+            rows.append(row)
+            if on_row is not None:
+                on_row(row)
     except (KeyboardInterrupt, Terminated) as err:
         stopped_by = err
-        executor.close()  # stop the workers now; the batches that finished are kept
+        executor.close()  # stop the workers now; the scenarios that finished are kept
     rows.sort(key=lambda r: r["scenario"])
-    return SweepRun(rows, len(scenarios), time.perf_counter() - t0, stopped_by)
+    return SweepRun(rows, count if planned is None else planned, time.perf_counter() - t0, stopped_by)

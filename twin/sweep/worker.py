@@ -43,6 +43,12 @@ class Job:
 _PREPARED: dict[str, tuple[Prepared, RandomSampler]] = {}  # per worker process: a definition is prepared once
 
 
+def warm(job: Job) -> None:
+    """Prepare the job's definition in this process, so the children forked from it start prepared
+    (a Dask worker forks one per task)."""
+    _prepared(job.spec)
+
+
 def _prepared(spec: SweepSpec) -> tuple[Prepared, RandomSampler]:
     key = spec.key()
     if key not in _PREPARED:
@@ -50,12 +56,6 @@ def _prepared(spec: SweepSpec) -> tuple[Prepared, RandomSampler]:
         _PREPARED.clear()
         _PREPARED[key] = (prep, RandomSampler(spec.seed, prep.keys))
     return _PREPARED[key]
-
-
-def run_batch(job: Job, scenarios: list[int]) -> list[dict]:
-    """The rows of a batch of scenarios, in order (what an executor runs as one task)."""
-    keep_freed_memory()
-    return [run_scenario(job, i) for i in scenarios]
 
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
@@ -90,7 +90,7 @@ def run_scenario(job: Job, scenario: int) -> dict:
     """Run scenario `scenario` once (twice for a failure that is recorded) and return its row."""
     prep, sampler = _prepared(job.spec)
     values = sampler.values(scenario)
-    row = {"scenario": scenario, "seed": job.spec.seed, **{key.name: value for key, value in values.items()}}
+    row = _row(job, scenario, values)
     save_all = job.save == "all" and job.out_dir is not None
     first = scenario_path(job.out_dir, SCENARIOS, scenario) if save_all else None
     t0 = time.perf_counter()
@@ -107,6 +107,41 @@ def run_scenario(job: Job, scenario: int) -> dict:
         else:  # the run is deterministic: running it again, recorded, gives this same run
             _run(prep, values, scenario, failed)
     return row
+
+
+def confirm_scenario(job: Job, scenario: int) -> dict:
+    """Run a scenario whose first run killed its process (or hung) once more, recorded from the
+    start as a failure, so that if it dies again its file holds what was flushed before
+    (`twin recover` restores it). A run that ends after all is kept per --save like any other."""
+    if job.out_dir is None or job.save == "none":
+        return run_scenario(job, scenario)
+    prep, sampler = _prepared(job.spec)
+    values = sampler.values(scenario)
+    failed = scenario_path(job.out_dir, FAILURES, scenario)
+    t0 = time.perf_counter()
+    result = _run(prep, values, scenario, failed)
+    row = _row(job, scenario, values)
+    row.update(result, wall_s=time.perf_counter() - t0)
+    try:
+        if job.save == "all":
+            scenario_path(job.out_dir, SCENARIOS, scenario).parent.mkdir(exist_ok=True)
+            shutil.copyfile(failed, scenario_path(job.out_dir, SCENARIOS, scenario))
+        if row["outcome"] == "ok":
+            failed.unlink()
+    except OSError as err:
+        raise RecordingError(f"cannot write the recording of scenario {scenario}: {err.strerror or err}") from err
+    return row
+
+
+def failed_row(job: Job, scenario: int, reason: str, wall_s: float) -> dict:
+    """The row of a scenario that gave no result (its process died, or it ran out of wall time)."""
+    _, sampler = _prepared(job.spec)
+    return {**_row(job, scenario, sampler.values(scenario)), "outcome": "error", "error": reason,
+            "placement_error_mm": None, **dict.fromkeys(COUNTED, 0), "sim_s": None, "wall_s": wall_s}
+
+
+def _row(job: Job, scenario: int, values: dict) -> dict:
+    return {"scenario": scenario, "seed": job.spec.seed, **{key.name: value for key, value in values.items()}}
 
 
 class _Tally(Sink):

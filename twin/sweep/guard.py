@@ -1,0 +1,251 @@
+"""Scenarios run in child processes that may die without taking the sweep along.
+
+A `Child` is a forked process that runs the batches of scenarios sent to it, one row back per
+scenario, in order, so the parent always knows which scenario is running. It dies with its parent
+(PR_SET_PDEATHSIG) and leaves Ctrl-C to it. `GuardedPool` keeps `jobs` children busy with batches
+taken from an iterator (only as many as it has children: the window is bounded whatever the sweep's
+size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs past the wall-clock
+limit into a failed scenario: that scenario is run once more, alone in a fresh child and recorded per
+the job's --save; if it dies or hangs again, its row says why, the rest of its batch goes on in
+another child and so does the sweep. The local executor runs a pool of `jobs` children; a Dask task
+runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import socket
+import sys
+import time
+from collections import deque
+from collections.abc import Iterable, Iterator
+from multiprocessing.connection import Connection, wait
+
+from twin.errors import TwinError
+from twin.sweep.worker import Job, confirm_scenario, failed_row, keep_freed_memory, run_scenario, warm
+
+PR_SET_PDEATHSIG = 1  # prctl(2)
+OOM_EVENTS = "/sys/fs/cgroup/memory.events"  # cgroup v2: oom_kill counts the processes the OOM killer ended
+_PARENT_ENDS: set[int] = set()  # this process's ends of its children's pipes: a new child closes them, or a
+#                                 child would never read the end of its pipe while a sibling held that end open
+
+
+class Child:
+    """One forked worker and the scenarios it was sent and has not answered yet (`pending`, in the
+    order it runs them)."""
+
+    def __init__(self, job: Job) -> None:
+        parent_end, child_end = socket.socketpair()
+        parent_pid = os.getpid()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:  # the child: serve until the parent closes its end, never return into the parent's code
+            code = 0
+            try:
+                parent_end.close()
+                for fd in _PARENT_ENDS:
+                    os.close(fd)
+                _serve(Connection(child_end.detach()), job, parent_pid)
+            except BaseException:  # noqa: BLE001 - a child must end here, whatever happened
+                code = 70
+            finally:
+                os._exit(code)
+        child_end.close()
+        self.pid = pid
+        self.conn = Connection(parent_end.detach())
+        _PARENT_ENDS.add(self.conn.fileno())
+        self.pending: deque[int] = deque()
+        self.started_s = time.monotonic()  # when the scenario pending[0] started
+        self.confirm: str | None = None  # running one scenario again, alone: why its first run ended
+        self.timed_out = False
+        self.oom_before = oom_kills()
+
+    def send(self, scenarios: list[int], *, confirm: str | None = None) -> None:
+        self.pending.extend(scenarios)
+        self.confirm = confirm
+        self.started_s = time.monotonic()
+        self.conn.send((scenarios, confirm is not None))
+
+    def kill(self) -> str:
+        """End the process now (if it still runs) and say how it ended."""
+        try:
+            os.kill(self.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        return self.reap()
+
+    def reap(self) -> str:
+        """Wait for the process to end; how it ended, as a failed scenario's reason."""
+        _PARENT_ENDS.discard(self.conn.fileno())
+        self.conn.close()
+        try:
+            _, status = os.waitpid(self.pid, 0)
+        except ChildProcessError:
+            return "worker died"
+        code = os.waitstatus_to_exitcode(status)
+        if code >= 0:
+            return f"worker died: exit code {code}"
+        sig = -code
+        if sig == signal.SIGKILL and oom_kills() > self.oom_before:
+            return "killed: out of memory"
+        try:
+            name = signal.Signals(sig).name
+        except ValueError:
+            name = "unknown signal"
+        return f"worker died: signal {sig} ({name})"
+
+
+def _serve(conn: Connection, job: Job, parent_pid: int) -> None:
+    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop", error)."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    prctl = getattr(libc, "prctl", None)
+    if prctl is not None:
+        prctl(PR_SET_PDEATHSIG, signal.SIGKILL)  # dies with the parent, even by kill -9
+    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+        return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle (it stops us)
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, signal.SIG_DFL)
+    keep_freed_memory()
+    while True:
+        try:
+            scenarios, confirm = conn.recv()
+        except EOFError:
+            return
+        for i in scenarios:
+            try:
+                row = confirm_scenario(job, i) if confirm else run_scenario(job, i)
+            except TwinError as err:  # a file that cannot be written: the sweep stops (one line)
+                conn.send(("stop", err))
+                return
+            except Exception as err:  # noqa: BLE001 - a bug in the task's code fails its scenario only
+                row = failed_row(job, i, f"{type(err).__name__}: {err}", 0.0)
+            conn.send(("row", row))
+        sys.stdout.flush()
+
+
+def oom_kills() -> int:
+    """How many processes the OOM killer has ended in this cgroup (0 where that is not known)."""
+    try:
+        with open(OOM_EVENTS) as f:
+            for line in f:
+                name, _, value = line.partition(" ")
+                if name == "oom_kill":
+                    return int(value)
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+class GuardedPool:
+    """`jobs` children running the batches of one sweep; `run` yields each scenario's row as it
+    finishes. scenario_timeout_s: wall seconds a scenario may take (None: no limit)."""
+
+    def __init__(self, job: Job, jobs: int, scenario_timeout_s: float | None = None) -> None:
+        self.job, self.jobs, self.timeout_s = job, jobs, scenario_timeout_s
+        self.busy: list[Child] = []
+        self.idle: list[Child] = []
+        self.again: deque[list[int]] = deque()  # the rest of a batch whose child died
+        self.to_confirm: deque[tuple[int, str]] = deque()  # scenarios to run once more, alone: (i, first reason)
+
+    def run(self, batches: Iterable[list[int]]) -> Iterator[dict]:
+        source = iter(batches)
+        warm(self.job)  # once here, not in every child
+        try:
+            while True:
+                while len(self.busy) < self.jobs and self._send(source):
+                    pass
+                if not self.busy:
+                    return
+                for child in self._ready():
+                    row = self._answer(child)
+                    if child.conn.closed or not child.pending:
+                        self.busy.remove(child)
+                        if not child.conn.closed:
+                            self.idle.append(child)
+                    if row is not None:
+                        yield row
+        finally:
+            self.close()
+
+    def _send(self, source: Iterator[list[int]]) -> bool:
+        """Give the next work to an idle (or new) child: a scenario to confirm, the rest of a batch,
+        or the next batch. False when there is none now."""
+        if self.to_confirm:
+            scenario, reason = self.to_confirm.popleft()
+            work, confirm = [scenario], reason
+        elif self.again:
+            work, confirm = self.again.popleft(), None
+        else:
+            work, confirm = next(source, None), None
+            if work is None:
+                return False
+        child = self.idle.pop() if self.idle else Child(self.job)
+        child.send(work, confirm=confirm)
+        self.busy.append(child)
+        return True
+
+    def _ready(self) -> list[Child]:
+        """The busy children with a message (or dead), after waiting until one has; a child past the
+        time limit is marked and returned too."""
+        timeout = None
+        if self.timeout_s is not None:
+            timeout = max(0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic())
+        ready = wait([c.conn for c in self.busy], timeout)
+        out = [c for c in self.busy if c.conn in ready]
+        if self.timeout_s is not None:
+            now = time.monotonic()
+            for c in self.busy:
+                if c not in out and now - c.started_s >= self.timeout_s:
+                    c.timed_out = True
+                    out.append(c)
+        return out
+
+    def _answer(self, child: Child) -> dict | None:
+        """Take one message from a child, or its death or time-out; the finished row, if one is."""
+        scenario = child.pending[0]
+        if child.timed_out:
+            child.kill()
+            reason = f"timed out: no result after {self.timeout_s:g} s of wall time"
+        else:
+            try:
+                kind, value = child.conn.recv()
+            except (EOFError, OSError):
+                kind, value = "died", child.reap()
+            if kind == "stop":
+                raise value
+            if kind == "row":
+                child.pending.popleft()
+                child.started_s = time.monotonic()
+                return value
+            reason = value
+        wall_s = time.monotonic() - child.started_s
+        child.pending.popleft()
+        if child.pending:
+            self.again.append(list(child.pending))
+            child.pending.clear()
+        if child.confirm is None:  # first time: run it once more, alone, before calling it a failure
+            self.to_confirm.append((scenario, reason))
+            return None
+        why = reason if reason == child.confirm else f"{reason} (first run: {child.confirm})"
+        return failed_row(self.job, scenario, why, wall_s)
+
+    def close(self) -> None:
+        """End the children: an idle one when it reads the end of its pipe, a busy one (Ctrl-C, an
+        error) at once, its unanswered scenarios dropped."""
+        busy, idle, self.busy, self.idle = self.busy, self.idle, [], []
+        for child in busy:
+            if not child.conn.closed:
+                child.kill()
+        for child in idle:
+            if not child.conn.closed:
+                child.reap()
+
+
+def run_batch_guarded(job: Job, scenarios: list[int], scenario_timeout_s: float | None = None) -> list[dict]:
+    """A batch's rows, run in a child of this process (what a Dask task runs): a scenario that kills
+    its process or hangs is a failed row, the Dask worker lives on."""
+    return list(GuardedPool(job, 1, scenario_timeout_s).run([scenarios]))

@@ -104,3 +104,36 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
     assert not (goldens / "one_cycle.obtained.mcap").exists()
     pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+
+
+FAILING_TEST = """
+import os
+from twin.verify.check import record_task
+from twin.model.config import TwinConfig
+
+def test_run(golden):
+    params = {"cycles": 1, "max_error_m": 1e-9} if os.environ.get("TWIN_FAIL") else {"cycles": 1}
+    golden.check(record_task(TwinConfig(), "pick_place", params), "one_cycle",
+                 allow_error=bool(os.environ.get("TWIN_ALLOW")))
+"""
+
+
+def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypatch):
+    pytester.makeini("[pytest]\ntwin_goldens_dir = goldens\n")
+    pytester.makepyfile(test_plugin=FAILING_TEST)
+    golden = pytester.path / "goldens" / "one_cycle.mcap"
+    monkeypatch.setenv("TWIN_FAIL", "1")
+    first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    first.assert_outcomes(failed=1)
+    assert "this run cannot become it: its task ended error" in first.stdout.str() and not golden.exists()
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)  # still not written
+    monkeypatch.delenv("TWIN_FAIL")
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)  # written from the ok run
+    assert golden.exists()
+    monkeypatch.setenv("TWIN_FAIL", "1")
+    update = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens")
+    update.assert_outcomes(failed=1)
+    assert "rerun with --update-goldens" not in update.stdout.str()
+    assert "this run cannot become the golden: its task ended error" in update.stdout.str()
+    monkeypatch.setenv("TWIN_ALLOW", "1")
+    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)

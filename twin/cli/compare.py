@@ -94,7 +94,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
         with open_recorders(rec.config, replay_run(rec), mcap_path=args.record) as sinks:
             new = replay(rec, sinks=sinks)
-        new.path = args.record
+        new.path, new.finalized = args.record, True  # the file was finalized as the block closed
     else:
         new = replay(rec)
     kinds = replayed_event_kinds(rec)

@@ -15,6 +15,7 @@ import numpy as np
 
 from twin.compare.events import by_key
 from twin.compare.metrics import quat_angle
+from twin.compare.tolerances import COUNTED_EVENTS
 from twin.model.recording import Recording
 from twin.model.types import Command
 
@@ -103,7 +104,7 @@ def measure(run: Recording, perturbed: Recording, series: tuple, perturbation: s
         "final.orientation": margin * float(np.max(quat_angle(a[:, 3:], b[:, 3:]), initial=0.0)),
         "run.length": float(abs(int(run.frames.step[-1]) - int(perturbed.frames.step[-1]))),
     }
-    for kind in ("attach", "release", "break"):
+    for kind in COUNTED_EVENTS:
         scalars[f"counts.{kind}"] = float(abs(sum(e.kind == kind for e in run.events)
                                               - sum(e.kind == kind for e in perturbed.events)))
     commands, split = 0.0, None

@@ -28,15 +28,17 @@ FIELDS: dict[str, tuple[str, str]] = {
     "run.length": ("steps", "difference in the last step"),
     "commands.sequence": ("", ("every Command's step, kind and text exactly, in order; the numbers in its "
                           "arguments within the tolerance")),
-    "outcome.task": ("", "whether the task ended ok: no task_error, finalized ok (exact or off)"),
+    "outcome.task": ("", ("how the task ended: ok (no task_error, finalized ok), error, interrupted, or "
+                          "unfinished (a file cut short, also once recovered); exact or off")),
     "counts.attach": ("events", "number of attach events"),
     "counts.release": ("events", "number of release events"),
     "counts.break": ("events", "number of break events"),
+    "counts.cycle_failed": ("events", "number of cycle_failed events (a cycle a task let fail and went on)"),
     "images.pixels": ("levels", "mean absolute difference of a camera picture's pixels (0..255 per channel)"),
 }
 DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.sequence", "outcome.task"})
-COUNTED_EVENTS = ("attach", "release", "break")
-_ALWAYS = {"outcome.task": 0.0, "counts.attach": 0.0, "counts.release": 0.0, "counts.break": 0.0}
+COUNTED_EVENTS = ("attach", "release", "break", "cycle_failed")
+_ALWAYS = {"outcome.task": 0.0, **{f"counts.{kind}": 0.0 for kind in COUNTED_EVENTS}}
 IMAGE_TIGHT_LEVELS = 0.5  # tight: a picture may differ by half a level on average (another CPU's rounding)
 POSITION_M = 2.5e-4  # physical: a clear margin below 1 mm, so a 1 mm change always shows
 

@@ -38,8 +38,11 @@ class Recording:
 
     @property
     def outcome(self) -> str:
-        """How the run's task ended: the finalized outcome in its file (ok, error, interrupted), and
-        error whenever a task_error event says so (a run kept in memory has only its events)."""
+        """How the run's task ended: the finalized outcome in its file (ok, error, interrupted);
+        unfinished for a file that was never finalized (cut short, also once recovered); and error
+        whenever a task_error event says so (a run kept in memory has only its events)."""
+        if self.path and not self.finalized:
+            return "unfinished"
         outcome = str((self.meta.get(META_FINALIZED) or {}).get("outcome", "ok"))
         if outcome == "ok" and any(e.kind == "task_error" for e in self.events):
             outcome = "error"

@@ -51,7 +51,11 @@ class GoldenChecker:
         golden_path = self.path(name)
         obtained = golden_path.with_name(f"{name}.obtained.mcap")
         report = golden_path.with_name(f"{name}.report.md")
+        failed = None if allow_error or candidate.outcome == "ok" else _failure(candidate)
         if not golden_path.exists():
+            if failed is not None:  # a golden is never made from a failed run unless asked (allow_error)
+                pytest.fail(f"golden {str(golden_path)!r} does not exist, and this run cannot become it: {failed} "
+                            "(pass allow_error=True to keep a failing run as the golden)", pytrace=False)
             golden_path.parent.mkdir(parents=True, exist_ok=True)
             save(candidate, golden_path)
             pytest.fail(f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
@@ -62,16 +66,18 @@ class GoldenChecker:
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)
             return result
-        if self.update and (allow_error or candidate.outcome == "ok"):
+        if self.update and failed is None:
             save(candidate, golden_path)
             for stale in (obtained, report):
                 stale.unlink(missing_ok=True)
             return result
         save(candidate, obtained)
         write_report(result, report)
+        hint = ("if the change is intended, rerun with --update-goldens: it rewrites the golden with this run"
+                if failed is None else f"this run cannot become the golden: {failed}; pass allow_error=True to "
+                "accept a failing run")
         pytest.fail(f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
-                    f"{report.name}; if the change is intended, rerun with --update-goldens: it rewrites the golden "
-                    f"with this run)\n{render_text(result)}", pytrace=False)
+                    f"{report.name}; {hint})\n{render_text(result)}", pytrace=False)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -87,3 +93,9 @@ def golden(request: pytest.FixtureRequest) -> GoldenChecker:
     config = request.config
     directory = Path(config.rootpath) / config.getini("twin_goldens_dir")
     return GoldenChecker(directory, bool(config.getoption("--update-goldens")))
+
+
+def _failure(run: Recording) -> str:
+    """Why a run's task did not end ok, in a few words."""
+    why = next((e.message for e in run.events if e.kind == "task_error"), "")
+    return f"its task ended {run.outcome}" + (f" ({why.splitlines()[0]})" if why else "")

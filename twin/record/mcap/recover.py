@@ -2,7 +2,8 @@
 
 Reads up to the first damaged record, keeps only the frames all three block channels hold (a
 chunk may end between them), drops commands and events after the last kept frame, and writes
-everything else unchanged, plus a `twin.recovered` metadata record.
+everything else unchanged (but the finalization record of a file cut short: its run did not end
+there), plus a `twin.recovered` metadata record.
 
 A killed run leaves `NAME.mcap.partial` (recordings are renamed into place only when finalized):
 `recover("NAME.mcap")` finds it when NAME.mcap does not exist, and then writes NAME.mcap.
@@ -136,8 +137,8 @@ def _write(f, s: Scan, kept: list, last_step: int) -> None:
         cid: writer.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
         for cid, c in sorted(s.channels.items())
     }
-    for name, record in s.metadata.items():
-        if name != S.META_RECOVERED:
+    for name, record in s.metadata.items():  # a file cut short loses its finalization too: what followed the
+        if name != S.META_RECOVERED and (s.complete or name != S.META_FINALIZED):  # kept frames is gone
             writer.add_metadata(name, record)
     writer.add_metadata(S.META_RECOVERED, {
         "source": Path(s.path).name, "problem": s.problem if not s.complete else "none (the source was complete)",

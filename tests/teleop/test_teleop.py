@@ -2,6 +2,7 @@
 exactly; unknown keys, joint limits and bad options."""
 
 import math
+import re
 import subprocess
 import sys
 import time
@@ -186,3 +187,13 @@ def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
     assert kinds.count("attach") == 1 and kinds.count("release") == 1
     box = rec.frames.object_poses[-1][0]
     assert math.dist(box[:2], POINT_B_M) < 0.005 and abs(box[2] - 0.025) < 1e-3
+
+
+@pytest.mark.parametrize("robot", ["seed001", "seed000"])
+def test_a_keys_run_prints_how_far_the_box_ended_from_the_place_point_as_the_readme_says(robot):
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    keys = next(x for x in readme.splitlines() if x.startswith(f"twin teleop --robot {robot} --keys")).split('"')[1]
+    said = re.search(rf"{robot}'s .*?(\d+\.\d) mm", readme, re.DOTALL).group(1)  # the README's figure for it
+    out = _cli("--robot", robot, "--keys", keys)
+    assert out.returncode == 0, out.stderr
+    assert f", {said} mm from the place point (-0.3, -0.55) in x and y" in out.stdout

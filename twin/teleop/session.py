@@ -24,6 +24,7 @@ from twin.model.sink import Sink
 from twin.model.types import Event
 from twin.robot.profile_files import get_profile
 from twin.sim.twin import Twin
+from twin.tasks.pick_place import POINT_B_M as PLACE_M  # where the seeds' loop places the box
 
 POLL_S = 0.01  # how long one poll of the keyboard may block
 CHUNK_S = 0.02  # at most this much simulated time between two polls of the keyboard
@@ -238,7 +239,9 @@ def summary_lines(session: Session) -> list[str]:
         "events: " + (", ".join(f"{k} {v}" for k, v in sorted(session.log.counts.items())) or "none"),
     ]
     for obj, pose in zip(twin.config.objects, f.object_poses, strict=True):
-        lines.append(f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m")
+        off_mm = 1000.0 * math.hypot(pose[0] - PLACE_M[0], pose[1] - PLACE_M[1])
+        lines.append(f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m, "
+                     f"{off_mm:.1f} mm from the place point ({PLACE_M[0]:g}, {PLACE_M[1]:g}) in x and y")
     if session.record_path:
         lines.append(f"recorded {session.record_path}")
     return lines

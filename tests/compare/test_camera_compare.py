@@ -59,6 +59,9 @@ def test_a_missing_picture_differs(camera_run):
     track.step, track.t_ns, track.data = track.step[:-1], track.t_ns[:-1], track.data[:-1]
     first = compare(golden, candidate, Tolerances.from_preset("exact")).first
     assert first.element == f"overhead #{len(track.data)}" and first.actual == ["missing"]
+    assert first.expected == ["picture"]
+    first = compare(candidate, golden, Tolerances.from_preset("exact")).first  # the picture only the candidate has
+    assert first.expected == ["missing"] and first.actual == ["picture"]
 
 
 def test_replay_of_a_camera_run_matches_exactly(camera_run, capsys):

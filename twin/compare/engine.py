@@ -469,17 +469,17 @@ def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns
     if tolerance == INF:
         return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
     names = list(dict.fromkeys([c.name for c in golden.config.cameras] + [c.name for c in candidate.config.cameras]))
-    rows: list[tuple[int, str, float]] = []  # (step, "camera #index", error)
+    rows: list[tuple[int, str, float, str, str]] = []  # (step, "camera #index", error, golden's, candidate's)
     for name in names:
         g, c = golden.cameras.get(name), candidate.cameras.get(name)
         g_steps = g.step if g is not None else np.zeros(0, dtype=np.int64)
         c_steps = c.step if c is not None else np.zeros(0, dtype=np.int64)
         _, gi, ci = np.intersect1d(g_steps, c_steps, assume_unique=True, return_indices=True)
         for i, j in zip(gi.tolist(), ci.tolist(), strict=True):
-            rows.append((int(g_steps[i]), f"{name} #{i}", _picture_error(g, i, c, j)))
-        for steps, which in ((g_steps, gi), (c_steps, ci)):
+            rows.append((int(g_steps[i]), f"{name} #{i}", _picture_error(g, i, c, j), "picture", "picture"))
+        for steps, which, sides in ((g_steps, gi, ("picture", "missing")), (c_steps, ci, ("missing", "picture"))):
             missing = np.setdiff1d(np.arange(len(steps)), which)
-            rows += [(int(steps[k]), f"{name} #{k}", INF) for k in missing.tolist()]
+            rows += [(int(steps[k]), f"{name} #{k}", INF, *sides) for k in missing.tolist()]
     if not rows:
         return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
     rows.sort(key=lambda r: r[0])
@@ -489,9 +489,9 @@ def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns
     stat = FieldStat("images.pixels", unit, tolerance, float(errors[worst]), rows[worst][0], rows[worst][1],
                      float(np.sqrt(np.mean(np.square(errors)))), len(over))
     if over:
-        step, element, err = over[0]
-        stat.first = Divergence(step, step * dt_ns * 1e-9, "images", "pixels", element, ["picture"],
-                                ["picture" if err != INF else "missing"], err, tolerance, unit)
+        step, element, err, expected, actual = over[0]
+        stat.first = Divergence(step, step * dt_ns * 1e-9, "images", "pixels", element, [expected], [actual], err,
+                                tolerance, unit)
     return stat
 
 

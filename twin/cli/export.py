@@ -11,6 +11,7 @@ from pathlib import Path
 
 from twin.cli.args import whole_number
 from twin.errors import ConfigError, TwinError
+from twin.export.episodes import MAX_FPS
 
 FORMATS = ("parquet", "csv", "lerobot")
 
@@ -32,7 +33,8 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--table", choices=("frames", "events", "commands"), default=None,
                    help="parquet/csv: which table (default frames: one row per recorded frame)")
     p.add_argument("--fps", type=whole_number(1), default=None, metavar="N",
-                   help="lerobot: frames per second of the dataset (a whole number; required)")
+                   help=f"lerobot: frames per second of the dataset (a whole number; required), at most the "
+                        f"recordings' physics rate (240 by default; never above {MAX_FPS})")
     p.add_argument("--episodes", choices=("recording", "cycles"), default=None,
                    help="lerobot: one episode per recording (default) or per pick-place cycle")
     p.add_argument("--task", default=None, metavar="TEXT",
@@ -60,6 +62,7 @@ def _refuse(args: argparse.Namespace, options: tuple[str, ...], why: str) -> Non
 def _export_table(args: argparse.Namespace) -> int:
     from twin.export.files import FORMATS as SUFFIXES
     from twin.export.files import write_table
+    from twin.export.sources import check_commands
     from twin.record.mcap.reader import load
     from twin.record.outputs import check_output
 
@@ -69,7 +72,9 @@ def _export_table(args: argparse.Namespace) -> int:
                           "(export each on its own, or use --format lerobot)")
     out = check_output(args.output, SUFFIXES[args.format], inputs=args.files, option="output")
     table = args.table or "frames"
-    rows = write_table(load(args.files[0]), out, args.format, table)
+    rec = load(args.files[0])
+    check_commands(rec)  # the frames table reads them (suction.command); a malformed one is exit 2 as in replay
+    rows = write_table(rec, out, args.format, table)
     print(f"wrote {out}: {rows} rows ({table})")
     return 0
 
@@ -80,6 +85,9 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     _refuse(args, ("--table",), "--format parquet and csv")
     if args.fps is None:
         raise ConfigError("--format lerobot needs --fps N (a whole number of frames per second)")
+    if args.fps > MAX_FPS:  # before loading anything; each recording's own physics rate is checked once loaded
+        raise ConfigError(f"--fps {args.fps} is above {MAX_FPS}, the fastest physics rate a recording has; expected "
+                          "at most the recordings' physics rate (240 by default)")
     written, sources = export_lerobot(args.files, Path(args.output), args.fps, mode=args.episodes or "recording",
                                       task=args.task, verify_first=args.verify, overwrite=args.overwrite, say=print)
     left_out = sum(1 for s in sources if s.verified is False)

@@ -7,6 +7,11 @@ recorded frame whose t_ns is nearest t0 + k / fps (the earlier of two as near; e
 arithmetic), so every value in a dataset is one the twin recorded, never an interpolation. Nearest,
 not the last before: a step's t_ns is rounded to whole nanoseconds (240 Hz: 4166667 ns), so step 8k
 lies 2.7k ns after k / 30 s, and "the last before" would take step 8k - 1.
+
+Bounds, checked before anything is allocated: --fps at most the recording's physics rate (a faster
+dataset only repeats steps: max_fps), every frame's time its step times the time step (a file whose
+times disagree is damaged: check_times), and at most MAX_DATASET_FRAMES frames in all (memory grows
+with them: about 200 bytes each).
 """
 
 from __future__ import annotations
@@ -16,11 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.errors import ConfigError, RecordingError
 from twin.model.recording import Recording
 
 _CYCLE_PHASE = re.compile(r"cycle (\d+):")
 NS_PER_S = 1_000_000_000
+MAX_FPS = 10_000  # the fastest physics rate a twin runs at (model.config: time steps of 1e5..1e8 ns)
+MAX_DATASET_FRAMES = 2_000_000  # one export: 2.3 h at 240 fps, 18.5 h at 30 fps (about 400 MB while written)
 
 
 @dataclass(frozen=True)
@@ -58,16 +65,50 @@ def spans(rec: Recording, mode: str) -> list[tuple[int, int, int]]:
     return [(step, end, number) for (number, step), end in zip(cycles, ends, strict=True)]
 
 
+def max_fps(rec: Recording) -> int:
+    """The highest --fps for rec: its physics rate (steps per second, rounded: 240 for 4166667 ns)."""
+    return max(1, round(NS_PER_S / rec.config.dt_ns))
+
+
+def check_fps(rec: Recording, fps: int) -> None:
+    """ConfigError unless 1 <= fps <= rec's physics rate: faster, dataset frames would only repeat steps
+    (and their number, memory and time grow with fps, not with the recording)."""
+    top = max_fps(rec)
+    if isinstance(fps, bool) or not isinstance(fps, int) or fps < 1:
+        raise ConfigError(f"--fps {fps!r:.30} is invalid; expected a whole number 1..{top}")
+    if fps > top:
+        raise ConfigError(f"--fps {fps} is above the physics rate of recording {rec.path!r} ({top} steps per "
+                          f"second): its dataset frames would only repeat steps; expected --fps 1..{top}")
+
+
+def check_times(rec: Recording) -> None:
+    """RecordingError unless every frame's time is its step times the time step (as the twin records
+    them): resampling goes by time, so a damaged time could ask for any number of dataset frames."""
+    f, dt_ns = rec.frames, rec.config.dt_ns
+    wrong = np.nonzero(f.t_ns != f.step * dt_ns)[0]
+    if wrong.size:
+        i = int(wrong[0])
+        raise RecordingError(f"recording {rec.path!r}: the frame at step {int(f.step[i])} has time {int(f.t_ns[i])} ns; "
+                             f"expected step x {dt_ns} ns = {int(f.step[i]) * dt_ns} ns")
+
+
+def frame_count(rec: Recording, first_step: int, end_step: int, fps: int) -> tuple[int, int, int]:
+    """(first row, last row, dataset frames) of the episode of rec's frames with first_step <= step <
+    end_step at fps: frames k with k / fps <= its span. Nothing allocated."""
+    steps = rec.frames.step
+    lo = int(np.searchsorted(steps, first_step, side="left"))
+    hi = int(np.searchsorted(steps, end_step, side="left")) - 1
+    if hi < lo:
+        raise ConfigError(f"recording {rec.path!r} has no frame between steps {first_step} and {end_step}")
+    span_ns = int(rec.frames.t_ns[hi]) - int(rec.frames.t_ns[lo])
+    return lo, hi, span_ns * fps // NS_PER_S + 1
+
+
 def resample(rec: Recording, first_step: int, end_step: int, fps: int, cycle: int = 0) -> Episode:
     """The episode of rec's frames with first_step <= step < end_step, at fps frames per second."""
-    steps, t_ns = rec.frames.step, rec.frames.t_ns
-    inside = np.nonzero((steps >= first_step) & (steps < end_step))[0]
-    if inside.size == 0:
-        raise ConfigError(f"recording {rec.path!r} has no frame between steps {first_step} and {end_step}")
-    lo, hi = int(inside[0]), int(inside[-1])
+    lo, hi, count = frame_count(rec, first_step, end_step, fps)
+    t_ns = rec.frames.t_ns
     t0 = int(t_ns[lo])
-    span_ns = int(t_ns[hi]) - t0
-    count = span_ns * fps // NS_PER_S + 1  # frames k with k / fps <= span
     rows = lo + nearest((t_ns[lo:hi + 1] - t0) * fps, np.arange(count, dtype=np.int64) * NS_PER_S)
     return Episode(rec, rows, t0, cycle)
 
@@ -82,5 +123,18 @@ def nearest(times: np.ndarray, wanted: np.ndarray) -> np.ndarray:
 
 
 def episodes(recordings: list[Recording], fps: int, mode: str) -> list[Episode]:
-    """Every episode of the recordings, in order (mode "recording" or "cycles")."""
-    return [resample(rec, first, end, fps, cycle) for rec in recordings for first, end, cycle in spans(rec, mode)]
+    """Every episode of the recordings, in order (mode "recording" or "cycles"). Checks the bounds
+    first (fps, frame times, MAX_DATASET_FRAMES in all): ConfigError or RecordingError, nothing allocated."""
+    for rec in recordings:
+        check_fps(rec, fps)
+        check_times(rec)
+    cut = [(rec, first, end, cycle) for rec in recordings for first, end, cycle in spans(rec, mode)]
+    total = 0
+    for rec, first, end, _ in cut:
+        total += frame_count(rec, first, end, fps)[2]
+        if total > MAX_DATASET_FRAMES:
+            seconds = sum(int(r.frames.t_ns[-1] - r.frames.t_ns[0]) for r in recordings) / NS_PER_S
+            raise ConfigError(f"the dataset would hold more than {MAX_DATASET_FRAMES:,} frames ({seconds:.1f} s of "
+                              f"recordings at --fps {fps}); expected at most {MAX_DATASET_FRAMES:,}: lower --fps, "
+                              "or export the recordings in parts")
+    return [resample(rec, first, end, fps, cycle) for rec, first, end, cycle in cut]

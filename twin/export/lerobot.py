@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.errors import ConfigError, RecordingError
 from twin.export.episodes import NS_PER_S, Episode, nearest
-from twin.export.stats import feature_stats, image_stats
+from twin.export.stats import feature_stats, image_sample, image_stride, sampled_image_stats
 from twin.model.tables import frame_column_names, suction_command
 from twin.record.outputs import fsync_file
 
@@ -72,28 +72,45 @@ def episode_arrays(ep: Episode, command: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def camera_names(episodes: list[Episode]) -> list[str]:
-    """The cameras every episode's recording has (the same set in each, else ConfigError)."""
+    """The cameras every episode's recording has (the same set in each, each of one size, else ConfigError)."""
     sets = {tuple(sorted(getattr(ep.rec, "cameras", None) or {})) for ep in episodes}
     if len(sets) > 1:
         raise ConfigError("the recordings have different cameras: " + " vs ".join(
             "(" + ", ".join(s) + ")" for s in sorted(sets)) + "; expected the same cameras in every recording")
-    return list(sets.pop()) if sets else []
+    names = list(sets.pop()) if sets else []
+    for name in names:
+        sizes = {(ep.rec.cameras[name].width_px, ep.rec.cameras[name].height_px) for ep in episodes}
+        if len(sizes) > 1:
+            raise ConfigError(f"the recordings' camera {name!r} has different sizes: " + " vs ".join(
+                f"{w}x{h}" for w, h in sorted(sizes)) + " px; expected one size in every recording")
+    return names
 
 
-def camera_frames(ep: Episode, name: str, fps: int) -> list[np.ndarray]:
-    """The camera image shown at each dataset frame: the one taken nearest its time (episodes.nearest)."""
+def check_finite(episodes: list[Episode]) -> None:
+    """RecordingError (exit 2) for a NaN or infinite value among the exported frames' state and action:
+    LeRobot normalizes features by their stats.json mean and std, which one NaN makes NaN (and strict
+    JSON has no NaN), so such a recording is refused, naming the value; the csv and parquet tables keep it."""
+    for ep in episodes:
+        f, rows = ep.rec.frames, ep.rows
+        state_of, action_of = state_names(ep.rec)
+        for values, names in ((f.joint_q[rows], state_of), (f.joint_target[rows], action_of)):
+            with np.errstate(over="ignore"):  # 1e300 is finite, but not as the float32 the dataset holds
+                bad = np.argwhere(~np.isfinite(values.astype(np.float32)))
+            if bad.size:
+                k, j = (int(v) for v in bad[0])
+                raise RecordingError(f"recording {ep.rec.path!r}: {names[j]} is {values[k, j]} at step "
+                                     f"{int(f.step[rows[k]])}; expected finite float32 values in a dataset (its "
+                                     "stats.json and LeRobot's normalization need them; --format csv or parquet "
+                                     "keeps them)")
+
+
+def camera_picks(ep: Episode, name: str, fps: int) -> np.ndarray:
+    """Which of the camera's pictures each dataset frame shows: the one taken nearest its time (episodes.nearest)."""
     track = ep.rec.cameras[name]
     if len(track.t_ns) == 0:
         raise ConfigError(f"recording {ep.rec.path!r}: camera {name!r} has no images")
     elapsed = (np.asarray(track.t_ns, dtype=np.int64) - ep.t0_ns) * fps
-    which = nearest(elapsed, np.arange(len(ep), dtype=np.int64) * NS_PER_S)
-    cache: dict[int, np.ndarray] = {}
-    out = []
-    for i in which.tolist():
-        if i not in cache:
-            cache[i] = track.rgb(i)
-        out.append(cache[i])
-    return out
+    return nearest(elapsed, np.arange(len(ep), dtype=np.int64) * NS_PER_S)
 
 
 def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int, provenance: dict,
@@ -101,14 +118,17 @@ def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int
     """Write the episodes (with one task text each) as a LeRobot v3.0 dataset in folder `out`.
 
     Written in a temporary folder beside `out` and renamed into place when complete, so `out` is
-    either what it was or the whole new dataset."""
+    either what it was or the whole new dataset. Such folders left by killed exports (their process is
+    gone) are removed first."""
     if not episodes:
         raise ConfigError("no episode to export")
     cameras = camera_names(episodes)
+    check_finite(episodes)
     if cameras:
         from twin.export.video import require_av
 
         require_av()  # before any work: a missing PyAV is one line, and nothing is written
+    remove_stale(out)
     tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
     if tmp.exists():  # left by a killed export of this process id: ours by its name
         shutil.rmtree(tmp)
@@ -120,6 +140,66 @@ def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return Written(out, len(episodes), sum(len(ep) for ep in episodes), [f"observation.images.{c}" for c in cameras])
+
+
+def remove_stale(out: Path) -> list[Path]:
+    """Remove what killed exports of `out` left beside it: `.NAME.partial-PID` folders, and `.NAME.old-PID-*`
+    folders (an overwritten dataset) once `out` holds a complete dataset again. Only those whose process
+    PID is gone, or is a later process that reused the id (it started after the folder last changed):
+    a running export's folders are kept. Returns the folders removed."""
+    removed = []
+    try:
+        entries = list(out.parent.iterdir())
+    except OSError:
+        return removed
+    partial, old = f".{out.name}.partial-", f".{out.name}.old-"
+    for entry in entries:
+        name = entry.name
+        if name.startswith(partial):
+            pid_text = name[len(partial):]
+        elif name.startswith(old) and (out / "meta" / "info.json").is_file():
+            pid_text = name[len(old):].partition("-")[0]
+        else:
+            continue
+        if not pid_text.isdigit() or entry.is_symlink() or not entry.is_dir():
+            continue
+        pid = int(pid_text)
+        if pid != os.getpid() and _writing(pid, entry):
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+        removed.append(entry)
+    return removed
+
+
+def _writing(pid: int, folder: Path) -> bool:
+    """Whether process pid may still be writing folder: it is alive and started before the folder last
+    changed (a process started later only reuses a dead export's id). Alive when unsure."""
+    if not 0 < pid <= 2**31:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: another user's live process
+        return True
+    started = _start_time(pid)
+    try:
+        changed = folder.stat().st_mtime
+    except OSError:
+        return True
+    return started is None or started <= changed + 2.0  # /proc's boot time has whole seconds
+
+
+def _start_time(pid: int) -> float | None:
+    """When process pid started (seconds since the epoch), from /proc; None where there is no /proc."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        with open("/proc/stat", "rb") as f:
+            boot = next(int(line.split()[1]) for line in f if line.startswith(b"btime "))
+        return boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22, starttime, in clock ticks
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
 
 
 def _write_all(root: Path, episodes: list[Episode], tasks: list[str], cameras: list[str], fps: int,
@@ -207,20 +287,30 @@ def _write_videos(root: Path, episodes: list[Episode], cameras: list[str], fps: 
 
 def _camera_images(episodes: list[Episode], name: str, fps: int, shape: tuple[int, int, int], ep_rows: list[dict],
                    stats_out: list[dict]):
-    """Each episode's images of one camera in turn; records each episode's video span in its row
-    and its image statistics in stats_out."""
+    """Each episode's images of one camera in turn, decoded one picture at a time (a picture shown by
+    several dataset frames is decoded once: they come in order); records each episode's video span in
+    its row and, once its images are through, its image statistics in stats_out (from the sampled
+    frames' subsampled copies, image_stats's sample)."""
     key, at = f"observation.images.{name}", 0
+    stride = image_stride(shape)
     for ep, row in zip(episodes, ep_rows, strict=True):
-        images = camera_frames(ep, name, fps)
-        wrong = next((img.shape for img in images if img.shape != shape), None)
-        if wrong is not None:
-            raise ConfigError(f"recording {ep.rec.path!r}: camera {name!r} has an image of shape {wrong}; "
-                              f"expected {shape} as in the first recording")
-        stats_out.append(image_stats(images))
+        track = ep.rec.cameras[name]
+        if (track.height_px, track.width_px, 3) != shape:
+            raise ConfigError(f"recording {ep.rec.path!r}: camera {name!r} is {track.width_px}x{track.height_px} px; "
+                              f"expected {shape[1]}x{shape[0]} px as in the first recording")
+        picks = camera_picks(ep, name, fps).tolist()
+        sampled = set(image_sample(len(picks)))
         row.update({f"videos/{key}/chunk_index": 0, f"videos/{key}/file_index": 0,
                     f"videos/{key}/from_timestamp": at / fps, f"videos/{key}/to_timestamp": (at + len(ep)) / fps})
         at += len(ep)
-        yield from images
+        thumbs, shown, image = [], -1, None
+        for k, i in enumerate(picks):
+            if i != shown:
+                image, shown = track.rgb(i), i  # (height, width, 3) as configured, or a RecordingError
+            if k in sampled:
+                thumbs.append(image[::stride, ::stride].copy())  # a copy: the picture itself is not kept
+            yield image
+        stats_out.append(sampled_image_stats(thumbs))
 
 
 def _merged_image_stats(per_episode: list[dict]) -> dict:
@@ -302,7 +392,7 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
     if out.exists() and any(out.iterdir()):
         if not overwrite:  # checked before any work too; a folder filled meanwhile is not replaced
             raise ConfigError(f"output folder {str(out)!r} is not empty; expected a new or empty folder (or --overwrite)")
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
         os.replace(out, old / out.name)
         os.replace(tmp, out)
         shutil.rmtree(old, ignore_errors=True)

@@ -9,7 +9,7 @@ from pathlib import Path
 from twin.errors import ConfigError
 from twin.export.episodes import Episode, episodes
 from twin.export.lerobot import Written, write_dataset
-from twin.export.sources import Source, load_source, verify
+from twin.export.sources import Source, check_recording, load_source, verify
 
 
 def check_folder(out: Path, inputs: list[str], overwrite: bool) -> Path:
@@ -40,6 +40,8 @@ def export_lerobot(paths: list[str], out: Path, fps: int, *, mode: str = "record
     when --verify left every recording out: then nothing is written) and every source, verified or not."""
     check_folder(out, paths, overwrite)
     sources = [load_source(path) for path in paths]
+    for source in sources:  # a damaged file is exit 2 before any work, also before --verify's replay
+        check_recording(source.rec, fps)
     if verify_first:
         for source in sources:
             verify(source)

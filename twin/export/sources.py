@@ -10,8 +10,9 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import TwinError
+from twin.errors import RecordingError, TwinError
 from twin.model.recording import Recording
+from twin.model.types import COMMAND_ARGS
 
 
 @dataclass
@@ -43,6 +44,50 @@ def load_source(path: str) -> Source:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return Source(path, rec, digest.hexdigest())
+
+
+def check_commands(rec: Recording) -> None:
+    """RecordingError (exit 2) for a command `twin replay` refuses (Twin.apply): an unknown kind, other
+    arguments than the kind's (model.types.COMMAND_ARGS), or, for what an export reads of them (the
+    suction.command column), a signal name or key that is no dictionary key or a value int() refuses."""
+    for c in rec.commands:
+        expected = COMMAND_ARGS.get(c.kind)
+        if expected is None:
+            raise RecordingError(f"recording {rec.path!r}: unknown command kind {c.kind!r:.40} at step {c.step}; "
+                                 f"expected one of {sorted(COMMAND_ARGS)}")
+        if not isinstance(c.args, dict) or sorted(c.args) != sorted(expected):
+            raise RecordingError(f"recording {rec.path!r}: {c.kind} command at step {c.step} has arguments "
+                                 f"{c.args!r:.80}; expected {', '.join(expected)}")
+        try:
+            if c.kind == "signal":
+                hash(c.args["name"])
+                if c.args["value"] is not None:
+                    int(c.args["value"])
+            elif c.kind == "key":
+                hash(c.args["key"])
+        except (TypeError, ValueError, OverflowError) as err:
+            raise RecordingError(f"recording {rec.path!r}: {c.kind} command at step {c.step} is malformed: "
+                                 f"{str(err)[:80]}") from None
+
+
+def check_pictures(rec: Recording) -> None:
+    """RecordingError (exit 2) unless every camera picture's header declares the camera's format and
+    configured size (headers only: nothing is decoded); the tracks name rec's file from now on."""
+    for track in rec.cameras.values():
+        track.source = track.source or rec.path
+        track.check()
+
+
+def check_recording(rec: Recording, fps: int | None = None) -> None:
+    """What an export refuses in a recording before any work: malformed commands, bad pictures, frame
+    times that are not their steps', and (for a dataset at fps) fps above its physics rate."""
+    from twin.export.episodes import check_fps, check_times
+
+    check_commands(rec)
+    check_pictures(rec)
+    check_times(rec)
+    if fps is not None:
+        check_fps(rec, fps)
 
 
 def verify(source: Source) -> Source:

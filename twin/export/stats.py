@@ -29,12 +29,27 @@ def feature_stats(values: np.ndarray) -> dict[str, list]:
     return out
 
 
+def image_sample(count: int) -> range:
+    """Which of an episode's `count` frames image_stats looks at: evenly spaced, at most IMAGE_SAMPLE_FRAMES."""
+    return range(0, count, max(1, count // IMAGE_SAMPLE_FRAMES))[:IMAGE_SAMPLE_FRAMES]
+
+
+def image_stride(shape: tuple[int, ...]) -> int:
+    """The pixel stride that brings a frame's longer side to at most IMAGE_SAMPLE_SIDE_PX."""
+    return -(-max(shape[:2]) // IMAGE_SAMPLE_SIDE_PX)  # ceil
+
+
 def image_stats(frames: list[np.ndarray]) -> dict[str, list]:
     """Per-channel statistics of (H, W, 3) uint8 frames scaled to [0, 1], each shaped (3, 1, 1)."""
-    step = max(1, len(frames) // IMAGE_SAMPLE_FRAMES)
-    sample = frames[::step][:IMAGE_SAMPLE_FRAMES]
-    stride = -(-max(sample[0].shape[:2]) // IMAGE_SAMPLE_SIDE_PX)  # ceil: the longer side <= IMAGE_SAMPLE_SIDE_PX
-    pixels = np.concatenate([f[::stride, ::stride].reshape(-1, 3) for f in sample]).astype(np.float64) / 255.0
+    sample = [frames[k] for k in image_sample(len(frames))]
+    stride = image_stride(sample[0].shape)
+    return sampled_image_stats([f[::stride, ::stride] for f in sample])
+
+
+def sampled_image_stats(thumbs: list[np.ndarray]) -> dict[str, list]:
+    """image_stats from the sampled frames already subsampled (image_sample, image_stride): what an
+    export keeps of an episode's pictures while it streams them into the video."""
+    pixels = np.concatenate([t.reshape(-1, 3) for t in thumbs]).astype(np.float64) / 255.0
     flat = feature_stats(pixels)
     return {key: value if key == "count" else [[[v]] for v in value] for key, value in {
-        **flat, "count": [len(sample)]}.items()}
+        **flat, "count": [len(thumbs)]}.items()}

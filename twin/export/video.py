@@ -53,15 +53,28 @@ def _encode(av, path, frames: Iterable[np.ndarray], fps: int, width_px: int, hei
     with av.open(str(path), "w", format="mp4") as out:
         stream = out.add_stream(CODEC, rate=fps, options=dict(OPTIONS))
         stream.width, stream.height, stream.pix_fmt = width_px, height_px, PIX_FMT
-        for rgb in frames:
-            frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
-            frame.pts = count
-            for packet in stream.encode(frame):
-                out.mux(packet)
-            count += 1
+        try:
+            for rgb in frames:
+                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+                frame.pts = count
+                for packet in stream.encode(frame):
+                    out.mux(packet)
+                count += 1
+        except BaseException:  # a bad picture, Ctrl-C: end the stream first, else SVT-AV1 prints
+            _end_quietly(stream)  # "Svt[error]: deinit called without sending EOS!" under the error line
+            raise
         for packet in stream.encode():
             out.mux(packet)
     return count
+
+
+def _end_quietly(stream) -> None:
+    """Send the encoder its end of stream, dropping what it still holds (the file is abandoned)."""
+    try:
+        for _ in stream.encode():
+            pass
+    except Exception:  # noqa: BLE001, S110 - the error being raised is the one to report
+        pass
 
 
 def probe(path: str | os.PathLike) -> dict:

@@ -3,7 +3,10 @@ sinks get through on_image) and all of one camera's pictures in a recording (Cam
 
 A camera is part of the scene's configuration (TwinConfig.cameras), so a replay renders it again.
 Pictures are stored encoded (PNG, fixed settings: the same pixels give the same bytes) and decoded
-with Pillow only when asked (CameraTrack.rgb).
+with Pillow only when asked (CameraTrack.rgb). A picture read from a file is checked before it is
+decoded: its header (Pillow's Image.open reads nothing more) must declare the camera's configured
+format and size, so a damaged picture costs at most one configured-size decode, never a bomb's
+(CameraTrack.check, a RecordingError naming the file, the camera, the step and what was expected).
 """
 
 from __future__ import annotations
@@ -11,13 +14,14 @@ from __future__ import annotations
 import io
 import math
 import struct
+import warnings
 import zlib
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.errors import ConfigError, RecordingError
 from twin.model.quat import quat_from_axes, rotate
 
 FORMATS = ("png", "jpeg")
@@ -147,7 +151,8 @@ class CameraImage(NamedTuple):
 
 @dataclass
 class CameraTrack:
-    """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i])."""
+    """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]).
+    source: the file they were read from ("" in memory), named when a picture is bad."""
 
     name: str
     width_px: int
@@ -156,13 +161,34 @@ class CameraTrack:
     step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     data: list[bytes] = field(default_factory=list)
+    source: str = ""
 
     def __len__(self) -> int:
         return len(self.data)
 
     def rgb(self, i: int) -> np.ndarray:
-        """Picture i decoded: (height, width, 3) uint8."""
-        return decode_rgb(self.data[i])
+        """Picture i decoded: (height, width, 3) uint8. Its header is checked first (check): a picture
+        that is not the camera's format and size is a RecordingError, and is never decoded."""
+        try:
+            return decode_rgb(self.data[i], self.format, (self.width_px, self.height_px))
+        except ValueError as err:
+            raise self._bad(i, str(err)) from None
+
+    def check(self, i: int | None = None) -> None:
+        """Picture i's header (every picture's with i None) against the camera: RecordingError unless it
+        is a picture of the camera's format and configured size. Reads headers only: microseconds each."""
+        for k in range(len(self.data)) if i is None else (i,):
+            try:
+                _checked_header(self.data[k], self.format, (self.width_px, self.height_px))
+            except ValueError as err:
+                raise self._bad(k, str(err)) from None
+
+    def _bad(self, i: int, why: str) -> RecordingError:
+        where = f"recording {self.source!r}: " if self.source else ""
+        step = f"step {int(self.step[i])}" if i < len(self.step) else f"picture {i}"
+        return RecordingError(f"{where}camera {self.name!r} picture at {step} {why}; expected a "
+                              f"{self.format.upper()} picture of {self.width_px}x{self.height_px} px (the camera's "
+                              "configured format and size)")
 
     @staticmethod
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
@@ -222,9 +248,64 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
-def decode_rgb(data: bytes) -> np.ndarray:
-    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels."""
-    from PIL import Image
+_PIL_FORMATS = {"png": "PNG", "jpeg": "JPEG"}
+_PNG_HEAD = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR"  # the signature, then the IHDR chunk's length and type
 
-    with Image.open(io.BytesIO(data)) as image:
-        return np.asarray(image.convert("RGB"), dtype=np.uint8)
+
+def decode_rgb(data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None) -> np.ndarray:
+    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height) the
+    header is checked first and nothing else is decoded: ValueError saying what the bytes are instead,
+    also for pixel data Pillow cannot decode."""
+    with _open(data, format, size_px) as image:
+        if size_px is not None and image.size != tuple(size_px):
+            raise ValueError(f"is {image.size[0]}x{image.size[1]} px")
+        try:
+            image.load()
+            rgb = image.convert("RGB")
+        except Exception as err:  # noqa: BLE001 - Pillow raises OSError, SyntaxError, ValueError, ... on bad data
+            raise ValueError(f"does not decode ({_one_line(err)})") from None
+    pixels = np.asarray(rgb, dtype=np.uint8)
+    if size_px is not None and pixels.shape != (size_px[1], size_px[0], 3):
+        raise ValueError(f"decodes to shape {pixels.shape}")
+    return pixels
+
+
+def _checked_header(data: bytes, format: str, size_px: tuple[int, int]) -> None:
+    """ValueError unless the picture's header declares format and size_px (nothing is decoded)."""
+    with _open(data, format, size_px) as image:
+        if image.size != tuple(size_px):
+            raise ValueError(f"is {image.size[0]}x{image.size[1]} px")
+
+
+def _open(data: bytes, format: str | None, size_px: tuple[int, int] | None = None):
+    """Pillow's Image.open of the bytes (it reads the header only), for format when given. A PNG's
+    IHDR is read first: one of another size than size_px, or too large for Pillow, is refused with
+    its size before Pillow sees it; Pillow's own limit (DecompressionBombError, and the warning it
+    prints below that) never shows."""
+    from PIL import Image, UnidentifiedImageError
+
+    if not isinstance(data, (bytes, bytearray, memoryview)) or not len(data):
+        raise ValueError("is empty")
+    if format is not None and format not in _PIL_FORMATS:
+        raise ValueError(f"is in format {format!r}; expected one of {', '.join(_PIL_FORMATS)}")
+    if bytes(data[:16]) == _PNG_HEAD and len(data) >= 24 and format in (None, "png"):
+        w, h = struct.unpack(">II", bytes(data[16:24]))
+        limit = Image.MAX_IMAGE_PIXELS
+        if (size_px is not None and (w, h) != tuple(size_px)) or (limit and w * h > limit):
+            raise ValueError(f"is {w}x{h} px")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            return Image.open(io.BytesIO(bytes(data)), formats=None if format is None else [_PIL_FORMATS[format]])
+        except Image.DecompressionBombError:
+            raise ValueError(f"declares more than {Image.MAX_IMAGE_PIXELS} pixels") from None
+        except UnidentifiedImageError:
+            what = f"a {_PIL_FORMATS[format]} picture" if format else "a picture"
+            raise ValueError(f"is not {what} ({len(data)} bytes starting {bytes(data[:8])!r})") from None
+        except Exception as err:  # noqa: BLE001 - a damaged header: SyntaxError, OSError, struct.error, ...
+            raise ValueError(f"has a damaged header ({_one_line(err)})") from None
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(f"{type(err).__name__}: {err}".split())
+    return text if len(text) <= 120 else text[:117] + "..."

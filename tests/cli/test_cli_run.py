@@ -215,3 +215,49 @@ def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tm
     plain = _twin_cli(*args, "--record", str(tmp_path / "plain.mcap"), cwd=tmp_path)
     assert plain.returncode == 0, plain.stderr
     assert (tmp_path / "piped.mcap").read_bytes() == (tmp_path / "plain.mcap").read_bytes()
+
+
+# A user task may say `placed` with no usable error figure: the summary used to crash on it (a KeyError or
+# TypeError traceback, exit 1, though the recording was finalized ok), and hid the task's own error.
+PLACED_TASK = '''
+def run(twin, error: str = "missing", fail: bool = False):
+    twin.wait(0.05)
+    data = {"missing": {}, "none": {"error_m": None}, "text": {"error_m": "1 mm"}, "bool": {"error_m": True},
+            "huge": {"error_m": 10**400}, "list": {"error_m": [0.001]}}[error]
+    twin.event("placed", "box", "put down", **data)
+    twin.event("placed", "box", "put down again", error_m=0.0015)
+    if fail:
+        raise RuntimeError("after placing")
+'''
+
+
+@pytest.mark.parametrize("error", ["missing", "none", "text", "bool", "huge", "list"])
+def test_a_placed_event_without_an_error_figure_is_summarized(error, tmp_path, monkeypatch, capsys):
+    import twin
+
+    monkeypatch.chdir(tmp_path)
+    task = tmp_path / "placing.py"
+    task.write_text(PLACED_TASK)
+    assert main(["run", str(task), "--param", f"error={error}", "--record", str(tmp_path / "p.mcap")]) == 0
+    out, err = capsys.readouterr()
+    assert err == ""
+    assert "placement error: worst 1.50 mm over 1 cycle(s); 1 more placed (no error figure)" in out
+    assert "placed 2" in out and "recorded " in out
+    assert twin.load(tmp_path / "p.mcap").outcome == "ok"
+
+
+def test_placed_events_with_no_figure_at_all_and_a_failing_task(tmp_path, monkeypatch, capsys):
+    """The exit code follows the task: it raised after saying `placed` (exit 1, its error on one line)."""
+    import twin
+
+    monkeypatch.chdir(tmp_path)
+    task = tmp_path / "placing.py"
+    task.write_text(PLACED_TASK.replace("error_m=0.0015", "error_m=None"))
+    assert main(["run", str(task), "--param", "error=none", "--record", str(tmp_path / "p.mcap")]) == 0
+    assert "placement error: 2 placed (no error figure)" in capsys.readouterr().out
+    assert main(["run", str(task), "--param", "error=text", "--param", "fail=true", "--record",
+                 str(tmp_path / "f.mcap")]) == 1
+    out, err = capsys.readouterr()
+    assert _one_error_line(err) == "twin: error: task raised RuntimeError: after placing"
+    assert "placement error: 2 placed (no error figure)" in out
+    assert twin.load(tmp_path / "f.mcap").outcome == "error"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -109,9 +110,25 @@ def _print_summary(twin: Twin, summary: _Summary, wall_s: float) -> None:
         print(f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m, "
               f"q ({pose[3]:+.4f}, {pose[4]:+.4f}, {pose[5]:+.4f}, {pose[6]:+.4f})")
     placed = [ev for ev in summary.events if ev.kind == "placed"]
-    if placed:
-        worst = max(ev.data["error_m"] for ev in placed)
-        print(f"placement error: worst {worst * 1000:.2f} mm over {len(placed)} cycle(s)")
+    errors = [e for e in (_error_m(ev) for ev in placed) if e is not None]
+    unmeasured = len(placed) - len(errors)
+    if errors:  # a task's own `placed` event may carry no error figure: counted, never a crash
+        print(f"placement error: worst {max(errors) * 1000:.2f} mm over {len(errors)} cycle(s)"
+              + (f"; {unmeasured} more placed (no error figure)" if unmeasured else ""))
+    elif placed:
+        print(f"placement error: {unmeasured} placed (no error figure)")
+
+
+def _error_m(event) -> float | None:
+    """A `placed` event's error_m when it is a finite number of metres, else None (missing, null, text)."""
+    value = event.data.get("error_m") if isinstance(event.data, dict) else None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        value = float(value)
+    except OverflowError:  # an integer too large for a float
+        return None
+    return value if math.isfinite(value) else None
 
 
 def cmd_teleop(args: argparse.Namespace) -> int:

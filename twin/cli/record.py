@@ -47,12 +47,15 @@ def cmd_info(args: argparse.Namespace) -> int:
     if not Path(args.file).exists() and partial.is_file():
         raise RecordingError(f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
                              f"of a run that was killed (or is still running); `twin recover {args.file}` restores it")
-    info = describe(args.file)
+    info = describe(args.file, keep_events=args.events)
     for line in format_info(info, all_events=args.events):
         print(line)
     if not info.intact:
         raise RecordingError(f"recording {args.file!r} is not finalized: {info.problem}; "
                              f"`twin recover {args.file} -o FIXED.mcap` restores its readable part")
+    if info.problems:  # printed above, each on its own line; the error names the first and how many
+        more = f" (and {len(info.problems) - 1} more problem(s) listed above)" if len(info.problems) > 1 else ""
+        raise RecordingError(f"recording {args.file!r}: {info.problems[0]}{more}")
     return 0
 
 
@@ -67,7 +70,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 def add_record_commands(sub) -> None:
     p = sub.add_parser("info", help="describe a recording: duration, channels, events, metadata, finalized or not",
-                       description="Exit code 0 for a complete file, 2 for a missing, unreadable or unfinished one.")
+                       description="Exit code 0 for a complete twin recording; 2 for a missing, unfinished or "
+                                   "foreign file, or one with any unreadable part (the report says what it could read).")
     p.add_argument("file", metavar="FILE.mcap")
     p.add_argument("--events", action="store_true", help="also list every event with its time, step and data")
     p.set_defaults(func=cmd_info)

@@ -10,7 +10,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 
 from twin.errors import ConfigError
 from twin.model.images import CameraSpec
-from twin.model.json_values import all_finite
+from twin.model.json_values import MAX_DEPTH, all_finite, nesting_depth, shown
 from twin.model.keymaps import validate_keymap
 from twin.model.profiles import PROFILES, RobotProfile
 
@@ -76,6 +76,8 @@ class TwinConfig:
         cameras = [c.name for c in self.cameras]
         if len(set(cameras)) != len(cameras):
             raise ConfigError(f"camera names must be unique, got {cameras}")
+        for camera in self.cameras:
+            check_camera_view(camera)
 
     @property
     def dt_s(self) -> float:
@@ -102,6 +104,33 @@ class TwinConfig:
                           cameras=tuple(CameraSpec(**c) for c in data["cameras"]))
 
 
+MIN_VIEW_M = 1e-6  # a camera's eye and target are at least this far apart
+MIN_UP_SINE = 1e-6  # its up direction leans at least this much (sine of the angle) off the view direction
+
+
+def check_camera_view(camera: CameraSpec) -> None:
+    """ConfigError unless the camera looks somewhere (eye_m and target_m apart) with an up direction
+    that is not zero nor along the view: the image's axes are made from these (images.optical_pose).
+    Checked in the camera's own axes, which a pad mount turns as a whole."""
+    forward = tuple(t - e for t, e in zip(camera.target_m, camera.eye_m, strict=True))
+    distance = math.sqrt(sum(c * c for c in forward))
+    where = f"camera {camera.name!r}"
+    if not distance >= MIN_VIEW_M:
+        raise ConfigError(f"{where}: eye_m {list(camera.eye_m)} and target_m {list(camera.target_m)} are "
+                          f"{distance:g} m apart; expected a target at least {MIN_VIEW_M:g} m from the eye")
+    length = math.sqrt(sum(c * c for c in camera.up))
+    if not length > 0:
+        raise ConfigError(f"{where}: up {list(camera.up)} is no direction; expected a vector that is not zero, "
+                          "e.g. [0, 1, 0]")
+    f = [c / distance for c in forward]
+    u = [c / length for c in camera.up]
+    sine = math.sqrt((f[1] * u[2] - f[2] * u[1]) ** 2 + (f[2] * u[0] - f[0] * u[2]) ** 2
+                     + (f[0] * u[1] - f[1] * u[0]) ** 2)
+    if not sine >= MIN_UP_SINE:
+        raise ConfigError(f"{where}: up {list(camera.up)} is along the view direction (target_m - eye_m = "
+                          f"{[round(c, 9) for c in forward]}); expected an up direction across it")
+
+
 # -- the schema of a stored configuration ----------------------------------------------------------
 # Every field a recording's `twin.config` holds, with its type and the range twin can simulate. A
 # field missing from a record takes its default (older recordings); an unknown field is an error.
@@ -122,16 +151,23 @@ class Field:
     count: int = 0  # floats/strs: exactly this many (0: one to 64)
 
     def expected(self) -> str:
-        if self.kind in ("int", "float", "floats"):
+        """What a value of this field must be, in words (for every kind: a nested schema and a list of
+        them are a dict and a list, which are not hashable, so they are told apart first)."""
+        kind = self.kind
+        if isinstance(kind, dict):
+            return "a JSON object"
+        if isinstance(kind, list):
+            return f"a list of at most {MAX_OBJECTS} JSON objects"
+        if kind in ("int", "float", "floats"):
             what = {"int": "a whole number", "float": "a finite number", "floats": f"{self.count} finite numbers"}
-            return f"{what[self.kind]} {'>' if self.open_lo else '>='} {self.lo:g} and <= {self.hi:g}"
-        if self.kind == "float?":
+            return f"{what[kind]} {'>' if self.open_lo else '>='} {self.lo:g} and <= {self.hi:g}"
+        if kind == "float?":
             return f"null or a finite number >= {self.lo:g} and <= {self.hi:g}"
-        return {"bool": "true or false", "str": f"a string (up to {MAX_TEXT} characters)",
-                "signs": f"{self.count} signs, each 1 or -1",
-                "strs": f"{self.count or 'one or more'} non-empty strings",
-                "dict": "a JSON object of finite values"}.get(
-            self.kind, "a JSON object" if isinstance(self.kind, dict) else f"a list of at most {MAX_OBJECTS} objects")
+        words = {"bool": "true or false", "str": f"a string (up to {MAX_TEXT} characters)",
+                 "signs": f"{self.count} signs, each 1 or -1",
+                 "strs": f"{self.count or 'one to 64'} non-empty strings",
+                 "dict": f"a JSON object of finite values, nested at most {MAX_DEPTH} deep"}
+        return words.get(kind, f"a value of kind {kind!r}") if isinstance(kind, str) else f"a value of kind {kind!r}"
 
 
 def _f(lo: float, hi: float, *, open_lo: bool = False, count: int = 0, kind: str = "float") -> Field:
@@ -189,13 +225,13 @@ _DEFAULTS = {id(PROFILE_SCHEMA): _defaults(RobotProfile), id(OBJECT_SCHEMA): _de
 
 
 def _bad(where: str, value: object, spec: Field) -> ConfigError:
-    return ConfigError(f"twin.config field {where} = {value!r:.60} is invalid; expected {spec.expected()}")
+    return ConfigError(f"twin.config field {where} = {shown(value)} is invalid; expected {spec.expected()}")
 
 
 def _record(value: object, schema: dict, where: str) -> dict:
     """A JSON object checked field by field against schema; missing fields with defaults are filled in."""
     if not isinstance(value, dict):
-        raise ConfigError(f"twin.config {where or 'record'} = {value!r:.60} is invalid; expected a JSON object")
+        raise ConfigError(f"twin.config {where or 'record'} = {shown(value)} is invalid; expected a JSON object")
     unknown = sorted(str(k) for k in value if k not in schema)
     if unknown:
         raise ConfigError(f"twin.config {where or 'record'} has unknown field {unknown[0][:60]!r}; "
@@ -245,7 +281,7 @@ def _field(value: object, spec: Field, where: str) -> object:
             raise _bad(where, value, spec)
         return value
     if kind == "dict":
-        if not isinstance(value, dict) or not all_finite(value):
+        if not isinstance(value, dict) or nesting_depth(value) > MAX_DEPTH or not all_finite(value):
             raise _bad(where, value, spec)
         return value
     if isinstance(value, bool) or not isinstance(value, int if kind == "int" else (int, float)):

@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from pathlib import Path
 
 from twin.errors import ConfigError, UnknownName
+from twin.model.json_values import load_json_text, load_toml_text
 from twin.model.profiles import ROLES, RobotProfile
 
 NAMED_KEYS = ("up", "down", "left", "right", "space", "enter", "tab", "backspace", "delete", "insert",
@@ -140,7 +140,11 @@ def _value(src: str, key: str, action: list, raw: object, joint: int) -> float:
             raw = math.radians(float(raw[:-3]))
         except ValueError:
             pass
-    if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
+    try:
+        finite = not isinstance(raw, bool) and isinstance(raw, (int, float)) and math.isfinite(raw)
+    except OverflowError:  # a JSON integer too large for a float
+        finite = False
+    if not finite:
         unit = "metres" if joint == ROLES.index("z") else "radians or a string like \"5deg\""
         raise _bad(src, key, action, f"value {raw!r} is not a finite number; expected {unit}")
     return float(raw)
@@ -226,17 +230,18 @@ def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
         raise ConfigError(f"key map {src} does not exist")
     try:
         text = p.read_text()
-        data = tomllib.loads(text) if p.suffix == ".toml" else json.loads(text)
-    except (ValueError, OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"key map {src} cannot be read: {str(err).splitlines()[0]}") from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"key map {src} cannot be read: {(str(err).splitlines() or [type(err).__name__])[0]}") from err
+    what = f"key map {src} cannot be read"  # malformed or nested too deep: one line, never a RecursionError
+    data = load_toml_text(text, what) if p.suffix == ".toml" else load_json_text(text, what)
     if not isinstance(data, dict) or not isinstance(data.get("keys"), dict):
         raise ConfigError(f"key map {src}: expected a table `keys` (key = list of actions)")
-    unknown = sorted(set(data) - {"keys", "extends"})
+    unknown = sorted(str(k) for k in set(data) - {"keys", "extends"})
     if unknown:
         raise ConfigError(f"key map {src}: unknown entries {unknown}; expected `keys` and optionally `extends`")
     base: dict = {}
     if "extends" in data:
-        if data["extends"] not in BUILTIN:
+        if not isinstance(data["extends"], str) or data["extends"] not in BUILTIN:
             raise ConfigError(f"key map {src}: extends {data['extends']!r} is unknown; expected one of "
                               f"{', '.join(BUILTIN)}")
         base = builtin_keymap(data["extends"])

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
+from twin.model.json_values import MAX_DEPTH, nesting_depth, shown
 from twin.model.versions import ENGINE
 from twin.record.machine import machine
 from twin.record.mcap import schemas as S
@@ -69,9 +70,12 @@ def check_run(run: dict) -> dict:
     if not isinstance(run, dict) or run.get("source") not in RUN_SOURCES:
         raise ConfigError(f"run description {run!r:.200} is invalid; expected source one of {RUN_SOURCES}")
     params = run.get("params", {})
+    if nesting_depth(params) > MAX_DEPTH:  # a reader refuses deeper (a recursion in every JSON tool)
+        raise ConfigError(f"run parameters nest lists and objects more than {MAX_DEPTH} levels deep; expected "
+                          f"at most {MAX_DEPTH}")
     try:
         _dumps(params)
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError, RecursionError) as err:
         raise ConfigError(f"run parameters {params!r:.200} are not JSON data: {err}") from err
     out = {"source": run["source"], "task": str(run.get("task", "")), "params": params}
     if run.get("task_sha256"):
@@ -126,7 +130,10 @@ def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") 
     except ValueError as err:
         raise RecordingError(f"{where}: {S.META_RUN} field params is not JSON: {err}") from err
     if not isinstance(params, dict):
-        raise RecordingError(f"{where}: {S.META_RUN} field params = {params!r:.60} is invalid; expected a JSON object")
+        raise RecordingError(f"{where}: {S.META_RUN} field params = {shown(params)} is invalid; expected a JSON object")
+    if nesting_depth(params) > MAX_DEPTH:  # never printed: repr recurses too
+        raise RecordingError(f"{where}: {S.META_RUN} field params nests more than {MAX_DEPTH} levels deep; expected "
+                             f"at most {MAX_DEPTH}")
     if S.META_RUN in records and record.get("source") not in RUN_SOURCES:
         raise RecordingError(f"{where}: {S.META_RUN} field source = {record.get('source')!r:.60} is invalid; "
                              f"expected one of {', '.join(RUN_SOURCES)}")
@@ -135,8 +142,8 @@ def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") 
         run["task_sha256"] = record["task_sha256"]
     if record.get("replay_of"):
         try:
-            replay_of = json.loads(record["replay_of"])
-        except ValueError:
+            replay_of = strict_json.loads(record["replay_of"])
+        except ValueError:  # also nested too deep
             replay_of = None
         if isinstance(replay_of, dict):
             run["replay_of"] = replay_of

@@ -253,7 +253,7 @@ def good(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def corpus(good, tmp_path_factory) -> dict[str, tuple[Path, str]]:
     """name -> (path, kind). kind "bad": every reader exits 2; "damaged": recover may restore it (0);
-    "messages": info may describe it (0), it does not interpret commands or the URDF; "any": a bit flip
+    "messages": a part that info reads too is bad or foreign (it prints the rest, then exits 2); "any": a bit flip
     may hit bytes nobody reads (0), or a value replay then sees differ (1)."""
     d = tmp_path_factory.mktemp("corpus")
     raw = good.read_bytes()
@@ -352,9 +352,7 @@ def _expected_codes(kind: str, reader: str) -> set[int]:
         return {0, 1, 2}
     if kind == "damaged" and reader == "recover":
         return {0, 2}
-    if kind == "messages" and reader == "info":
-        return {0}
-    return {2}
+    return {2}  # "messages" too: info prints what it read of such a file, then exits 2
 
 
 def _assert_clean(run: Run, expected: set[int], what: str) -> None:
@@ -443,3 +441,156 @@ def test_nan_in_event_data_is_written_as_null(tmp_path):
                 if topic == S.EVENTS.topic and b"probe" in m.data]
     assert event["data"] == {"error_m": None, "ok": 1.5, "pose": [1.0, None]}
     assert twin.load(path).events[-1].data == {"error_m": None, "ok": 1.5, "pose": [1.0, None]}
+
+
+# pictures and export
+# -- camera pictures through the readers that decode them (diff, replay, check) --------------------------
+# conftest's camera_run (pick_place, overhead and wrist cameras, 320x240 at 15 Hz) with its third overhead
+# picture (step 32) replaced. Was: an UnidentifiedImageError or DecompressionBombError traceback (exit 1)
+# from each, and 1.14-1.17 GB for the 9000x9000 PNG (decoded in full: 243 MB of pixels in a 430 KB file).
+# `twin export` on these and more: tests/export/test_export_bad_inputs.py.
+
+def _black_png(width: int, height: int, *, pixels: bool = True) -> bytes:
+    """An 8-bit RGB PNG of black pixels, compressed row by row; pixels=False: the header and one row only."""
+    c = zlib.compressobj(1)
+    row = bytes(1 + 3 * width)
+    idat = b"".join([c.compress(row) for _ in range(height if pixels else 1)] + [c.flush()])
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+@pytest.fixture(scope="module")
+def bad_picture_runs(camera_run, tmp_path_factory) -> dict[str, Path]:
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+
+    folder = tmp_path_factory.mktemp("bad_pictures")
+    content = _read(camera_run["mcap"])
+    topic = S.image_channel("overhead").topic
+
+    def third_picture(payload: bytes):
+        seen = [0]
+
+        def edit(t: str, data: bytes) -> bytes:
+            if t != topic:
+                return data
+            seen[0] += 1
+            if seen[0] != 3:
+                return data
+            picture = CompressedImage()
+            picture.ParseFromString(data)
+            picture.data = payload
+            return picture.SerializeToString()
+
+        return edit
+
+    payloads = {"garbage": b"not a picture " * 20, "png_20000x20000": _black_png(20000, 20000, pixels=False),
+                "png_9000x9000": _black_png(9000, 9000)}
+    return {name: rewrite(content, folder / f"{name}.mcap", edit=third_picture(payload))
+            for name, payload in payloads.items()}
+
+
+@pytest.mark.parametrize("name", ["garbage", "png_20000x20000", "png_9000x9000"])
+@pytest.mark.parametrize("reader", ["diff", "replay", "check"])
+def test_a_bad_camera_picture_is_one_line_exit_2(bad_picture_runs, camera_run, tmp_path, reader, name):
+    path = bad_picture_runs[name]
+    argv = {"diff": ["diff", str(path), str(camera_run["mcap"])], "replay": ["replay", str(path)],
+            "check": ["check", str(path)]}[reader]
+    run = run_forked(argv, tmp_path)
+    _assert_clean(run, {2}, f"{reader} {name}")
+    said = run.err + run.out
+    assert "camera 'overhead' picture at step 32 " in said and "expected a PNG picture of 320x240 px" in said, run
+    print(f"{reader} {name}: {run.code} {run.rss_mb:.0f} MB {run.seconds:.2f} s")
+
+
+# readers and metadata
+# -- floods of empty messages: memory must not grow with the number of messages ----------------------------
+# The issue: a 44 MB file of empty messages cost `twin info` 2.34 GB and 14 s, `twin check` 1.22 GB. Measured
+# here on the files below before the fix (each `twin` process's whole peak, as run_binary measures it):
+#   empty_44M_tf (45 MB, 44 million empty /tf messages): info 5.6 GB, 143 s; check 5.6 GB, 141 s; both exit 0
+#   empty_44M_foreign (the same on a channel twin does not know): info 5.6 GB, 232 s; check 5.6 GB, 214 s
+#   empty_44M_events (on /twin/events): info 5.6 GB, over 300 s (stopped)
+#   empty_3M_tf_timed (50 MB, 3 million empty /tf messages at distinct times): info 723 MB, 10.5 s; check
+#   761 MB, 9.9 s; both exit 0
+# After: 80-125 MB and 1-2 s each, exit 2: the chunks hold more records than one per 8 bytes of the file
+# (twin's writer spends 16 bytes of message index per message); empty_3M_tf_timed, inside that bound, is
+# read (exit 0) in 117 and 154 MB, 1.2 and 1.5 s. The rule checked: the peak RSS of the whole `twin`
+# process under MAX_RSS_MB (400 MB) and the time under 10 s, whatever the number of messages.
+
+FLOOD_TIMEOUT_S = 10.0
+_FLOOD_RECORD = [("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"), ("log_time", "<u8"),
+                 ("publish_time", "<u8")]  # a message record with no data: 31 bytes
+
+
+def _channel_record(channel_id: int, schema_id: int, topic: str, encoding: str) -> bytes:
+    def text(s: str) -> bytes:
+        return struct.pack("<I", len(s.encode())) + s.encode()
+
+    return _record(0x04, struct.pack("<HH", channel_id, schema_id) + text(topic) + text(encoding)
+                   + struct.pack("<I", 0))
+
+
+def _flood_chunk(channel: bytes, channel_id: int, n: int, *, timed: bool, first: int = 0) -> bytes:
+    """A zstd chunk: a channel record, then n empty messages on it (sequence first..; log and publish
+    time 0, or, timed, one step apart and scattered: then the chunk compresses about 2.5 times only)."""
+    import numpy as np
+
+    records = np.zeros(n, dtype=_FLOOD_RECORD)
+    records["op"], records["length"], records["channel"] = 0x05, 22, channel_id
+    records["sequence"] = np.arange(first, first + n)
+    if timed:
+        records["log_time"] = np.arange(first, first + n) * 4_166_667
+        records["publish_time"] = np.random.default_rng(first).integers(0, 2**62, n)
+    raw = channel + records.tobytes()
+    return chunk_record(None, compression="zstd", declared=len(raw),
+                        compressed=zstandard.ZstdCompressor(level=1).compress(raw))
+
+
+@pytest.fixture(scope="module")
+def floods(good, tmp_path_factory) -> dict[str, tuple[Path, int]]:
+    """name -> (path, the exit code every reader gives): the `good` recording with a flood of empty
+    messages written before its own (rewrite's Writer numbers schemas and channels 1, 2, ... in order)."""
+    folder = tmp_path_factory.mktemp("floods")
+    content = _read(good)
+    ids = {c.topic: (i, list(content["schemas"]).index(c.schema_id) + 1)
+           for i, c in enumerate(content["channels"].values(), 1)}
+    out = {}
+    for name, topic, encoding, chunks, per_chunk, timed, code in (
+            ("empty_44M_tf", S.TF.topic, "protobuf", 44, 1 << 20, False, 2),
+            ("empty_44M_events", S.EVENTS.topic, "json", 44, 1 << 20, False, 2),
+            ("empty_44M_foreign", "/x", "json", 44, 1 << 20, False, 2),
+            ("empty_3M_tf_timed", S.TF.topic, "protobuf", 3, 1 << 20, True, 0)):
+        channel_id, schema_id = ids.get(topic, (len(ids) + 1, 0))  # /x: a new channel, no schema
+        channel = _channel_record(channel_id, schema_id, topic, encoding)
+        flood = (b"".join(_flood_chunk(channel, channel_id, per_chunk, timed=True, first=i * per_chunk)
+                          for i in range(chunks)) if timed
+                 else _flood_chunk(channel, channel_id, per_chunk, timed=False) * chunks)  # the same chunk again
+        path = rewrite(content, folder / f"{name}.mcap", raw_chunk=flood)
+        out[name] = (path, code)
+    return out
+
+
+@pytest.mark.parametrize("name", ["empty_44M_tf", "empty_44M_events", "empty_44M_foreign", "empty_3M_tf_timed"])
+@pytest.mark.parametrize("reader", ["info", "check"])
+def test_a_flood_of_empty_messages_costs_bounded_memory_and_time(floods, good, tmp_path, reader, name):
+    path, code = floods[name]
+    run = run_binary(reader_argv(reader, path, good, tmp_path), tmp_path, timeout_s=60)
+    _assert_clean(run, {code}, f"{reader} {name} (executable)")
+    assert run.seconds < FLOOD_TIMEOUT_S, run
+    print(f"twin {reader} {name} ({path.stat().st_size:,} bytes): exit {run.code}, {run.rss_mb:.0f} MB peak, "
+          f"{run.seconds:.2f} s")
+
+
+def test_a_message_on_a_channel_never_registered_is_refused_at_once(good, tmp_path):
+    """MCAP registers a channel before its messages: 44 million messages on channel 999 stop at the first."""
+    content = _read(good)
+    chunk = _flood_chunk(b"", 999, 1 << 20, timed=False)
+    path = rewrite(content, tmp_path / "unregistered.mcap", raw_chunk=chunk * 44)
+    for reader in ("info", "check"):
+        run = run_forked(reader_argv(reader, path, good, tmp_path), tmp_path)
+        _assert_clean(run, {2}, f"{reader} unregistered")
+        assert "a message on channel 999, which no channel record before it registers" in run.err + run.out, run
+        assert run.seconds < FLOOD_TIMEOUT_S, run

@@ -1,4 +1,11 @@
-"""`twin info`: what a recording holds and whether it was finalized, also for a file cut short."""
+"""`twin info`: what a recording holds and whether it was finalized, also for a file cut short.
+
+It reads what it can and says what it could not: `problems` lists every part that is unreadable (the
+configuration, the run, events, commands, blocks, the robot description) or foreign (no twin
+configuration); `twin info` prints the report and then exits 2 when there is any, or when the file
+is cut short. Messages are taken as they are read: counted by channel, events kept (for --events),
+nothing per message of any other channel.
+"""
 
 from __future__ import annotations
 
@@ -8,15 +15,20 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from twin.errors import RecordingError
 from twin.model.config import TwinConfig
 from twin.model.types import Event
 from twin.record.machine import machine_text
 from twin.record.mcap import schemas as S
-from twin.record.mcap import strict_json
-from twin.record.mcap.reader import block_steps, parse_event, scan
+from twin.record.mcap.reader import (
+    Message,
+    Scan,
+    block_steps,
+    parse_command,
+    parse_event,
+    parse_robot_description,
+    scan,
+)
 from twin.record.metadata import parse_config, parse_run
 
 
@@ -37,65 +49,112 @@ class Info:
     first_step: int
     last_step: int
     channels: list[tuple[str, str, str, int]]  # topic, schema, encoding, messages
-    events: dict[str, int]
-    commands: int
+    events: dict[str, int]  # readable events by kind
+    commands: int  # readable commands
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: list[tuple[str, int]] = field(default_factory=list)
     config: TwinConfig | None = None  # what the run was: robot, scene, pad, cameras
     event_list: list[Event] = field(default_factory=list)  # every readable event, in file order
     machine: dict[str, str] = field(default_factory=dict)  # where it was made; empty in older files
+    problems: list[str] = field(default_factory=list)  # what is unreadable or foreign: twin info exits 2
 
 
-def _steps(messages: list) -> np.ndarray:
-    parts = [block_steps(m) for m in messages]
-    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+MAX_UNREADABLE = 1000  # unreadable messages of one topic counted one by one; past that, reading it stops
+MAX_KINDS = 1000  # distinct event kinds counted by name; any more are counted together
 
 
-def _kind(data: bytes) -> str:
+class _Reading:
+    """Takes the messages twin info describes as the scan reads them: the joint blocks' steps, the
+    events (kept only for --events), the commands and the robot description; counts the unreadable
+    ones with the first reason. Nothing is kept per message but the events asked for."""
+
+    TOPICS = frozenset((S.JOINTS.topic, S.EVENTS.topic, S.COMMANDS.topic, S.ROBOT_DESCRIPTION.topic))
+
+    def __init__(self, keep_events: bool) -> None:
+        self.keep_events = keep_events
+        self.frames, self.first_step, self.last_step = 0, -1, -1
+        self.events: list[Event] = []
+        self.kinds: Counter[str] = Counter()
+        self.commands = 0
+        self.unreadable: dict[str, list] = {}  # topic -> [count, first reason]
+
+    def take(self, s: Scan, topic: str, m: Message) -> None:
+        try:
+            if topic == S.JOINTS.topic:
+                steps = block_steps(m)
+                if not steps.size:
+                    raise RecordingError("a block holds no frame")
+                self.frames += int(steps.size)
+                self.first_step = int(steps[0]) if self.first_step < 0 else self.first_step
+                self.last_step = int(steps[-1])
+            elif topic == S.EVENTS.topic:
+                event = parse_event(m.data, s.path)
+                kind = event.kind[:60]
+                self.kinds["(other kinds)" if kind not in self.kinds and len(self.kinds) >= MAX_KINDS else kind] += 1
+                if self.keep_events:
+                    self.events.append(event)
+            elif topic == S.COMMANDS.topic:
+                parse_command(m.data, s.path)
+                self.commands += 1
+            elif topic == S.ROBOT_DESCRIPTION.topic:
+                s.stop_keeping(topic)  # the first one is the robot's (twin writes one)
+                parse_robot_description(m.data, s.path)
+        except RecordingError as err:
+            entry = self.unreadable.setdefault(topic, [0, str(err).removeprefix(f"recording {s.path!r}: ")])
+            entry[0] += 1
+            if entry[0] >= MAX_UNREADABLE:
+                s.stop_keeping(topic)
+
+    def problems(self, s: Scan) -> list[str]:
+        out = []
+        for topic, (count, reason) in self.unreadable.items():
+            total = s.message_count_of(topic)
+            what = "message" if total == 1 else "messages"
+            at_least = f"at least {count:,} (then reading them stopped)" if count >= MAX_UNREADABLE else f"{count:,}"
+            out.append(f"{at_least} of its {total:,} {topic} {what} {'is' if count == 1 else 'are'} unreadable "
+                       f"(the first: {reason[:160]})")
+        return out
+
+
+def describe(path: str | Path, *, keep_events: bool = True) -> Info:
+    """Read as much of the file as is readable and summarize it (RecordingError if it is not an MCAP
+    file at all); what is unreadable or foreign is listed in `problems`. keep_events: keep every
+    readable event in `event_list` (else only their counts by kind)."""
+    reading = _Reading(keep_events)
+    s = scan(path, strict=False, topics=_Reading.TOPICS, consume=reading.take)
+    problems = []
+    config = None
+    if S.META_CONFIG in s.metadata:
+        try:
+            config = parse_config(s.metadata, repr(s.path))
+        except RecordingError as err:
+            problems.append(str(err).removeprefix(f"{s.path!r}: "))
+    else:
+        problems.append(f"it has no {S.META_CONFIG} metadata: it was not written by twin"
+                        + (f" (written by {s.library[:60]!r})" if s.library and s.library != S.LIBRARY else ""))
     try:
-        value = strict_json.loads(data)
-    except ValueError:
-        return "(unreadable)"
-    return str(value.get("kind", "?"))[:60] if isinstance(value, dict) else "(unreadable)"
-
-
-def describe(path: str | Path) -> Info:
-    """Read as much of the file as is readable and summarize it (RecordingError if nothing is, or if
-    its configuration or run description is malformed)."""
-    s = scan(path, strict=False)
-    topics = s.by_topic()
-    steps = _steps(topics.get(S.JOINTS.topic, []))
-    kinds = Counter(_kind(m.data) for m in topics.get(S.EVENTS.topic, []))
-    counts = Counter(m.channel_id for m in s.messages)
+        run = parse_run(s.metadata, repr(s.path))
+    except RecordingError as err:
+        problems.append(str(err).removeprefix(f"{s.path!r}: "))
+        run = {}
+    problems += reading.problems(s)
     channels = []
     for cid, channel in sorted(s.channels.items()):
         schema = s.schemas.get(channel.schema_id)
-        channels.append((channel.topic, schema.name if schema else "", channel.message_encoding, counts[cid]))
-    config = parse_config(s.metadata, repr(s.path)) if S.META_CONFIG in s.metadata else None
+        channels.append((channel.topic, schema.name if schema else "", channel.message_encoding, s.counts.get(cid, 0)))
     return Info(
         path=s.path, size_bytes=s.size_bytes, intact=s.complete, problem=s.problem,
         finalized=s.complete and S.META_FINALIZED in s.metadata, finished=s.metadata.get(S.META_FINALIZED, {}),
-        recovered=s.metadata.get(S.META_RECOVERED, {}), run=parse_run(s.metadata, repr(s.path)),
+        recovered=s.metadata.get(S.META_RECOVERED, {}), run=run,
         robot=config.profile.name if config else "", objects=[o.name for o in config.objects] if config else [],
-        dt_ns=config.dt_ns if config else 0, frames=int(steps.size),
-        first_step=int(steps[0]) if steps.size else -1, last_step=int(steps[-1]) if steps.size else -1,
-        channels=channels, events=dict(sorted(kinds.items())), commands=len(topics.get(S.COMMANDS.topic, [])),
+        dt_ns=config.dt_ns if config else 0, frames=reading.frames,
+        first_step=reading.first_step, last_step=reading.last_step,
+        channels=channels, events=dict(sorted(reading.kinds.items())), commands=reading.commands,
         metadata={k: v for k, v in sorted(s.metadata.items()) if k != S.META_CONFIG},
         attachments=[(a.name, len(a.data)) for a in s.attachments],
-        config=config, event_list=_events(topics.get(S.EVENTS.topic, []), s.path),
-        machine=dict(s.metadata.get(S.META_MACHINE, {})),
+        config=config, event_list=reading.events, machine=dict(s.metadata.get(S.META_MACHINE, {})),
+        problems=[" ".join(p.split()) for p in problems],  # one line each
     )
-
-
-def _events(messages: list, where: str) -> list[Event]:
-    """The events a file holds, as far as they parse (a damaged one is left out: info describes what is readable)."""
-    out = []
-    for m in messages:
-        try:
-            out.append(parse_event(m.data, where))
-        except RecordingError:
-            continue
-    return out
 
 
 def format_info(info: Info, *, all_events: bool = False) -> list[str]:
@@ -140,6 +199,7 @@ def format_info(info: Info, *, all_events: bool = False) -> list[str]:
         lines.append("attachments: " + ", ".join(f"{name} ({size:,} bytes)" for name, size in info.attachments))
     if info.config is not None:
         lines += setup_lines(info.config, info.run)
+    lines += [f"problem: {problem}" for problem in info.problems]
     if all_events:
         lines.append(f"all events ({len(info.event_list)}):" if info.event_list else "all events: none")
         lines += [f"  {event_line(e)}" for e in info.event_list]
@@ -171,5 +231,8 @@ def setup_lines(config: TwinConfig, run: dict) -> list[str]:
 
 def event_line(e: Event) -> str:
     """One event: time, step, kind, body, message and its data as JSON."""
-    data = f" {json.dumps(e.data, sort_keys=True)}" if e.data else ""
+    try:
+        data = f" {json.dumps(e.data, sort_keys=True)}" if e.data else ""
+    except RecursionError:  # as deep as the file's JSON parser allowed: printing it recurses again
+        data = " (data nested too deeply to show)"
     return f"t={e.t_ns * 1e-9:9.3f} s  step {e.step:>7}  {e.kind:<14} {e.body:<6} {e.message}{data}".rstrip()

@@ -3,13 +3,18 @@
 One pass over the file's records (mcap.scan); the twin's blocks are decoded with a numpy fast
 path (tests check it against the standard protobuf decoder). `scan(path, strict=False)` stops at
 the first broken record instead of failing, which is what `twin recover` and `twin info` use.
+
+Memory does not grow with messages a reader does not interpret: `scan(topics=...)` hands over only
+the messages of the topics asked for, and counts the rest by channel. `load` takes each message as
+it is read (a block's fields, a Command, an Event, a picture), so a message that does not parse
+fails at once and no message object is kept: what stays is what the Recording holds.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import stat
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,7 +24,9 @@ from mcap.records import Attachment, Channel, Footer, Header, Metadata, Schema
 from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.columns import FrameColumns
+from twin.model.config import TwinConfig
 from twin.model.images import CameraTrack
+from twin.model.json_values import shown
 from twin.model.recording import Recording
 from twin.model.types import Command, Event
 from twin.record.mcap import scan as mcap_scan
@@ -33,19 +40,38 @@ Message = mcap_scan.Message
 
 @dataclass
 class Scan:
-    """Every record read from a file, in file order, and whether the file ended cleanly."""
+    """Every record read from a file, in file order, and whether the file ended cleanly. `messages`
+    holds the messages of the topics the scan kept (all, unless it was told which, or handed them on);
+    `counts` the number of messages on each channel id, kept or not."""
 
     path: str
     size_bytes: int
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
     messages: list[Message] = field(default_factory=list)
+    counts: dict[int, int] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: list[Attachment] = field(default_factory=list)
     library: str = ""
     header: bool = False  # an MCAP header record was read
     complete: bool = False  # the footer was reached
     problem: str = ""  # why reading stopped early
+    _keep: set[int] = field(default_factory=set, repr=False)  # the channel ids whose messages are handed on
+    _dropped: set[str] = field(default_factory=set, repr=False)  # topics no longer kept (stop_keeping)
+
+    def stop_keeping(self, topic: str) -> None:
+        """From now on, only count the messages of `topic` (a consumer that has seen enough of them)."""
+        self._dropped.add(topic)
+        self._keep.difference_update(cid for cid, c in self.channels.items() if c.topic == topic)
+
+    @property
+    def message_count(self) -> int:
+        """Every message read, on any channel (kept or only counted)."""
+        return sum(self.counts.values())
+
+    def message_count_of(self, topic: str) -> int:
+        """The messages read on the channels of one topic."""
+        return sum(n for cid, n in self.counts.items() if cid in self.channels and self.channels[cid].topic == topic)
 
     def topic_of(self, message: Message) -> str:
         return self.channels[message.channel_id].topic
@@ -55,6 +81,9 @@ class Scan:
         for m in self.messages:
             out[self.channels[m.channel_id].topic].append(m)
         return out
+
+
+Consume = Callable[[Scan, str, Message], None]  # (the scan so far, the message's topic, the message)
 
 
 def block_steps(message: Message) -> np.ndarray:
@@ -92,20 +121,36 @@ def open_checked(path: str | Path) -> tuple[str, int]:
     return where, size
 
 
-def scan(path: str | Path, *, strict: bool = True) -> Scan:
+def scan(path: str | Path, *, strict: bool = True, topics: Collection[str] | Callable[[str], bool] | None = None,
+         consume: Consume | None = None) -> Scan:
     """Read every record. strict: a file that ends without a footer or with a damaged record is a
-    RecordingError; otherwise reading stops there and `problem` says why."""
+    RecordingError; otherwise reading stops there and `problem` says why.
+
+    topics: the topics whose messages are kept (a collection, or a test of the topic); None: every
+    topic. The others' messages are only counted. consume: called with each kept message as it is
+    read, instead of keeping it in `messages` (what it raises ends the scan)."""
     where, size = open_checked(path)
     out = Scan(where, size)
+    wanted = (lambda _: True) if topics is None else topics if callable(topics) else frozenset(topics).__contains__
+    keep = out._keep
     footer = False
     with open(where, "rb") as f:
         try:
-            for record in mcap_scan.records(f, size):
+            for record in mcap_scan.records(f, size, keep=keep, counts=out.counts):
                 kind = type(record)
                 if kind is Message:
-                    out.messages.append(record)
+                    if consume is None:
+                        out.messages.append(record)
+                    else:
+                        consume(out, out.channels[record.channel_id].topic, record)
                 elif kind is Channel:
+                    known = out.channels.get(record.id)
+                    if known is not None and known.topic != record.topic:
+                        raise mcap_scan.Damaged(f"channel {record.id} is registered as {known.topic[:60]!r} and "
+                                                f"again as {record.topic[:60]!r}")
                     out.channels[record.id] = record
+                    if wanted(record.topic) and record.topic not in out._dropped:
+                        keep.add(record.id)
                 elif kind is Schema:
                     out.schemas[record.id] = record
                 elif kind is Metadata:
@@ -128,65 +173,118 @@ def scan(path: str | Path, *, strict: bool = True) -> Scan:
                              f"{size} bytes")
     if strict and not out.complete:
         raise RecordingError(
-            f"recording {where!r} is truncated or damaged ({out.problem}) after {len(out.messages)} readable "
+            f"recording {where!r} is truncated or damaged ({out.problem}) after {out.message_count} readable "
             f"messages; `twin recover {where} -o FIXED.mcap` restores its readable part")
-    for m in out.messages:
-        if m.channel_id not in out.channels:
-            raise RecordingError(f"recording {where!r} has a message on unknown channel {m.channel_id}")
     return out
 
 
 def load(path: str | Path) -> Recording:
     """A finalized (or recovered) recording, as a Recording."""
-    return recording_from_scan(scan(path, strict=True))
+    builder = RecordingBuilder()
+    return builder.recording(scan(path, strict=True, topics=builder.wants, consume=builder.take))
 
 
 def recording_from_scan(s: Scan) -> Recording:
-    config = located_config(parse_config(s.metadata, repr(s.path)), s.path)
-    topics = s.by_topic()
-    frames = decode_frames(*(topics.get(t, []) for t in S.BLOCK_TOPICS.values()), len(config.objects), s.path)
-    commands = [parse_command(m.data, s.path) for m in topics.get(S.COMMANDS.topic, [])]
-    events = [parse_event(m.data, s.path) for m in topics.get(S.EVENTS.topic, [])]
-    urdf = ""
-    for m in topics.get(S.ROBOT_DESCRIPTION.topic, [])[:1]:
-        urdf = _json_message(m.data, S.ROBOT_DESCRIPTION.topic, s.path).get("data")
-        if not isinstance(urdf, str):
-            raise RecordingError(f"recording {s.path!r}: the {S.ROBOT_DESCRIPTION.topic} message has no string "
-                                 "'data'; expected {\"data\": URDF text}")
-    meta = {name: dict(record) for name, record in sorted(s.metadata.items())
-            if name not in (S.META_CONFIG, S.META_RUN)}
-    return Recording(config=config, frames=frames, commands=commands, events=events,
-                     run=parse_run(s.metadata, repr(s.path)), meta=meta,
-                     finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=urdf, path=s.path,
-                     assets={a.name: a.data for a in s.attachments}, cameras=camera_tracks(config, topics, s.path))
+    """The Recording of a scan that kept every message (scan(path) without topics or consume)."""
+    builder = RecordingBuilder()
+    for m in s.messages:
+        topic = s.topic_of(m)
+        if builder.wants(topic):
+            builder.take(s, topic, m)
+    return builder.recording(s)
 
 
-def camera_tracks(config, topics: dict[str, list[Message]], where: str) -> dict[str, CameraTrack]:
-    """Each configured camera's pictures from its foxglove.CompressedImage channel (bytes as stored,
-    decoded only by CameraTrack.rgb); a picture's step is its time over the time step."""
-    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
-    from google.protobuf.message import DecodeError
+def _is_image_topic(topic: str) -> bool:
+    return topic.startswith("/camera/") and topic.endswith("/image")
 
-    tracks = {}
-    for spec in config.cameras:
-        topic = S.image_channel(spec.name).topic
-        steps, times, data = [], [], []
-        for m in topics.get(topic, []):
-            picture = CompressedImage()
-            try:
-                picture.ParseFromString(m.data)
-            except DecodeError as err:
-                raise RecordingError(f"recording {where!r}: a {topic} message is not a CompressedImage: {err}") from err
-            t_ns = picture.timestamp.seconds * 1_000_000_000 + picture.timestamp.nanos
-            if picture.format != spec.format or t_ns % config.dt_ns or not 0 <= t_ns <= S.MAX_T_NS:
-                raise RecordingError(f"recording {where!r}: a {topic} picture at {t_ns} ns in {picture.format!r}; "
-                                     f"expected {spec.format!r} at a whole step of {config.dt_ns} ns")
-            steps.append(t_ns // config.dt_ns)
-            times.append(t_ns)
-            data.append(picture.data)
-        tracks[spec.name] = CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
-                                        np.array(steps, dtype=np.int64), np.array(times, dtype=np.int64), data)
-    return tracks
+
+class RecordingBuilder:
+    """Takes a recording's messages one by one as they are read (scan's consume) and keeps only what
+    the Recording holds: the blocks' fields as bytes, Commands, Events, the URDF, the pictures."""
+
+    FIXED = frozenset((*S.BLOCK_TOPICS.values(), S.COMMANDS.topic, S.EVENTS.topic, S.ROBOT_DESCRIPTION.topic))
+
+    def __init__(self) -> None:
+        self.blocks = {topic: BlockParts(block, topic) for block, topic in S.BLOCK_TOPICS.items()}
+        self.commands: list[Command] = []
+        self.events: list[Event] = []
+        self.urdf: str | None = None
+        self._config: TwinConfig | None = None
+        self._pictures: dict[str, list[tuple[int, str, bytes]]] = {}  # image topic -> (t_ns, format, data)
+        self._early: list[tuple[str, Message]] = []  # pictures read before the configuration (twin never writes)
+
+    def wants(self, topic: str) -> bool:
+        return topic in self.FIXED or _is_image_topic(topic)
+
+    def take(self, s: Scan, topic: str, m: Message) -> None:
+        where = s.path
+        blocks = self.blocks.get(topic)
+        if blocks is not None:
+            blocks.add(m.data, where)
+        elif topic == S.COMMANDS.topic:
+            self.commands.append(parse_command(m.data, where))
+        elif topic == S.EVENTS.topic:
+            self.events.append(parse_event(m.data, where))
+        elif topic == S.ROBOT_DESCRIPTION.topic:
+            if self.urdf is None:
+                self.urdf = parse_robot_description(m.data, where)
+        elif self._config is None and S.META_CONFIG not in s.metadata:
+            self._early.append((topic, m))
+        else:
+            self._picture(self._configured(s), topic, m.data, where)
+
+    def _configured(self, s: Scan) -> TwinConfig:
+        if self._config is None:
+            self._config = parse_config(s.metadata, repr(s.path))
+        return self._config
+
+    def _picture(self, config: TwinConfig, topic: str, data: bytes, where: str) -> None:
+        """A picture on a configured camera's channel, checked now (others are left out, as before)."""
+        spec = next((c for c in config.cameras if S.image_channel(c.name).topic == topic), None)
+        if spec is None:
+            return
+        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+        from google.protobuf.message import DecodeError
+
+        picture = CompressedImage()
+        try:
+            picture.ParseFromString(data)
+        except DecodeError as err:
+            raise RecordingError(f"recording {where!r}: a {topic} message is not a CompressedImage: {err}") from err
+        t_ns = picture.timestamp.seconds * 1_000_000_000 + picture.timestamp.nanos
+        if picture.format != spec.format or t_ns % config.dt_ns or not 0 <= t_ns <= S.MAX_T_NS:
+            raise RecordingError(f"recording {where!r}: a {topic} picture at {t_ns} ns in {picture.format!r}; "
+                                 f"expected {spec.format!r} at a whole step of {config.dt_ns} ns")
+        self._pictures.setdefault(topic, []).append((t_ns, picture.format, picture.data))
+
+    def recording(self, s: Scan) -> Recording:
+        """The Recording, once every message has been taken."""
+        config = located_config(self._configured(s), s.path)
+        for topic, m in self._early:
+            self._picture(config, topic, m.data, s.path)
+        self._early.clear()
+        frames = frames_of(*self.blocks.values(), n_objects=len(config.objects), where=s.path)
+        tracks = {}
+        for spec in config.cameras:
+            pictures = self._pictures.get(S.image_channel(spec.name).topic, [])
+            times = np.array([t for t, _, _ in pictures], dtype=np.int64)
+            tracks[spec.name] = CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
+                                            times // config.dt_ns, times, [d for _, _, d in pictures], source=s.path)
+        meta = {name: dict(record) for name, record in sorted(s.metadata.items())
+                if name not in (S.META_CONFIG, S.META_RUN)}
+        return Recording(config=config, frames=frames, commands=self.commands, events=self.events,
+                         run=parse_run(s.metadata, repr(s.path)), meta=meta,
+                         finalized=S.META_FINALIZED in s.metadata and s.complete, urdf=self.urdf or "", path=s.path,
+                         assets={a.name: a.data for a in s.attachments}, cameras=tracks)
+
+
+def parse_robot_description(data: bytes, where: str) -> str:
+    """The URDF text of a /robot_description message ({"data": URDF}); RecordingError otherwise."""
+    urdf = _json_message(data, S.ROBOT_DESCRIPTION.topic, where).get("data")
+    if not isinstance(urdf, str):
+        raise RecordingError(f"recording {where!r}: the {S.ROBOT_DESCRIPTION.topic} message has no string "
+                             "'data'; expected {\"data\": URDF text}")
+    return urdf
 
 
 def _json_message(data: bytes, what: str, where: str) -> dict:
@@ -202,21 +300,21 @@ def _json_message(data: bytes, what: str, where: str) -> dict:
 def _whole(v: dict, name: str, limit: int) -> int:
     value = v.get(name)
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= limit:
-        raise ValueError(f"{name} {value!r:.40} is not a whole number 0..{limit}")
+        raise ValueError(f"{name} {shown(value, 40)} is not a whole number 0..{limit}")
     return value
 
 
 def _text(v: dict, name: str) -> str:
     value = v.get(name)
     if not isinstance(value, str):
-        raise TypeError(f"{name} {value!r:.40} is not a string")
+        raise TypeError(f"{name} {shown(value, 40)} is not a string")
     return value
 
 
 def _object(v: dict, name: str) -> dict:
     value = v.get(name)
     if not isinstance(value, dict):
-        raise TypeError(f"{name} {value!r:.40} is not a JSON object")
+        raise TypeError(f"{name} {shown(value, 40)} is not a JSON object")
     return value
 
 
@@ -227,7 +325,7 @@ def parse_command(data: bytes, where: str) -> Command:
     try:
         return Command(step=_whole(v, "step", S.MAX_STEP), kind=_text(v, "kind"), args=_object(v, "args"))
     except (TypeError, ValueError) as err:
-        raise RecordingError(f"recording {where!r}: malformed command {json.dumps(v)[:120]}: {err}") from err
+        raise RecordingError(f"recording {where!r}: malformed command {shown(v, 120, as_json=True)}: {err}") from err
 
 
 def parse_event(data: bytes, where: str) -> Event:
@@ -237,42 +335,66 @@ def parse_event(data: bytes, where: str) -> Event:
         return Event(step=_whole(v, "step", S.MAX_STEP), t_ns=_whole(v, "t_ns", S.MAX_T_NS), kind=_text(v, "kind"),
                      body=_text(v, "body"), message=_text(v, "message"), data=_object(v, "data"))
     except (TypeError, ValueError) as err:
-        raise RecordingError(f"recording {where!r}: malformed event {json.dumps(v)[:120]}: {err}") from err
+        raise RecordingError(f"recording {where!r}: malformed event {shown(v, 120, as_json=True)}: {err}") from err
 
 
-def _columns(messages: list[Message], spec: list[tuple[int, str]], where: str, topic: str) -> list[np.ndarray]:
-    """Concatenate the numbered fields of every block on a channel into flat arrays."""
-    parts: list[list[bytes]] = [[] for _ in spec]
-    for m in messages:
+class BlockParts:
+    """The numbered fields of one block channel's messages, as the raw bytes of each, message after
+    message (model.fields says which field is where); a message is split when it is added."""
+
+    def __init__(self, block: str, topic: str) -> None:
+        self.block, self.topic = block, topic
+        # step first; t_ns is every block's, taken from the first (the frames' steps must agree)
+        self.fields = tuple(f for f in F.block_fields(block) if f.name != "t_ns" or block == F.BLOCKS[0])
+        self.parts: list[list[bytes]] = [[] for _ in self.fields]
+
+    def add(self, data: bytes, where: str) -> None:
         try:
-            fields = wire.split_fields(m.data)
+            fields = wire.split_fields(data)
         except RecordingError as err:
-            raise RecordingError(f"recording {where!r}: a {topic} block is malformed: {err}") from err
-        for i, (number, dtype) in enumerate(spec):
-            parts[i].append(wire.raw_of(fields, number, dtype))
-    out = []
-    for p, (_, dtype) in zip(parts, spec, strict=True):
-        raw = b"".join(p)
-        if len(raw) % np.dtype(dtype).itemsize:
-            raise RecordingError(f"recording {where!r}: a {topic} field is not a whole number of {dtype} values")
-        out.append(np.frombuffer(raw, dtype=dtype).copy())
-    return out
+            raise RecordingError(f"recording {where!r}: a {self.topic} block is malformed: {err}") from err
+        raws = [wire.raw_of(fields, f.number, f.wire) for f in self.fields]
+        if not raws[0]:  # twin writes a block when it holds frames: an empty one costs memory, says nothing
+            raise RecordingError(f"recording {where!r}: a {self.topic} block holds no frame; expected at least one")
+        for part, raw in zip(self.parts, raws, strict=True):
+            part.append(raw)
+
+    def arrays(self, where: str) -> list[np.ndarray]:
+        """Each field's values, every message's concatenated (the parts are released)."""
+        out = []
+        for f, parts in zip(self.fields, self.parts, strict=True):
+            raw = b"".join(parts)
+            parts.clear()
+            if len(raw) % np.dtype(f.wire).itemsize:
+                raise RecordingError(f"recording {where!r}: a {self.topic} field is not a whole number of {f.wire} "
+                                     "values")
+            out.append(np.frombuffer(raw, dtype=f.wire).copy())
+        return out
 
 
 def decode_frames(joints: list[Message], suction: list[Message], poses: list[Message], n_objects: int,
                   where: str) -> FrameColumns:
-    """FrameColumns from the three block channels (model.fields says which field is where); RecordingError
+    """FrameColumns from the three block channels' messages; RecordingError if they disagree."""
+    blocks = []
+    for (block, topic), messages in zip(S.BLOCK_TOPICS.items(), (joints, suction, poses), strict=True):
+        parts = BlockParts(block, topic)
+        for m in messages:
+            parts.add(m.data, where)
+        blocks.append(parts)
+    return frames_of(*blocks, n_objects=n_objects, where=where)
+
+
+def frames_of(*blocks: BlockParts, n_objects: int, where: str) -> FrameColumns:
+    """FrameColumns from the three block channels' parts (in model.fields' block order); RecordingError
     if they disagree."""
     n_joints = 4
     columns: dict[str, np.ndarray] = {}
     steps = []
-    for (block, topic), messages in zip(S.BLOCK_TOPICS.items(), (joints, suction, poses), strict=True):
-        fields = [f for f in F.block_fields(block) if f.name == "step" or f.name not in columns]
-        arrays = _columns(messages, [(f.number, f.wire) for f in fields], where, topic)
-        for f, array in zip(fields, arrays, strict=True):
+    for parts in blocks:
+        for f, array in zip(parts.fields, parts.arrays(where), strict=True):
             if f.name == "step":
                 steps.append(array)
-            else:
+            elif f.name not in columns:
                 columns[f.name] = array
     step = columns["step"] = steps[0]
     n = len(step)

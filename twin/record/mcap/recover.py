@@ -5,6 +5,9 @@ chunk may end between them), drops commands and events after the last kept frame
 everything else unchanged (but the finalization record of a file cut short: its run did not end
 there), plus a `twin.recovered` metadata record.
 
+Two passes over the source, neither keeping a message: the first finds the last whole frame (and
+checks every command and event), the second writes what is kept as it reads it.
+
 A killed run leaves `NAME.mcap.partial` (recordings are renamed into place only when finalized):
 `recover("NAME.mcap")` finds it when NAME.mcap does not exist, and then writes NAME.mcap.
 """
@@ -19,7 +22,7 @@ from mcap.writer import CompressionType, Writer
 
 from twin.errors import ConfigError, RecordingError
 from twin.record.mcap import schemas as S
-from twin.record.mcap.reader import Scan, block_steps, parse_command, parse_event, recording_from_scan, scan
+from twin.record.mcap.reader import Message, Scan, block_steps, load, parse_command, parse_event, scan
 from twin.record.metadata import parse_config
 from twin.record.outputs import check_output, final_path, partial_path, publish
 
@@ -53,26 +56,58 @@ class RecoverReport:
         ]
 
 
-def _last_common_step(s: Scan, steps: dict[int, np.ndarray]) -> int:
-    """The last step every block channel holds (blocks hold whole runs of frames)."""
-    topics = s.by_topic()
-    last = None
-    for topic in BLOCK_TOPICS:
-        ends = [int(steps[id(m)].max()) for m in topics.get(topic, []) if steps[id(m)].size]
-        end = max(ends) if ends else -1
-        last = end if last is None else min(last, end)
-    return -1 if last is None else last
+class _Ends:
+    """The first pass: the last step each block channel reaches; every command and event parsed (a
+    malformed one is a RecordingError: a recovered file must load)."""
+
+    TOPICS = frozenset((*BLOCK_TOPICS, S.COMMANDS.topic, S.EVENTS.topic))
+
+    def __init__(self) -> None:
+        self.last = dict.fromkeys(BLOCK_TOPICS, -1)
+
+    def take(self, s: Scan, topic: str, message: Message) -> None:
+        if topic in self.last:
+            block = block_steps(message)
+            if block.size:
+                self.last[topic] = max(self.last[topic], int(block.max()))
+        elif topic == S.COMMANDS.topic:
+            parse_command(message.data, s.path)
+        else:
+            parse_event(message.data, s.path)
+
+    def last_common_step(self) -> int:
+        """The last step every block channel holds (blocks hold whole runs of frames)."""
+        return min(self.last.values())
 
 
-def _keep(s: Scan, message, steps: dict[int, np.ndarray], last_step: int, dt_ns: int) -> bool:
-    topic = s.topic_of(message)
+class _Enough(Exception):
+    """The second pass has written every message the first one read (a file still being written grows)."""
+
+
+class _Copy:
+    """The second pass: each message the first pass read is written at once if it is kept."""
+
+    def __init__(self, writer: Writer, channel_ids: dict[int, int], read: int, last_step: int, dt_ns: int) -> None:
+        self.writer, self.channel_ids, self.left, self.last_step, self.dt_ns = writer, channel_ids, read, last_step, dt_ns
+        self.kept = 0
+
+    def take(self, s: Scan, topic: str, m: Message) -> None:
+        if self.left <= 0:
+            raise _Enough
+        self.left -= 1
+        if _keep(s.path, topic, m, self.last_step, self.dt_ns):
+            self.writer.add_message(self.channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+            self.kept += 1
+
+
+def _keep(where: str, topic: str, message: Message, last_step: int, dt_ns: int) -> bool:
     if topic in BLOCK_TOPICS:
-        block = steps[id(message)]
+        block = block_steps(message)
         return bool(block.size) and int(np.max(block)) <= last_step
     if topic == S.COMMANDS.topic:
-        return parse_command(message.data, s.path).step <= last_step  # RecordingError if malformed
+        return parse_command(message.data, where).step <= last_step  # RecordingError if malformed
     if topic == S.EVENTS.topic:
-        return parse_event(message.data, s.path).step <= last_step
+        return parse_event(message.data, where).step <= last_step
     return message.log_time <= max(0, last_step) * dt_ns
 
 
@@ -103,20 +138,19 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
                              "expected a recording or the .partial file a killed run left")
     output = default_output(source) if output is None else output
     out_path = check_output(output, ".mcap", inputs=[source], option="output")
-    s = scan(source, strict=False)
+    ends = _Ends()
+    s = scan(source, strict=False, topics=ends.TOPICS, consume=ends.take)
     if S.META_CONFIG not in s.metadata:
         raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
                              " nothing to recover")
     dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns  # a damaged config is a RecordingError
-    steps = {id(m): block_steps(m) for m in s.messages if s.topic_of(m) in BLOCK_TOPICS}  # decoded once
-    last_step = _last_common_step(s, steps)
-    kept = [m for m in s.messages if _keep(s, m, steps, last_step, dt_ns)]
+    last_step = ends.last_common_step()
     writing = out_path.with_name(out_path.name + ".recovering")  # not .partial: that may be the source
     try:
         try:
             with open(writing, "wb") as f:
-                _write(f, s, kept, last_step)
-            recording = recording_from_scan(scan(writing, strict=True))  # the result must load
+                kept = _write(f, s, source, last_step, dt_ns)
+            recording = load(writing)  # the result must load
             publish(writing, out_path)
         except OSError as err:
             raise RecordingError(f"cannot write {str(output)!r}: {err.strerror or err}") from err
@@ -124,12 +158,14 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
         writing.unlink(missing_ok=True)
     return RecoverReport(
         source=str(source), output=str(output), asked=asked, was_complete=s.complete, problem=s.problem,
-        messages_kept=len(kept), messages_dropped=len(s.messages) - len(kept), frames=len(recording.frames),
+        messages_kept=kept, messages_dropped=s.message_count - kept, frames=len(recording.frames),
         last_step=last_step, duration_s=max(0, last_step) * dt_ns * 1e-9,
     )
 
 
-def _write(f, s: Scan, kept: list, last_step: int) -> None:
+def _write(f, s: Scan, source: Path, last_step: int, dt_ns: int) -> int:
+    """The recovered file: the first pass's schemas, channels, metadata (and the recovered marker) and
+    attachments, then the kept messages of a second pass over the source. Returns how many were kept."""
     writer = Writer(f, compression=CompressionType.ZSTD)
     writer.start(profile="", library=S.LIBRARY)
     schema_ids = {sid: writer.register_schema(x.name, x.encoding, x.data) for sid, x in sorted(s.schemas.items())}
@@ -146,6 +182,10 @@ def _write(f, s: Scan, kept: list, last_step: int) -> None:
     })
     for a in s.attachments:
         writer.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-    for m in kept:
-        writer.add_message(channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+    copy = _Copy(writer, channel_ids, s.message_count, last_step, dt_ns)
+    try:
+        scan(source, strict=False, consume=copy.take)
+    except _Enough:
+        pass
     writer.finish()
+    return copy.kept

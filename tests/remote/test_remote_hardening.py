@@ -8,16 +8,25 @@ from __future__ import annotations
 import socket
 import struct
 import threading
+import time
 import uuid
 
 import cbor2
+import psutil
 import pytest
 import zmq
 from support.raw_client import RawClient
 from support.server import ServerProcess
 
-from twin.remote.protocol import MAX_FRAME_BYTES, MAX_ITEMS, MAX_NAME_CHARS, MAX_REQUEST_BYTES, MAX_SIGNALS
-from twin.remote.server import MAX_CLIENTS, MAX_CLIENTS_PER_CONNECTION
+from twin.remote.protocol import (
+    MAX_FRAME_BYTES,
+    MAX_ITEMS,
+    MAX_NAME_CHARS,
+    MAX_REQUEST_BYTES,
+    MAX_SIGNALS,
+    MAX_UNREAD_BYTES,
+)
+from twin.remote.server import EVICT_IDLE_S, MAX_CLIENTS, MAX_CLIENTS_PER_CONNECTION
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
@@ -219,31 +228,195 @@ def test_the_number_of_clients_is_bounded_per_connection_and_in_all():
     with ServerProcess("--stepped") as server:
         first = server.client().require("sim")
         one = RawClient(server.port)
-        for i in range(1000):  # each new uuid over one connection would be a client (old: 40,000 of them)
-            reply = one.raw(cbor2.dumps({"func": "sim.getSimulationState", "args": [], "uuid": f"u{i}"}))
-            if i < MAX_CLIENTS_PER_CONNECTION:
-                assert reply == {"ret": [0]}
-            else:
-                assert "too many clients on one connection" in reply["err"]
-        many = []
-        refused = None
-        for _ in range(MAX_CLIENTS):
-            c = RawClient(server.port)
-            many.append(c)
-            reply = c.call("sim.getSimulationState", [])
-            if "err" in reply:
-                refused = reply["err"]
-                break
-        assert refused and f"too many clients: {MAX_CLIENTS} are connected" in refused
-        assert len(many) == MAX_CLIENTS - MAX_CLIENTS_PER_CONNECTION  # the official client holds one slot
-        with pytest.raises(Exception, match="too many clients"):
-            server.client().require("sim")
-        assert first.getSimulationState() == 0  # a known client goes on
-        for c in many:
-            c.close()
-        one.close()
+        many: list[RawClient] = []
+        try:  # closed whatever happens: a failed test's unclosed zmq contexts hang the session when collected
+            for i in range(1000):  # each new uuid over one connection would be a client (old: 40,000 of them)
+                reply = one.raw(cbor2.dumps({"func": "sim.getSimulationState", "args": [], "uuid": f"u{i}"}))
+                if i < MAX_CLIENTS_PER_CONNECTION:
+                    assert reply == {"ret": [0]}
+                else:
+                    assert "too many clients on one connection" in reply["err"]
+            for _ in range(MAX_CLIENTS - MAX_CLIENTS_PER_CONNECTION - 1):  # the official client holds one slot
+                many.append(RawClient(server.port))
+                assert many[-1].call("sim.getSimulationState", []) == {"ret": [0]}
+            # every slot now held by a client seen less than EVICT_IDLE_S ago: none gives its slot up
+            assert first.getSimulationState() == 0
+            for i in range(MAX_CLIENTS_PER_CONNECTION):
+                request = {"func": "sim.getSimulationState", "args": [], "uuid": f"u{i}"}
+                assert one.raw(cbor2.dumps(request)) == {"ret": [0]}
+            for c in many:
+                assert c.call("sim.getSimulationState", []) == {"ret": [0]}
+            many.append(RawClient(server.port))
+            refused = many[-1].call("sim.getSimulationState", [])["err"]
+            assert refused.startswith(f"too many clients: {MAX_CLIENTS} are connected (the limit)")
+            assert f"the least recently seen one silent for {EVICT_IDLE_S:g} s or more" in refused
+            with pytest.raises(Exception, match="too many clients"):
+                server.client().require("sim")
+            assert first.getSimulationState() == 0  # a known client goes on
+        finally:
+            for c in [*many, one]:
+                c.close()
         server.wait_for(rf"client {MAX_CLIENTS} disconnected")
         assert server.client().require("sim").getSimulationState() == 0  # their slots are free again
+
+
+def test_idle_clients_cannot_lock_the_official_client_out():
+    """16 connections x 4 uuids took all 64 slots and held them while open (the official client got
+    "too many clients" until they closed). Now, with all slots taken, a new client takes the slot of the
+    least recently seen one silent for EVICT_IDLE_S or more."""
+    with ServerProcess("--stepped") as server:
+        idle = [RawClient(server.port) for _ in range(MAX_CLIENTS // MAX_CLIENTS_PER_CONNECTION)]
+        try:
+            for i, c in enumerate(idle):
+                for j in range(MAX_CLIENTS_PER_CONNECTION):  # a timeout of 115 days: never reaped
+                    request = {"func": "sim.getSimulationState", "args": [], "uuid": f"idle-{i}-{j}",
+                               "ver": 2, "lang": "python", "timeout": 9_999_999}
+                    assert c.raw(cbor2.dumps(request)) == {"ret": [0]}
+            filled = time.monotonic()
+            with pytest.raises(Exception, match="too many clients") as refused:  # all seen just now
+                server.client().require("sim")
+            time.sleep(max(0.0, filled + EVICT_IDLE_S + 0.1 - time.monotonic()))
+            t0 = time.monotonic()
+            sim = server.client().require("sim")  # two requests, then calls: one slot is enough
+            h = sim.getObject("/MTB_axis1")
+            sim.setJointPosition(h, 0.25)
+            assert sim.getJointPosition(h) == pytest.approx(0.25)
+            served_s = time.monotonic() - t0
+            server.wait_for(rf"client \d+ forgotten: silent for \d+\.\d s while all {MAX_CLIENTS} client slots were taken")
+            # the rule is in the refusal's text; the official client got in at once, not after a timeout
+            assert (f"when all slots are taken, a new client takes the slot of the least recently seen one silent "
+                    f"for {EVICT_IDLE_S:g} s or more") in str(refused.value)
+            assert served_s < 5.0
+            # the idle ones, their connections still open, are served again when they call (as new clients,
+            # taking idle slots in turn)
+            request = {"func": "sim.getSimulationState", "args": [], "uuid": "idle-0-0"}
+            assert idle[0].raw(cbor2.dumps(request)) == {"ret": [0]}
+            assert sim.getSimulationState() == 0
+        finally:
+            for c in idle:
+                c.close()
+
+
+class PeakRss:
+    """The highest resident set size of a process while in the block, sampled every 2 ms (psutil)."""
+
+    def __init__(self, pid: int) -> None:
+        self.proc = psutil.Process(pid)
+        self.base = self.peak = self.proc.memory_info().rss
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+
+    def _sample(self) -> None:
+        while not self._done.wait(0.002):
+            self.peak = max(self.peak, self.proc.memory_info().rss)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._done.set()
+        self._thread.join()
+
+    def growth_mb(self) -> float:
+        return (self.peak - self.base) / 1e6
+
+
+FLOOD_PARTS, FLOOD_PART_BYTES = 6, 100 << 20  # 600 MiB in parts each under the per-frame cap
+
+
+def keep_calling(sim, stop: threading.Event, errors: list) -> threading.Thread:
+    """The official client calling all along (in a thread): its calls must all be answered."""
+    def calls() -> None:
+        try:
+            while not stop.is_set():
+                assert sim.getSimulationState() == 0
+                time.sleep(0.005)
+        except BaseException as err:  # noqa: BLE001 - reported by the test
+            errors.append(err)
+
+    thread = threading.Thread(target=calls, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_a_multipart_flood_is_cut_off_after_one_frames_worth():
+    """ZMQ hands a message over only once all its parts are in (12 x 200 MiB parts: 2.48 GB in the old
+    server before its "12 message parts" reply). Now a connection whose unfinished message exceeds one
+    frame's worth (MAX_UNREAD_BYTES) is shut down; the server frees it and goes on serving."""
+    assert FLOOD_PART_BYTES < MAX_FRAME_BYTES < FLOOD_PARTS * FLOOD_PART_BYTES
+    with ServerProcess("--stepped") as server:
+        sim = server.client().require("sim")
+        context = zmq.Context()
+        dealer = context.socket(zmq.DEALER)
+        dealer.setsockopt(zmq.LINGER, 0)
+        dealer.connect(f"tcp://127.0.0.1:{server.port}")
+        stop, errors = threading.Event(), []
+        part = bytes(FLOOD_PART_BYTES)
+        try:
+            with PeakRss(server.proc.pid) as rss:
+                caller = keep_calling(sim, stop, errors)
+                t0 = time.monotonic()
+                dealer.send_multipart([b"", *[part] * FLOOD_PARTS], copy=False)  # a REQ's framing, 6 parts
+                while True:  # the old server answered once all of it was in; now the connection closes
+                    if dealer.poll(0):
+                        reply = cbor2.loads(dealer.recv_multipart()[-1])
+                        break
+                    try:
+                        reply = server.wait_for(r"closed the connection from 127\.0\.0\.1:\d+: it sent \d+ bytes "
+                                                r"without completing a message", 0.05)
+                        break
+                    except AssertionError:
+                        assert time.monotonic() - t0 < 20.0, "neither a reply nor the connection closed"
+                elapsed_s = time.monotonic() - t0
+                time.sleep(0.2)
+                stop.set()
+                caller.join(10)
+            print(f"multipart flood: peak RSS +{rss.growth_mb():.0f} MB over {rss.base / 1e6:.0f} MB, "
+                  f"{elapsed_s:.2f} s; {reply}")
+            assert rss.growth_mb() < (MAX_UNREAD_BYTES + (24 << 20)) / 1e6  # < 294 MB (old: 629 MB)
+            assert "closed the connection" in str(reply)
+            assert not errors, errors  # the official client was answered all along
+            deadline = time.monotonic() + 10.0  # ZMQ freed the unfinished message
+            while rss.proc.memory_info().rss - rss.base > 50e6:
+                assert time.monotonic() < deadline, "the unfinished message was not freed"
+                time.sleep(0.05)
+            assert_serving(server)
+            assert sim.getSimulationState() == 0
+        finally:
+            stop.set()
+            dealer.close()
+            context.term()
+
+
+# A ZMTP 3.1 REQ peer's greeting and READY, as libzmq 4.3 sends them
+ZMTP31_REQ_HANDSHAKE = (b"\xff" + b"\x00" * 7 + b"\x01\x7f\x03\x01" + b"NULL".ljust(20, b"\x00") + b"\x00" * 32
+                        + b"\x04&\x05READY\x0bSocket-Type\x00\x00\x00\x03REQ\x08Identity\x00\x00\x00\x00")
+
+
+def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
+    """A hostile peer speaking ZMTP itself goes on sending parts after the server closes its side: the
+    server reads end of file regardless, drops the message, and the peer's writes fail."""
+    with ServerProcess("--stepped") as server:
+        with PeakRss(server.proc.pid) as rss, socket.create_connection(("127.0.0.1", server.port)) as peer:
+            peer.sendall(ZMTP31_REQ_HANDSHAKE)
+            greeting = b""
+            while len(greeting) < 64 + 40:  # the server's greeting and READY, before any frame
+                greeting += peer.recv(4096)
+            peer.sendall(b"\x01\x00")  # the delimiter, then parts of 16 MiB, each with "more"
+            chunk, sent = bytes(16 << 20), 0
+            header = b"\x03" + struct.pack(">Q", len(chunk))
+            t0 = time.monotonic()
+            with pytest.raises(OSError):  # EPIPE or ECONNRESET once the server closed
+                while sent < FLOOD_PARTS * FLOOD_PART_BYTES:
+                    peer.sendall(header + chunk)
+                    sent += len(chunk)
+            elapsed_s = time.monotonic() - t0
+        print(f"raw flood: {sent >> 20} MiB sent in {elapsed_s:.2f} s, peak RSS +{rss.growth_mb():.0f} MB")
+        assert sent < MAX_UNREAD_BYTES + (32 << 20)  # what the kernels' buffers took after the close, at most
+        assert rss.growth_mb() < (MAX_UNREAD_BYTES + (24 << 20)) / 1e6
+        server.wait_for(r"closed the connection from 127\.0\.0\.1:\d+: it sent \d+ bytes without completing")
+        assert_serving(server)
 
 
 def zmtp3_req_with_frame_header(size: int) -> bytes:
@@ -328,3 +501,47 @@ def test_a_stopped_simulation_holds_a_bounded_number_of_commands_then_refuses_wi
         server.wait_for(r"recorded .*held\.mcap")
     commands = [c for c in load(record).commands if c.kind == "joint_target"]
     assert len(commands) == MAX_PENDING_COMMANDS + 1 and commands[-1].args["q"] == 0.5
+
+
+def test_the_eviction_rule_in_detail():
+    """In process, at chosen times: only when all slots are taken, only a client silent for EVICT_IDLE_S,
+    least recently seen first, a stepping one only after --step-grace, the per-connection cap first."""
+    from twin.model.config import TwinConfig
+    from twin.remote.server import Server
+    from twin.remote.session import Scene
+
+    lines: list[str] = []
+    scene = Scene(TwinConfig(), mode="stepped", log=lines.append)
+    server = Server(scene, port=0, mode="stepped", step_grace_s=10.0, log=lines.append)
+
+    def call(uuid: str, now: float, peer: bytes, func: str = "sim.getSimulationState", args=()) -> dict:
+        return cbor2.loads(server.handle(cbor2.dumps({"func": func, "args": list(args), "uuid": uuid}), now, peer))
+
+    try:
+        for i in range(MAX_CLIENTS):  # client c<i> seen at i ms, 4 per connection
+            assert call(f"c{i}", i / 1000, f"p{i // MAX_CLIENTS_PER_CONNECTION}".encode()) == {"ret": [0]}
+        assert call("c0", 0.5, b"p0", "sim.setStepping", [True]) == {"ret": [0]}  # c0 steps, seen at 0.5 s
+        assert "none silent long enough" in call("n1", EVICT_IDLE_S - 0.1, b"q")["err"]  # nobody idle 2 s yet
+        assert call("n1", EVICT_IDLE_S + 0.0015, b"q") == {"ret": [0]}  # c1 (2.0005 s idle) gives way, c2 not yet
+        assert "c1" not in server.clients and "c2" in server.clients
+        assert lines[-2].endswith(f"client 2 forgotten: silent for 2.0 s while all {MAX_CLIENTS} client slots "
+                                  "were taken (a new client takes its slot)")
+        assert call("n2", EVICT_IDLE_S + 0.0025, b"q") == {"ret": [0]}  # then c2
+        assert call("n3", 3.0, b"q") == {"ret": [0]} and call("n4", 3.0, b"q") == {"ret": [0]}  # c3, c4
+        assert not {"c1", "c2", "c3", "c4"} & set(server.clients) and "c5" in server.clients
+        # the per-connection cap comes first: no one is evicted for a fifth uuid over one connection
+        assert "too many clients on one connection" in call("n5", 100.0, b"q")["err"]
+        assert len(server.clients) == MAX_CLIENTS and "c5" in server.clients
+        for i in range(5, MAX_CLIENTS):  # at 5 s: the plain clients seen at 0.005..0.063 s go, oldest first
+            assert call(f"late{i}", 5.0, f"r{i}".encode()) == {"ret": [0]}
+            assert f"c{i}" not in server.clients and "n1" in server.clients
+        # c0 is now the least recently seen (0.5 s), but in stepping mode it keeps its slot for --step-grace
+        assert call("x1", 10.4, b"s") == {"ret": [0]}
+        assert "c0" in server.clients and "n1" not in server.clients
+        assert call("x2", 10.6, b"s") == {"ret": [0]}
+        assert "c0" not in server.clients  # silent 10.1 s: it gave way
+        assert call("n2", 10.7, b"q") == {"ret": [0]}  # a known client is served as ever, nobody evicted
+        assert call("c0", 10.8, b"p0", "sim.setStepping", [False]) == {"ret": [0]}  # back: a new client, not stepping
+        assert len(server.clients) == MAX_CLIENTS
+    finally:
+        server.close()

@@ -21,6 +21,8 @@ PROTOCOL_VERSION = 2
 # Limits on what a client may send (README, "Remote control"); over each, the client gets an error reply.
 MAX_REQUEST_BYTES = 1 << 20  # a real request is a few hundred bytes; 1 MiB is generous
 MAX_FRAME_BYTES = 256 << 20  # hard cap: ZMQ closes a connection announcing a bigger frame, unread
+MAX_UNREAD_BYTES = MAX_FRAME_BYTES + (64 << 10)  # per connection: sent, not yet a whole message the server
+# took (one frame at the hard cap, its framing and the handshake); above, the connection is closed (intake.py)
 MAX_DEPTH = 32  # nested arrays/maps (a request map holding args is 2 deep)
 MAX_ITEMS = 100_000  # CBOR data items in one request (a request of n bytes holds at most n)
 MAX_ARGS = 64

@@ -10,6 +10,18 @@ idle poll timeouts it steps up to floor(elapsed_wall * speed / dt). While any cl
 mode (sim.setStepping(True)), and always in stepped mode, the twin advances only on sim.step(),
 once every stepping client has asked for its next step. Wall-clock time never enters the twin:
 every call that changes it is a Command stamped with the step it took effect at.
+
+Bounds on what peers can make the server hold:
+- Bytes: each frame is at most MAX_FRAME_BYTES (ZMQ closes a connection announcing a bigger one), and
+  each connection may have sent at most MAX_UNREAD_BYTES that the server has not yet taken as whole
+  messages (one frame's worth). Over that, the server shuts the connection down (intake.py): ZMQ hands
+  a multipart message over only once all its parts are in, so this is what stops a peer from making it
+  buffer an endless multipart message (or requests sent without waiting for the replies).
+- Clients: at most MAX_CLIENTS uuids at once, MAX_CLIENTS_PER_CONNECTION per connection. A client is
+  forgotten when its connection closes or after its own timeout; and when all MAX_CLIENTS slots are
+  taken, a new uuid takes the slot of the least recently seen client that has been silent for at
+  least EVICT_IDLE_S (a client in stepping mode: --step-grace), so idle connections cannot lock
+  others out. A forgotten client that calls again is served as a new one (stepping off).
 """
 
 from __future__ import annotations
@@ -27,10 +39,12 @@ from zmq.utils.monitor import parse_monitor_message
 from twin.errors import ConfigError, TwinError
 from twin.model.config import TwinConfig
 from twin.remote import DEFAULT_STEP_GRACE_S, STEP_GRACE_RANGE_S
+from twin.remote.intake import Intake, wire_bytes
 from twin.remote.protocol import (
     EMPTY_REPLY,
     MAX_FRAME_BYTES,
     MAX_REQUEST_BYTES,
+    MAX_UNREAD_BYTES,
     WAIT_REPLY,
     Param,
     RequestError,
@@ -55,6 +69,7 @@ DEFAULT_CLIENT_TIMEOUT_S = 600.0
 WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
 MAX_CLIENTS = 64  # uuids served at once; a client is forgotten when its connection closes or it times out
 MAX_CLIENTS_PER_CONNECTION = 4  # the official client sends one uuid per connection
+EVICT_IDLE_S = 2.0  # all slots taken: a new client takes the slot of the least recently seen one silent this long
 RCVHWM = 4  # requests queued per connection (a REQ client has one at a time): bounds what a peer can park
 
 
@@ -70,7 +85,13 @@ class _Client:
 
 
 class Server:
-    """One ROUTER socket, one Scene; serves requests until stop() is called."""
+    """One ROUTER socket, one Scene; serves requests until stop() is called.
+
+    What a peer can make it hold is bounded (module docstring): MAX_FRAME_BYTES per frame and
+    MAX_UNREAD_BYTES per connection (a connection over it is shut down); MAX_CLIENTS clients,
+    MAX_CLIENTS_PER_CONNECTION per connection, and when all slots are taken a new client takes the slot
+    of the least recently seen one silent for EVICT_IDLE_S or more (step_grace_s if it is stepping).
+    """
 
     def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
                  speed: float = 1.0, step_grace_s: float = DEFAULT_STEP_GRACE_S,
@@ -101,6 +122,7 @@ class Server:
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)  # above: ZMQ closes the connection, unread
         self.socket.setsockopt(zmq.RCVHWM, RCVHWM)
+        self._intake = Intake(MAX_UNREAD_BYTES)  # what a connection sent beyond one frame: shut down
         try:
             if port == 0:
                 port = self.socket.bind_to_random_port(f"tcp://{host}")
@@ -109,18 +131,21 @@ class Server:
         except zmq.ZMQError as err:
             self.socket.close()
             self.context.term()
+            self._intake.close()
             raise ConfigError(f"cannot listen on tcp://{host}:{port}: {err}") from err
         self.host, self.port = host, port
-        self._monitor = self.socket.get_monitor_socket(zmq.EVENT_DISCONNECTED)
+        self._monitor = self.socket.get_monitor_socket(zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED)
 
     # -- loop --------------------------------------------------------------------------------
     def serve_forever(self) -> None:
-        sock, monitor = self.socket, self._monitor
+        sock, monitor, intake = self.socket, self._monitor, self._intake
         poller = zmq.Poller()
         poller.register(sock, zmq.POLLIN)
         poller.register(monitor, zmq.POLLIN)
-        served = 0
+        intake.start()  # its thread shuts down a connection over MAX_UNREAD_BYTES
         while not self._stop:
+            for line in intake.lines():
+                self.log(line)
             try:
                 parts = sock.recv_multipart(zmq.NOBLOCK, copy=False)
             except zmq.Again:
@@ -134,9 +159,8 @@ class Server:
                 if now >= self._next_reap_s:
                     self._reap(now)
                 continue
-            served += 1
-            if served % 64 == 0:
-                self._drain_monitor()
+            self._drain_monitor()  # the connections accepted and closed before it, in order: then count it
+            intake.took(_source_fd(parts[-1]), wire_bytes(parts[1:]))  # parts[0], the routing id, is ZMQ's
             now = time.monotonic()
             self._pace(now)
             if now >= self._next_reap_s:
@@ -179,6 +203,7 @@ class Server:
             self._monitor.close(linger=0)
             self.socket.close()
             self.context.term()
+            self._intake.close()
 
     def _poll_timeout_ms(self) -> int:
         if self._anchor is not None:
@@ -215,12 +240,17 @@ class Server:
                     self.log(f"error while stopping the simulation: {type(stop_err).__name__}: {stop_err}")
 
     def _drain_monitor(self) -> None:
-        """A TCP connection closed (a client's program ended or closed its socket): forget its clients."""
-        while self._monitor.poll(0):
+        """Connections ZMQ accepted (measured from now on) and closed (a client's program ended or closed
+        its socket: forget its clients), in the order they happened."""
+        while self._monitor.get(zmq.EVENTS) & zmq.POLLIN:
             event = parse_monitor_message(self._monitor.recv_multipart())
+            fd = int(event["value"])
+            if event["event"] == zmq.EVENT_ACCEPTED:
+                self._intake.accepted(fd)
+                continue
             if event["event"] != zmq.EVENT_DISCONNECTED:
                 continue
-            fd = int(event["value"])
+            self._intake.disconnected(fd)
             gone = {peer for peer, peer_fd in self._peer_fds.items() if peer_fd == fd}
             for peer in gone:
                 del self._peer_fds[peer]
@@ -249,7 +279,7 @@ class Server:
             return encode_err(str(err))
         client = self.clients.get(req.uuid)
         if client is None:
-            refusal = self._refuse_new_client(peer)
+            refusal = self._make_room(peer, now)
             if refusal:
                 return encode_err(refusal)
             client = self._connect(req.uuid, req.first, now)
@@ -288,14 +318,30 @@ class Server:
             self.log(f"internal error in {func}: {message}\n{traceback.format_exc()}")
             return encode_err(f"{func}: internal error: {message}")
 
-    def _refuse_new_client(self, peer: bytes) -> str:
-        """Why a new uuid cannot be served now ('' if it can): the number of clients is bounded."""
-        if len(self.clients) >= MAX_CLIENTS:
-            return (f"too many clients: {MAX_CLIENTS} are connected (the limit); a client is forgotten when its "
-                    "connection closes or after its timeout")
+    def _make_room(self, peer: bytes, now: float) -> str:
+        """Why a new uuid cannot be served now, or '' if it can (having forgotten an idle client if need be).
+
+        At most MAX_CLIENTS_PER_CONNECTION uuids per connection and MAX_CLIENTS in all. When all slots are
+        taken, the least recently seen client silent for EVICT_IDLE_S or more (step_grace_s if it is in
+        stepping mode, which would hold the others' sim.step() back that long anyway) is forgotten: its
+        slot goes to the new one. If it calls again it is served as a new client."""
         if peer and sum(1 for c in self.clients.values() if c.peer == peer) >= MAX_CLIENTS_PER_CONNECTION:
             return (f"too many clients on one connection: {MAX_CLIENTS_PER_CONNECTION} uuids already came over it "
                     "(the limit)")
+        if len(self.clients) < MAX_CLIENTS:
+            return ""
+        idle = [(c.last_seen_s, uuid) for uuid, c in self.clients.items()
+                if now - c.last_seen_s >= (self.step_grace_s if c.stepping else EVICT_IDLE_S)]
+        if not idle:
+            return (f"too many clients: {MAX_CLIENTS} are connected (the limit), none silent long enough to give "
+                    f"up its slot; when all slots are taken, a new client takes the slot of the least recently seen "
+                    f"one silent for {EVICT_IDLE_S:g} s or more ({self.step_grace_s:g} s, --step-grace, if it is in "
+                    "stepping mode): try again then. A client is also forgotten when its connection closes or "
+                    "after its timeout")
+        _, uuid = min(idle)
+        c = self.clients.pop(uuid)
+        self.log(f"{c.label} forgotten: silent for {now - c.last_seen_s:.1f} s while all {MAX_CLIENTS} client "
+                 "slots were taken (a new client takes its slot)")
         return ""
 
     def _connect(self, uuid: str, first: dict | None, now: float) -> _Client:

@@ -310,3 +310,15 @@ def test_a_folder_takes_only_its_sweep_definitions(golden, tmp_path, capsys):
     capsys.readouterr()
     assert main(["check", str(folder / "arm.toml")]) == 2
     assert "arm.toml' lacks task, scenarios, seed" in capsys.readouterr().err
+
+
+def test_deep_nesting_in_a_definition_or_summary_is_one_line_exit_2(tmp_path, capsys):
+    definition = tmp_path / "deep.toml"
+    definition.write_text('task = "pick_place"\nscenarios = 2\nseed = 0\n[params]\nx = ' + "[" * 5000 + "]" * 5000 + "\n")
+    assert main(["sweep", str(definition), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "nest more than 64 levels deep" in err and err.count("\n") == 1
+    (tmp_path / "g.toml").write_text('task = "pick_place"\nscenarios = 2\nseed = 0\n')
+    (tmp_path / "g.summary.json").write_text("[" * 100_000)
+    assert main(["check", str(tmp_path / "g.toml")]) == 2
+    assert "is not valid JSON: arrays or tables nest more than 64 levels deep" in capsys.readouterr().out

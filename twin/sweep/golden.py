@@ -13,12 +13,12 @@ import math
 import os
 import tempfile
 import time
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 from stat import S_IMODE, S_ISREG
 
 from twin.errors import ConfigError, TwinError
+from twin.model.json_values import load_json_text, load_toml_text
 from twin.sweep.results import summary, summary_text
 from twin.sweep.runner import run_sweep
 from twin.sweep.spec import load_spec, prepare
@@ -69,10 +69,8 @@ def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
 def _not_a_definition(path: Path) -> str | None:
     """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why not."""
     try:
-        data = tomllib.loads(_regular_text(path))
-    except tomllib.TOMLDecodeError as err:
-        return f"is not valid TOML: {err}"
-    except ValueError as err:
+        data = load_toml_text(_regular_text(path), "is not valid TOML")  # also too deep: one line
+    except (ConfigError, ValueError) as err:
         return str(err)
     missing = [k for k in DEFINITION_KEYS if k not in data]
     if missing:
@@ -163,10 +161,7 @@ def _read(path: Path) -> dict:
         text = _regular_text(path)
     except ValueError as err:
         raise ConfigError(f"sweep golden summary {str(path)!r} {err}") from err
-    try:
-        data = json.loads(text)
-    except ValueError as err:
-        raise ConfigError(f"sweep golden summary {str(path)!r} is not valid JSON: {err}") from err
+    data = load_json_text(text, f"sweep golden summary {str(path)!r} is not valid JSON")  # also too deep: one line
     return check_summary(data, str(path))
 
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
+from twin.model.json_values import load_toml_text
 from twin.robot.profile_files import get_profile
 from twin.sweep.dists import INT64_MAX, INT64_MIN, Dist, parse_dist
 from twin.sweep.keys import Key, check_dist, resolve_key
@@ -113,11 +113,12 @@ def load_spec(path: str | Path) -> SweepSpec:
     relative to the definition's folder. ConfigError (exit 2) naming the file and the field."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        text = path.read_text()
     except OSError as err:
         raise ConfigError(f"sweep definition {str(path)!r} cannot be read: {err.strerror or err}") from err
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+    except UnicodeDecodeError as err:
         raise ConfigError(f"sweep definition {str(path)!r} is not valid TOML: {err}") from err
+    data = load_toml_text(text, f"sweep definition {str(path)!r} is not valid TOML")  # also too deep: one line
     unknown = sorted(set(data) - set(SPEC_FIELDS))
     if unknown:
         raise ConfigError(f"sweep definition {str(path)!r} has unknown field {unknown[0]!r}; "

@@ -70,8 +70,8 @@ WORKER_CONFIG = {
     "distributed.admin.tick.interval": "500ms",  # an event-loop health check (for warnings), default 20 ms
     "distributed.worker.memory.monitor-interval": "1s",  # spill/pause/terminate checks, default 100 ms
     # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return memory at every
-    # free and turns off its adaptive threshold; the simulation allocates all the time (and run_batch
-    # keeps freed memory: worker.keep_freed_memory). Threads stay at 1.
+    # free and turns off its adaptive threshold; the simulation allocates all the time (and the guarded
+    # children that run scenarios keep freed memory: worker.keep_freed_memory). Threads stay at 1.
     "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
 }
 

@@ -1,5 +1,6 @@
 """Where work runs: `LocalExecutor` (this machine's cores) or `DaskExecutor` (Dask's distributed
-scheduler: a cluster at --scheduler, or a TLS-secured cluster of its own on 127.0.0.1, cluster.py). Both offer two calls:
+scheduler: a cluster at --scheduler, or a TLS-secured cluster of its own on 127.0.0.1, cluster.py).
+Both offer two calls:
 `run_scenarios(job, batches, scenario_timeout_s)`, which runs a sweep's batches (taken from the
 iterator only as workers free up) and yields each scenario's row as it finishes, a scenario that
 kills its process or hangs becoming a failed row (guard.py); and `map_unordered(fn, items)`, which

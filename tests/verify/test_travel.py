@@ -123,8 +123,8 @@ def test_a_changed_user_task_fails_the_default_check_at_its_onset(user_golden, t
 
 
 def _first_change(a, b, above: float = 0.0) -> int:
-    """The first step where two runs' frames differ by more than `above` (any bit, for 0) or their
-    commands differ, computed without twin.compare."""
+    """The first step where two runs' frames differ by more than `above` (any bit, for 0) or the
+    commands that act differ, computed without twin.compare."""
     import numpy as np
 
     n = min(len(a.frames), len(b.frames))
@@ -135,7 +135,8 @@ def _first_change(a, b, above: float = 0.0) -> int:
         rows = np.flatnonzero(moved.reshape(n, -1).any(axis=1))
         if len(rows):
             steps.append(int(a.frames.step[rows[0]]))
-    diff = [x.step for x, y in zip(a.commands, b.commands, strict=False) if x != y]
+    acting_a, acting_b = ([c for c in r.commands if c.kind != "event"] for r in (a, b))  # annotations apart
+    diff = [x.step for x, y in zip(acting_a, acting_b, strict=False) if x != y]
     return min(steps + diff[:1])
 
 

@@ -94,7 +94,7 @@ def late_runs(tmp_path_factory):
     d = tmp_path_factory.mktemp("late")
     for name, early, late in (("on_time", 0, 1), ("late", 1, 0)):
         (d / name).mkdir()
-        task = d / name / "task.py"  # one name: the task_start event names the task's module
+        task = d / name / "task.py"
         task.write_text(LATE_TASK.format(before_s=1.8, early=early, late=late))
         for rate in (1, 4, 7):
             assert main(["run", str(task), "--record", str(d / f"{name}_r{rate}.mcap"), "--rate", str(rate)]) == 0
@@ -132,7 +132,9 @@ def test_the_report_names_the_first_command_difference_and_the_likely_cause(late
     # commands on: the command sequence is the first divergence, and the frames' follows it
     code, out, _ = twin(capsys, "diff", d / "on_time_r4.mcap", d / "late_r4.mcap")
     assert code == 1 and f"first divergence: step {signal.step} " in out and "commands.sequence" in out
-    assert f"the golden's command #2 is {cause}; the candidate's is step {signal.step + 1} signal(" in out
+    acting = [c for c in load(d / "on_time_r4.mcap").commands if c.kind != "event"]  # annotations apart
+    assert f"the golden's command #{acting.index(signal)} is {cause}; the candidate's is step {signal.step + 1} " \
+        "signal(" in out
 
 
 # -- 3. outcome judges the outcome ----------------------------------------------------------------

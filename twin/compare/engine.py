@@ -100,6 +100,7 @@ class DiffResult:
     notes: list[str] = field(default_factory=list)
     first: Divergence | None = None
     first_command: Divergence | None = None  # the first difference in the command sequences
+    first_annotation: Divergence | None = None  # the first difference in what the tasks said (event Commands)
     likely_cause: str = ""  # the golden's last command at or before the first divergence acting on its field
     events_compared: bool = True  # False: the tolerances pair no events (outcome); counts still compare
     floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
@@ -206,7 +207,13 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
         if commands_until is not None:
             notes.append(f"the candidate's own commands change with last-bit noise from step {commands_until} on "
                          "(its noise run took other ones): commands are compared up to there")
-    fields.append(_command_stat(golden.commands, candidate.commands, commands_tol, dt_ns, commands_until))
+    g_parts, c_parts = _split_annotations(golden.commands), _split_annotations(candidate.commands)
+    fields.append(_command_stat(g_parts[0], c_parts[0], commands_tol, dt_ns, commands_until))
+    annotations_tol = tol["commands.annotations"]
+    if floor is not None:
+        annotations_tol = max(annotations_tol, floor.commands)
+    fields.append(_command_stat(g_parts[1], c_parts[1], annotations_tol, dt_ns, commands_until,
+                                name="commands.annotations"))
     task_tol = INF if floor is not None and floor.outcome_differs else tol["outcome.task"]
     fields.append(_task_stat(golden, candidate, task_tol, max(length), dt_ns))
     fields.extend(_count_stats(golden.events, candidate.events, scalar, max(length), dt_ns))
@@ -237,6 +244,7 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
     )
     result.first = _first(fields, event_diffs, dt_ns, window)
     result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
+    result.first_annotation = next((f.first for f in fields if f.name == "commands.annotations"), None)
     if result.first is not None:
         result.likely_cause = likely_cause(golden.commands, result.first, golden.config.profile.joint_names)
     return result
@@ -385,9 +393,15 @@ def _command_text(c: Command) -> str:
     return f"step {c.step} {c.kind}({args})"
 
 
+def _split_annotations(commands: list[Command]) -> tuple[list[Command], list[Command]]:
+    """(commands that act, annotations): an `event` Command acts on nothing, so the two sequences are
+    paired apart and an extra annotation does not shift the pairing of the commands that act."""
+    return [c for c in commands if c.kind != "event"], [c for c in commands if c.kind == "event"]
+
+
 def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: int,
-                  until_step: int | None = None) -> FieldStat:
-    """The two command sequences, entry by entry: step, kind and text exactly, the numbers in their
+                  until_step: int | None = None, name: str = "commands.sequence") -> FieldStat:
+    """Two command sequences, entry by entry: step, kind and text exactly, the numbers in their
     arguments within tolerance (0: equal; inf: the field is off); entries from until_step on are not judged."""
     if until_step is not None:
         g, c = [x for x in g if x.step < until_step], [x for x in c if x.step < until_step]
@@ -395,13 +409,14 @@ def _command_stat(g: list[Command], c: list[Command], tolerance: float, dt_ns: i
     differing = [i for i in range(n) if i >= len(g) or i >= len(c) or not _commands_agree(g[i], c[i], tolerance)]
     first_i = differing[0] if differing else -1
     step = -1 if first_i < 0 else min(x[first_i].step for x in (g, c) if first_i < len(x))
-    stat = FieldStat("commands.sequence", "", tolerance, float(len(differing)), step, "", float(len(differing)),
+    stat = FieldStat(name, "", tolerance, float(len(differing)), step, "", float(len(differing)),
                      len(differing) if tolerance != INF else 0)
     if differing and tolerance != INF:
         expected = [_command_text(g[first_i]) if first_i < len(g) else None]
         actual = [_command_text(c[first_i]) if first_i < len(c) else None]
-        kind = (g[first_i] if first_i < len(g) else c[first_i]).kind
-        stat.first = Divergence(step, step * dt_ns * 1e-9, "commands", "sequence", f"#{first_i} {kind}",
+        command = g[first_i] if first_i < len(g) else c[first_i]
+        kind = command.args.get("kind", "event") if command.kind == "event" else command.kind
+        stat.first = Divergence(step, step * dt_ns * 1e-9, "commands", name.split(".")[1], f"#{first_i} {kind}",
                                 expected, actual, float(len(differing)), tolerance, "")
     return stat
 
@@ -517,14 +532,16 @@ def _decimation_notes(golden: Recording, candidate: Recording, compared: int) ->
 
 def _first(fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int,
            window_steps: int | None) -> Divergence | None:
-    candidates = [f.first for f in fields if f.first is not None]
+    candidates = [f.first for f in fields if f.first is not None and f.name != "commands.annotations"]
     for d in event_diffs[:1]:
         element = f"{d.event_kind} {d.body}".strip()
         candidates.append(Divergence(d.step, d.step * dt_ns * 1e-9, "events", d.kind, element,
                                      [d.expected_step], [d.actual_step],
                                      float(abs(d.expected_step - d.actual_step)) if d.kind == "moved" else INF,
                                      float(window_steps or 0), "steps"))
-    return min(candidates, key=lambda d: d.step) if candidates else None
+    if not candidates:  # annotations alone: still a difference, but never ahead of a physical one
+        return next((f.first for f in fields if f.name == "commands.annotations" and f.first is not None), None)
+    return min(candidates, key=lambda d: d.step)
 
 
 def describe(rec: Recording) -> dict:

@@ -51,7 +51,8 @@ def first_line(d: Divergence) -> str:
 
 def first_detail(d: Divergence) -> str:
     if d.channel == "commands":
-        return (f"the golden's command #{d.element.split()[0][1:]} is {d.expected[0] or 'absent'}; "
+        what = "annotation" if d.field == "annotations" else "command"
+        return (f"the golden's {what} #{d.element.split()[0][1:]} is {d.expected[0] or 'absent'}; "
                 f"the candidate's is {d.actual[0] or 'absent'}")
     if d.channel == "events":
         if d.field == "missing":
@@ -145,6 +146,13 @@ def _cause_lines(result: DiffResult) -> list[str]:
     if result.likely_cause and (fc is None or fc is not result.first):
         lines.append(f"likely cause: the golden's last command at or before step {result.first.step}: "
                      f"{result.likely_cause}")
+    fa = result.first_annotation
+    if fa is not None and fa is result.first:
+        lines.append("annotations only: the runs do not diverge physically (what the tasks said differs; "
+                     "--tol commands.annotations=inf leaves it out)")
+    elif fa is not None:
+        lines.append(f"annotations differ too (apart from the physical divergence): {first_line(fa)}: "
+                     f"{first_detail(fa)}")
     return lines
 
 

@@ -26,8 +26,11 @@ FIELDS: dict[str, tuple[str, str]] = {
     "final.position": ("m", "distance between final object positions"),
     "final.orientation": ("rad", "angle between final object orientations"),
     "run.length": ("steps", "difference in the last step"),
-    "commands.sequence": ("", ("every Command's step, kind and text exactly, in order; the numbers in its "
-                          "arguments within the tolerance")),
+    "commands.sequence": ("", ("every Command that acts (joints, suction, keys): step, kind and text exactly, "
+                          "in order; the numbers in its arguments within the tolerance")),
+    "commands.annotations": ("", ("every annotation (an `event` Command: what the task said, such as "
+                             "task_start naming the task by its content's sha256), judged like commands.sequence "
+                             "but reported apart from the first physical divergence")),
     "outcome.task": ("", ("how the task ended: ok (no task_error, finalized ok), error, interrupted, or "
                           "unfinished (a file cut short, also once recovered); exact or off")),
     "counts.attach": ("events", "number of attach events"),
@@ -36,7 +39,8 @@ FIELDS: dict[str, tuple[str, str]] = {
     "counts.cycle_failed": ("events", "number of cycle_failed events (a cycle a task let fail and went on)"),
     "images.pixels": ("levels", "mean absolute difference of a camera picture's pixels (0..255 per channel)"),
 }
-DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.sequence", "outcome.task"})
+DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.sequence", "commands.annotations",
+                      "outcome.task"})
 COUNTED_EVENTS = ("attach", "release", "break", "cycle_failed")
 _ALWAYS = {"outcome.task": 0.0, **{f"counts.{kind}": 0.0 for kind in COUNTED_EVENTS}}
 IMAGE_TIGHT_LEVELS = 0.5  # tight: a picture may differ by half a level on average (another CPU's rounding)
@@ -61,13 +65,14 @@ _PHYSICAL = _ALWAYS | {
     "final.orientation": 1e-3,
     "run.length": 0.0,
     "commands.sequence": INF,  # physically equal runs may be driven by other but equivalent commands
+    "commands.annotations": INF,
     "images.pixels": INF,  # pictures of physically equal runs differ where the robot differs by a pixel
 }
 # outcome: where the objects ended, whether the task ended ok, how often the pad took and let go
 _OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
 
 # tight: 1e-9 on every number (frames of another libm stayed within it over 44k steps), commands' numbers too
-_TIGHT = {name: 0.0 if name in DISCRETE - {"commands.sequence"} or name == "run.length" or name in _ALWAYS else 1e-9
+_TIGHT = {name: 0.0 if name in DISCRETE - {"commands.sequence", "commands.annotations"} or name == "run.length" or name in _ALWAYS else 1e-9
           for name in FIELDS} | {"images.pixels": IMAGE_TIGHT_LEVELS}
 # preset -> (field tolerances, event window in steps; None: events are not paired)
 PRESETS: dict[str, tuple[dict[str, float], int | None]] = {

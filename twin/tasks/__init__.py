@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import inspect
 import sys
@@ -69,11 +70,30 @@ def check_params(fn: TaskFn, params: dict, task: str) -> dict:
     return dict(params)
 
 
+def source_sha256(path: str | Path) -> str:
+    """The sha256 of a source file with its line ends made LF, so a checkout with CRLF names the
+    same task."""
+    return hashlib.sha256(Path(path).read_bytes().replace(b"\r\n", b"\n")).hexdigest()
+
+
+def task_identity(fn: TaskFn) -> str:
+    """What a recording names a task by: the content of its source file (`sha256:<hex>`), so the same
+    task run by name, from its file or from a renamed copy is the same task. A function with no
+    source file is named by its module and name."""
+    try:
+        path = inspect.getsourcefile(fn)
+    except TypeError:
+        path = None
+    if path and Path(path).is_file():
+        return "sha256:" + source_sha256(path)
+    return f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', 'task')}"
+
+
 def run_task(twin, fn: TaskFn, params: dict) -> None:
     """Run a task; any exception becomes a task_error Event and a TaskError (a TwinError such as
     OutOfReach passes as it is). A task that calls sys.exit has failed too, whatever the code:
     only returning ends a task well."""
-    twin.event("task_start", message=getattr(fn, "__module__", "task"), **params)
+    twin.event("task_start", message=task_identity(fn), **params)
     try:
         fn(twin, **params)
     except TwinError as err:

@@ -67,11 +67,20 @@ def run(twin, cycles: int = 2, pause_s: float = 0.5, box: str = "box", keep_goin
         pose = twin.object_pose(box)
         error_m = math.hypot(pose[0] - place[0], pose[1] - place[1])
         yaw_rad = 2.0 * math.atan2(pose[5], pose[6])  # the box stays flat: its turn about z
-        twin.event("placed", box, f"cycle {cycle}: placed {error_m * 1000:.2f} mm from {place}",
+        twin.event("placed", box, f"cycle {cycle}: placed {error_m * 1000:.3f} mm from {place}",
                    cycle=cycle, target_m=list(place), error_m=error_m, yaw_rad=yaw_rad)
         if error_m > max_error_m:
-            _miss(twin, keep_going, cycle, box, f"cycle {cycle}: placed {error_m * 1000:.2f} mm from {place}, "
-                  f"beyond {max_error_m * 1000:g} mm")
+            _miss(twin, keep_going, cycle, box, f"cycle {cycle}: placed {mm_beyond(error_m, max_error_m)} mm "
+                  f"from {place}, beyond {max_error_m * 1000:g} mm")
+
+
+def mm_beyond(error_m: float, limit_m: float) -> str:
+    """error_m in mm with as many decimals (3 at least) as it takes to read larger than limit_m."""
+    for decimals in range(3, 10):
+        text = f"{error_m * 1000:.{decimals}f}"
+        if float(text) > limit_m * 1000:
+            return text
+    return f"{error_m * 1000!r}"
 
 
 def _lower_until_held(twin) -> tuple[float, bool]:

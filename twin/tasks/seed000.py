@@ -43,7 +43,7 @@ def ik(twin, x: float, y: float):
 def _placed(twin, box: str, place: tuple[float, float], n: int) -> None:
     pose = twin.object_pose(box)
     error_m = math.hypot(pose[0] - place[0], pose[1] - place[1])
-    twin.event("placed", box, f"release {n}: placed {error_m * 1000:.2f} mm from {place}",
+    twin.event("placed", box, f"release {n}: placed {error_m * 1000:.3f} mm from {place}",
                release=n, target_m=list(place), error_m=error_m)
 
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import hashlib
 import os
 import sys
 import time
@@ -26,7 +25,7 @@ from twin.model.collectors import ColumnCollector
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin
-from twin.tasks import TimeLimit, resolve, run_task
+from twin.tasks import TimeLimit, resolve, run_task, source_sha256
 from twin.verify.noise import judge
 from twin.verify.replay import collected, replay, replayed_event_kinds
 
@@ -58,7 +57,7 @@ def task_run(task: str, params: dict, recording: str | os.PathLike | None) -> di
         if recording is not None:
             folder = Path(os.path.abspath(recording)).parent
             run["task"] = Path(os.path.relpath(os.path.abspath(task), folder)).as_posix()
-        run["task_sha256"] = _sha256(task)
+        run["task_sha256"] = source_sha256(task)
     return run
 
 
@@ -157,11 +156,7 @@ def _task_sha256_now(golden: Recording) -> str | None:
     if not run.get("task_sha256") or not golden.path:
         return None
     path = Path(_task_path(run.get("task", ""), Path(golden.path).parent))
-    return _sha256(path) if path.is_file() else "missing"
-
-
-def _sha256(path: str | os.PathLike) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return source_sha256(path) if path.is_file() else "missing"
 
 
 def golden_paths(paths: Sequence[str]) -> list[str]:

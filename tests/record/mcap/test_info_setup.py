@@ -7,6 +7,8 @@ from pathlib import Path
 
 from support.cli import twin
 
+from twin.tasks import pick_place, task_identity
+
 BREAK_GOLDEN = Path(__file__).resolve().parents[3] / "recordings" / "pick_place_break_mtb.mcap"
 
 
@@ -27,4 +29,5 @@ def test_info_events_lists_every_event_with_time_and_data(capsys):
     assert len(lines) == 6
     assert lines[3].split() == ["t=", "2.263", "s", "step", "543", "attach", "box", "suction", "attached"]
     assert "break" in lines[4] and "shear 3.996 N > max_shear_force 1.0 N" in lines[4]
-    assert lines[0].endswith('task_start            twin.tasks.pick_place {"cycles": 1}')
+    identity = task_identity(pick_place.run)  # the task by its content
+    assert lines[0].endswith(f'task_start            {identity} {{"cycles": 1}}'), lines[0]

@@ -148,3 +148,39 @@ def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_pa
     assert [e.data["key"] for e in rec.events if e.kind == "key_unknown"] == ["z", "left"]
     assert main(["replay", str(record)]) == 0
     assert capsys.readouterr().out.startswith("MATCH")
+
+
+WINDOW_SHOT = """
+import json, sys, time
+from PIL import ImageGrab
+from twin.model.config import TwinConfig
+from twin.sim.world import World
+world = World(TwinConfig(), gui=True)
+time.sleep(1.5)  # the window draws in its own thread
+ImageGrab.grab(xdisplay=sys.argv[1]).save(sys.argv[2])
+print("camera=" + json.dumps(world.window_camera()), flush=True)
+world.close()
+"""
+
+
+def test_the_window_opens_on_the_arm_with_the_debug_panels_hidden(xvfb, tmp_path):
+    import json
+
+    import numpy as np
+    from PIL import Image
+
+    shot = tmp_path / "window.png"
+    done = subprocess.run([sys.executable, "-c", WINDOW_SHOT, xvfb, str(shot)], check=False, capture_output=True,
+                          text=True,
+                          env={**os.environ, "DISPLAY": xvfb}, timeout=60)
+    assert done.returncode == 0, done.stderr[-2000:]
+    camera = json.loads(next(line for line in done.stdout.splitlines() if line.startswith("camera="))[7:])
+    from twin.model.profiles import PROFILES
+
+    reach_m = PROFILES["mtb"].link1_m + PROFILES["mtb"].link2_m
+    assert reach_m < camera["distance_m"] < 2.5 * reach_m  # PyBullet's own default looks from 10 m
+    assert camera["pitch_deg"] < -20
+    rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    arm = (r > 180) & (g < 150) & (b > 15) & (b < 100)  # the links' orange, not the floor's ochre
+    assert arm.mean() > 0.003, f"the arm covers {arm.mean():.2%} of the window"  # 0.02 % on the default view

@@ -75,6 +75,8 @@ class World:
         self._keys_down: set[int] = set()
         try:
             self.build()
+            if gui:
+                self._frame_workspace()
         except pb.error as err:  # e.g. the window was closed (Esc) while the scene was loading
             self.close()
             raise ConfigError(f"PyBullet failed while building the scene: {err}") from err
@@ -271,6 +273,26 @@ class World:
         torque = (r[0] * tx + r[1] * ty + r[2] * tz, r[3] * tx + r[4] * ty + r[5] * tz,
                   r[6] * tx + r[7] * ty + r[8] * tz)
         return (-s[0], -s[1], -s[2]), torque
+
+    def _frame_workspace(self) -> None:
+        """Open the window on the arm's reach with PyBullet's side panels and camera previews hidden:
+        by default it shows the whole floor, the robot small in its middle, between debug panels."""
+        c = self.client
+        for flag in (pb.COV_ENABLE_GUI, pb.COV_ENABLE_RGB_BUFFER_PREVIEW, pb.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
+                     pb.COV_ENABLE_SEGMENTATION_MARK_PREVIEW):
+            pb.configureDebugVisualizer(flag, 0, physicsClientId=c)
+        p = self.config.profile
+        reach_m = p.link1_m + p.link2_m
+        pb.resetDebugVisualizerCamera(cameraDistance=1.8 * reach_m, cameraYaw=45.0, cameraPitch=-40.0,
+                                      cameraTargetPosition=(0.0, 0.0, 0.5 * p.elbow_height_m),
+                                      physicsClientId=c)
+
+    def window_camera(self) -> dict:
+        """The window's camera: distance_m, yaw_deg, pitch_deg, target_m (headless: {})."""
+        if not self.gui:
+            return {}
+        info = pb.getDebugVisualizerCamera(physicsClientId=self.client)
+        return {"distance_m": info[10], "yaw_deg": info[8], "pitch_deg": info[9], "target_m": tuple(info[11])}
 
     # -- the window's keyboard (teleop) -------------------------------------------------------
     def keyboard_events(self) -> list[str]:

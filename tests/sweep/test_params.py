@@ -121,6 +121,8 @@ def test_the_int64_ends_and_the_widest_finite_distributions_are_accepted_and_sta
                                     "outside int64; expected a whole number -2**63..2**63-1 (int64)")),
     ("cycles=-9223372036854775809", "-9223372036854775809 is outside int64"),
     pytest.param(f"cycles={LONG}", "...(5001 characters) is outside int64", id="cycles=<5001 digits>"),
+    pytest.param("pause_s=" + "[" * 100_000 + "]" * 100_000, "nest more than 64 levels deep", id="deep-100000"),
+    pytest.param("pause_s=" + "[" * 65 + "]" * 65, "nest more than 64 levels deep", id="deep-65"),
 ])
 def test_run_params_that_are_not_finite_or_beyond_int64_are_one_line_exit_2(tmp_path, capsys, param, message):
     out = tmp_path / "p.mcap"

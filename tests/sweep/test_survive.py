@@ -145,6 +145,19 @@ def test_resume_refuses_another_definition_and_no_journal(tmp_path, capsys):
     assert "--only and --resume cannot go together" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("line", [b"[" * 100_000 + b"]" * 100_000, b'{"scenario": 1, "values": ' + b"[" * 70
+                                  + b"]" * 70 + b"}"])
+def test_resume_calls_a_deeply_nested_journal_line_damaged(tmp_path, capsys, line):
+    args = _task(tmp_path)
+    assert main(["sweep", *args, "--scenarios", "2", "-j", "1", "--out", str(tmp_path / "a")]) == 0
+    capsys.readouterr()
+    with (tmp_path / "a" / "journal.jsonl").open("ab") as f:
+        f.write(line + b"\n")
+    assert main(["sweep", *args, "--scenarios", "2", "--out", str(tmp_path / "a"), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "line 4 is damaged" in err and err.count("\n") == 1, err
+
+
 def test_ctrl_c_stops_a_10m_scenario_sweep_with_its_results(tmp_path):
     out = tmp_path / "big"
     proc = _sweep(["pick_place", "--scenarios", "10000000", "--vary", "box.x_m=uniform(0.19,0.21)", "--param",

@@ -12,6 +12,7 @@ from typing import NoReturn
 import numpy as np
 
 from twin.errors import ConfigError
+from twin.model.json_values import MAX_DEPTH, nesting_depth
 
 _CALL = re.compile(r"^\s*([a-z_]+)\s*\((.*)\)\s*$", re.DOTALL)
 MAX_CHOICES = 1000
@@ -127,12 +128,22 @@ def read_value(text: str) -> object:
     """text as JSON when it parses (numbers, true/false, "text", null, lists, tables), else the text
     itself. BadValue for a number that cannot be carried, anywhere in it: an integer outside int64,
     NaN, an infinity, a float beyond +-1.8e308 (1e400), or a bare nan or inf that is not JSON."""
+    too_deep = False
     try:
-        return json.loads(text, parse_int=_int64, parse_float=_finite, parse_constant=_not_finite)
+        value = json.loads(text, parse_int=_int64, parse_float=_finite, parse_constant=_not_finite)
     except BadValue:
         raise
+    except RecursionError:  # json's parser recursed past Python's limit
+        too_deep = True
     except ValueError:
         pass
+    else:
+        if nesting_depth(value) <= MAX_DEPTH:
+            return value
+        too_deep = True
+    if too_deep:
+        raise BadValue(f"{_short(text)}: arrays or tables nest more than {MAX_DEPTH} levels deep; "
+                       f"expected at most {MAX_DEPTH}")
     try:
         number = float(text)
     except ValueError:

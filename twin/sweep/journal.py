@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from twin.errors import ConfigError
+from twin.model.json_values import load_json_text
 from twin.sweep.spec import SweepSpec
 
 JOURNAL = "journal.jsonl"
@@ -56,8 +57,8 @@ class Journal:
         end = text.rfind(b"\n") + 1
         lines = text[:end].splitlines()
         try:
-            head = json.loads(lines[0]) if lines else None
-        except ValueError:
+            head = load_json_text(lines[0], "journal") if lines else None
+        except ConfigError:  # not JSON, or nested past what twin reads
             head = None
         if not isinstance(head, dict) or head.get("twin_sweep_journal") != FORMAT:
             raise ConfigError(f"--resume: {str(self.path)!r} is not a twin sweep journal; expected one that "
@@ -67,9 +68,9 @@ class Journal:
                               "params, rate or timeout differ); expected the same definition, or no --resume")
         for number, line in enumerate(lines[1:], start=2):
             try:
-                row = json.loads(line)
+                row = load_json_text(line, "journal")
                 i = row["scenario"]
-            except (ValueError, TypeError, KeyError):
+            except (ConfigError, TypeError, KeyError):
                 raise ConfigError(f"--resume: {str(self.path)!r} line {number} is damaged; expected one "
                                   "scenario's row per line") from None
             if isinstance(i, int) and 0 <= i < spec.scenarios and not self.done(i):

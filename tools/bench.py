@@ -183,6 +183,7 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_
     chosen = {name: path for name, path in sections.items() if not only or name in only}
     from twin.sim.world import pybullet_version
 
+    load_before = os.getloadavg()
     t_start = time.perf_counter()
     samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))
     motion = tuple(pick_place_physics_steps_per_s() for _ in range(repeats))
@@ -213,15 +214,37 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_
     rows.append(("total", "wall time", f"{time.perf_counter() - t_start:.1f} s"))
     print("\n".join(_table(rows)))
     if json_path:
-        write_json(json_path, ctx.figures, rows)
+        write_json(json_path, ctx.figures, rows, run_facts(only, repeats, load_before))
     return 1 if failed else 0
 
 
-def write_json(path: str, figures: dict[str, float], rows: list[tuple[str, str, str]]) -> None:
+def run_facts(only: list[str], repeats: int, load_before: tuple[float, ...]) -> dict:
+    """When, where and how the run was made, for the docs' benchmarks page: UTC date, the machine
+    (CPU, cores, kernel, Python, PyBullet) and the load average before and after (a busy machine
+    gives noisy figures)."""
+    import datetime
+
+    from twin.record.machine import machine, machine_text
+    from twin.sim.world import pybullet_version
+
+    command = ["python tools/bench.py", *(f"--only {n}" for n in only), f"--repeats {repeats}"]
+    return {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            "machine": {"cpu": machine_text(machine()), "cpus": os.cpu_count(),
+                        "kernel": platform.release(), "python": platform.python_version(),
+                        "pybullet": pybullet_version()},
+            "command": " ".join(command),
+            "load_average": {"before": list(load_before), "after": list(os.getloadavg())}}
+
+
+def write_json(path: str, figures: dict[str, float], rows: list[tuple[str, str, str]],
+               facts: dict | None = None) -> None:
     """The run as JSON: every named figure at the top level (ratios are plain numbers, e.g.
-    record_both_vs_motion), and every row of the table under "rows"."""
+    record_both_vs_motion), every row of the table under "rows", and the run's date, machine,
+    command and load under "run" (tools/docs_benchmarks.py renders it into the docs)."""
     doc = {**{k: round(v, 6) for k, v in sorted(figures.items())},
            "rows": [{"section": a, "measure": b, "value": c} for a, b, c in rows[1:]]}
+    if facts is not None:
+        doc["run"] = facts
     Path(path).write_text(json.dumps(doc, indent=2) + "\n")
 
 

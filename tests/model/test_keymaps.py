@@ -198,7 +198,7 @@ def test_window_key_events_count_each_press_once():
 
 
 def test_readme_example_keymap_loads(tmp_path):
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "docs/how-to/teleop.md").read_text()
     path = tmp_path / "example.toml"
     path.write_text(re.search(r"```toml\n(.*?)```", readme, re.DOTALL).group(1))
     keymap = load_keymap(path, PROFILES["mtb"])

@@ -177,7 +177,7 @@ def test_paced_script_runs_in_real_time_with_the_same_commands():
 
 
 def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "docs/how-to/teleop.md").read_text()
     line = next(x for x in readme.splitlines() if x.startswith("twin teleop --robot seed000 --keys"))
     keys = line.split('"')[1]
     out = _cli("--robot", "seed000", "--keys", keys, "--record", str(tmp_path / "keys000.mcap"))
@@ -191,7 +191,7 @@ def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
 
 @pytest.mark.parametrize("robot", ["seed001", "seed000"])
 def test_a_keys_run_prints_how_far_the_box_ended_from_the_place_point_as_the_readme_says(robot):
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "docs/how-to/teleop.md").read_text()
     keys = next(x for x in readme.splitlines() if x.startswith(f"twin teleop --robot {robot} --keys")).split('"')[1]
     said = re.search(rf"{robot}'s .*?(\d+\.\d) mm", readme, re.DOTALL).group(1)  # the README's figure for it
     out = _cli("--robot", robot, "--keys", keys)

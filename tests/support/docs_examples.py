@@ -1,0 +1,258 @@
+"""The examples in README.md and docs/: found, run in order page by page, quoted output checked.
+
+A fenced block in bash or python is run as written, in the page's working folder (a fresh folder
+with a copy of recordings/, and runs/ holding the README's first run). An HTML comment on the line
+before a fence changes that:
+
+    <!-- doctest: exit=1 -->                   the block must exit 1 (default 0)
+    <!-- doctest: file=my_task.py -->          write the block to this file (any language)
+    <!-- doctest: output -->                   a text block: the lines the previous block printed
+                                                (in order, among others; `...` matches anything)
+    <!-- doctest: background ready="REGEX" --> start it, wait for REGEX in its output, go on; it is
+                                                stopped (SIGTERM) at the end of the page, or at
+                                                once with `stop`
+    <!-- doctest: tty keys="q" -->             run it on a terminal and type these keys
+    <!-- doctest: setup -->                    README's set-up: its twin run is the session's run
+    <!-- doctest: skip reason="..." -->        not run (the reason says why; the test lists them)
+"""
+
+from __future__ import annotations
+
+import os
+import pty
+import re
+import select
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+RUNNABLE = {"bash": "bash", "sh": "bash", "shell": "bash", "python": "python"}
+FENCE = re.compile(r"^```([\w+-]*)(?:\s+[^`]*)?$")  # a language, then attributes (title=...)
+DIRECTIVE = re.compile(r"^<!--\s*doctest:(.*?)-->\s*$")
+BLOCK_TIMEOUT_S = 300
+
+
+@dataclass
+class Block:
+    page: str
+    line: int  # 1-based line of the opening fence
+    lang: str
+    code: str
+    options: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def where(self) -> str:
+        return f"{self.page}:{self.line}"
+
+
+def _options(text: str) -> dict[str, str]:
+    out = {}
+    for token in shlex.split(text):
+        key, _, value = token.partition("=")
+        out[key] = value
+    return out
+
+
+def blocks(path: Path, root: Path) -> list[Block]:
+    """Every fenced block of a Markdown file with the directive above it, if any."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    found, i = [], 0
+    while i < len(lines):
+        m = FENCE.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        start, lang = i, m.group(1)
+        end = next(j for j in range(i + 1, len(lines)) if lines[j].rstrip() == "```")
+        directive = DIRECTIVE.match(lines[start - 1]) if start > 0 else None
+        options = _options(directive.group(1)) if directive else {}
+        found.append(
+            Block(
+                str(path.relative_to(root)),
+                start + 1,
+                lang,
+                "\n".join(lines[start + 1 : end]) + "\n",
+                options,
+            )
+        )
+        i = end + 1
+    return found
+
+
+def is_example(b: Block) -> bool:
+    return b.lang in RUNNABLE or bool(b.options)
+
+
+def check_output(expected: str, actual: str) -> str | None:
+    """None when the expected lines appear in the actual output in order, else what is missing."""
+    got = [line.strip() for line in actual.splitlines()]
+    at = 0
+    for want in expected.splitlines():
+        want = want.strip()
+        if not want or want == "...":
+            continue
+        pattern = re.compile(".*".join(re.escape(part) for part in want.split("...")))
+        while at < len(got) and not pattern.fullmatch(got[at]):
+            at += 1
+        if at == len(got):
+            return f"line not printed (in this order): {want!r}"
+        at += 1
+    return None
+
+
+@dataclass
+class Done:
+    code: int
+    output: str
+
+
+class PageRun:
+    """One page's examples, in order, in one working folder."""
+
+    def __init__(self, workdir: Path, env: dict[str, str]) -> None:
+        self.workdir, self.env = workdir, env
+        self.background: list[subprocess.Popen] = []
+        self.last: Done | None = None
+
+    def _argv(self, b: Block) -> list[str]:
+        if RUNNABLE[b.lang] == "python":
+            return [sys.executable, "-c", b.code]
+        return ["bash", "-e", "-c", b.code]  # as a shell a user types into: no pipefail
+
+    def run(self, b: Block) -> None:
+        o = b.options
+        if "skip" in o or "setup" in o:
+            return
+        if "file" in o:
+            target = self.workdir / o["file"]
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(b.code, encoding="utf-8")
+            return
+        if "output" in o:
+            assert self.last is not None, f"{b.where}: an output block with no example before it"
+            problem = check_output(b.code, self.last.output)
+            assert problem is None, f"{b.where}: {problem}\n--- printed:\n{self.last.output}"
+            return
+        if b.lang not in RUNNABLE:
+            return
+        if "background" in o:
+            self._start(b, o.get("ready", "."))
+            if "stop" in o:  # seen to start is enough (a serving viewer keeps a core busy)
+                self._stop(self.background.pop())
+            return
+        self.last = self._tty(b, o["keys"]) if "tty" in o else self._plain(b)
+        want = int(o.get("exit", "0"))
+        assert self.last.code == want, (
+            f"{b.where}: exit {self.last.code}, expected {want}\n--- block:\n{b.code}"
+            f"--- printed:\n{self.last.output}"
+        )
+
+    def _plain(self, b: Block) -> Done:
+        done = subprocess.run(
+            self._argv(b),
+            cwd=self.workdir,
+            env=self.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            timeout=BLOCK_TIMEOUT_S,
+            check=False,
+        )
+        return Done(done.returncode, done.stdout)
+
+    def _start(self, b: Block, ready: str) -> None:
+        proc = subprocess.Popen(
+            self._argv(b),
+            cwd=self.workdir,
+            env=self.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            start_new_session=True,
+        )
+        self.background.append(proc)
+        seen, deadline = [], time.monotonic() + 60
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                raise AssertionError(f"{b.where}: ended before it was ready:\n{''.join(seen)}")
+            seen.append(line)
+            if re.search(ready, line):
+                self.last = Done(0, "".join(seen))
+                return
+        raise AssertionError(f"{b.where}: not ready within 60 s:\n{''.join(seen)}")
+
+    def _tty(self, b: Block, keys: str) -> Done:
+        master, slave = pty.openpty()
+        proc = subprocess.Popen(
+            self._argv(b),
+            cwd=self.workdir,
+            env={**self.env, "TERM": "xterm"},
+            stdin=slave,
+            stdout=slave,
+            stderr=slave,
+            start_new_session=True,
+        )
+        os.close(slave)
+        out, typed, deadline = b"", False, time.monotonic() + BLOCK_TIMEOUT_S
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.2)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536)
+                except OSError:  # the terminal closed: the program ended
+                    break
+                out += chunk
+                if not typed and len(out) > 200:  # its screen is up: type
+                    time.sleep(0.5)
+                    os.write(master, keys.encode())
+                    typed = True
+            elif proc.poll() is not None:
+                break
+        os.close(master)
+        code = proc.wait(timeout=30)
+        text = re.sub(
+            r"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Z0-9]|\r", "", out.decode(errors="replace")
+        )
+        return Done(code, text)
+
+    def close(self) -> None:
+        for proc in self.background:
+            self._stop(proc)
+
+    @staticmethod
+    def _stop(proc: subprocess.Popen) -> None:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        proc.stdout.close()
+
+
+def run_workflow(path: Path, workdir: Path, env: dict[str, str]) -> tuple[bool, list[Path]]:
+    """A GitHub Actions workflow's `run` steps, as its runner would take them: in order, skipping
+    `uses:` steps and the install step (twin is installed here), `if: failure()` steps only after a
+    failure. Returns whether the job failed and the paths its failure uploads."""
+    import yaml
+
+    failed, uploads = False, []
+    for job in yaml.safe_load(path.read_text(encoding="utf-8"))["jobs"].values():
+        for step in job["steps"]:
+            when = step.get("if", "success()")
+            if when == "failure()" and not failed or when == "success()" and failed:
+                continue
+            if "run" in step and not step["run"].startswith("pip install"):
+                argv = ["bash", "-e", "-o", "pipefail", "-c", step["run"]]  # as GitHub runs it
+                done = subprocess.run(argv, cwd=workdir, env=env, capture_output=True, text=True,
+                                      timeout=BLOCK_TIMEOUT_S, check=False)
+                failed = failed or done.returncode != 0
+            elif "upload-artifact" in step.get("uses", ""):
+                uploads += [workdir / line for line in step["with"]["path"].split()]
+    return failed, uploads

@@ -66,14 +66,10 @@ MMAP_THRESHOLD_BYTES = 32 << 20  # blocks below this come from the heap (glibc's
 @functools.cache  # once per process (a forked child inherits the setting with the cache)
 def keep_freed_memory() -> None:
     """Have glibc keep the memory a scenario frees for the next one, in whatever process runs
-    scenarios (glibc only). Each scenario builds and frees a twin, about 28 MB, and with glibc's
-    default trim threshold the heap could shrink at each scenario's end and be page-faulted in
-    again by the next: up to 7,100 minor faults and 13-15 ms of system time in a 47 ms scenario
-    (33 ms without). How much of it a process paid depended on its past, not on the sweep:
-    7,100 faults per scenario in a fresh process, none once it had imported dask, about 5,000 in
-    Dask's spawned workers, so executors compared unequal. A fixed threshold (which also ends
-    glibc's dynamic mmap threshold, hence the second setting) makes them equal; a worker's peak
-    memory stays as it was (74 MB measured with and without)."""
+    scenarios (glibc only): each scenario builds and frees a twin, and with glibc's default, dynamic
+    trim threshold the heap shrinks and is page-faulted in again by the next, by an amount that
+    depends on the process's past, so executors would time unequally. Fixed thresholds make them
+    equal (the figures are in CHANGES.md)."""
     if not sys.platform.startswith("linux"):
         return
     mallopt = getattr(ctypes.CDLL(None), "mallopt", None)  # absent outside glibc-like C libraries

@@ -243,7 +243,9 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     real_replace = os.replace
 
     def replace(src, dst):  # the new summary is complete before it takes the golden's name; the old one intact
-        renames.append((os.path.basename(src), os.path.basename(dst), Path(src).read_text(), Path(dst).read_text()))
+        if str(dst).endswith(".json"):  # the summary (the results beside it are Parquet)
+            renames.append((os.path.basename(src), os.path.basename(dst), Path(src).read_text(),
+                            Path(dst).read_text()))
         return real_replace(src, dst)
 
     monkeypatch.setattr(os, "replace", replace)
@@ -253,7 +255,8 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     [(src, _, new_text, old_text)] = [r for r in renames if r[1] == "g.summary.json"]
     assert src.startswith("g.summary.json.") and src.endswith(".partial") and new_text == after and old_text == before
     assert oct((tmp_path / "g.summary.json").stat().st_mode & 0o777) == oct(0o640)
-    assert sorted(f.name for f in tmp_path.iterdir()) == ["g.summary.json", "g.toml"]  # nothing left beside it
+    # nothing left beside it; the per-scenario results were written too (a paired golden from now on)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["g.results.parquet", "g.summary.json", "g.toml"]
 
     def fail(src, dst):
         raise OSError(28, "No space left on device")
@@ -264,7 +267,7 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     assert main(["check", str(definition), "--update"]) == 2
     assert "g.summary.json': No space left on device" in capsys.readouterr().out
     assert (tmp_path / "g.summary.json").read_text() == before  # untouched, and no partial file left
-    assert sorted(f.name for f in tmp_path.iterdir()) == ["g.summary.json", "g.toml"]
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["g.results.parquet", "g.summary.json", "g.toml"]
 
 
 PROFILE = """\

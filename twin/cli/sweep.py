@@ -101,8 +101,120 @@ def add_sweep_command(sub) -> None:
                    help="re-run only these scenarios (recorded per --save; results.parquet is left alone)")
     p.add_argument("--fail-under", type=rate, default=None, metavar="RATE",
                    help="exit 1 when the success rate is below RATE (0..1, or 95%%): a CI gate")
+    p.add_argument("--plot", action="store_true",
+                   help="also write DIR/sweep.png: each scenario over the two varied keys "
+                        "that matter most and the placement error's distribution (needs "
+                        "matplotlib: twin[plot])")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar; only the summary")
     p.set_defaults(func=cmd_sweep)
+    p.epilog = ("twin sweep compare A B: two sweeps' results compared (paired when they ran "
+                "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
+                "`twin sweep compare --help`.")
+    _add_subcommands(p)
+
+
+def _add_subcommands(p: argparse.ArgumentParser) -> None:
+    """`twin sweep compare` and `twin sweep plot`: parsers of their own, chosen by the first word
+    after `sweep` (`twin sweep TASK` takes any other first word as the task)."""
+    kind = type(p)  # twin's parser class: one-line usage errors, exit 2
+    compare = kind(prog=f"{p.prog} compare",
+                   description="Compare two sweeps: B (new) against A (reference). The same "
+                               "scenarios (same seed and varied keys): paired, scenario by "
+                               "scenario (flips, Newcombe's paired interval, McNemar's exact "
+                               "test, the paired shift of the placement error); else Newcombe's "
+                               "unpaired interval. Exit 0, 1 under --fail-if-worse when B is "
+                               "worse, 2 bad input.")
+    compare.add_argument("a", metavar="A", help="the reference: a result folder (twin sweep "
+                         "--out) or a golden NAME.toml with NAME.results.parquet")
+    compare.add_argument("b", metavar="B",
+                         help="the new run: a result folder or a golden NAME.toml")
+    compare.add_argument("--report", default=None, metavar="FILE",
+                         help="also write the report: Markdown (.md) or JSON (.json)")
+    compare.add_argument("--fail-if-worse", action="store_true",
+                         help="exit 1 when B is worse beyond sampling noise: a significant "
+                              "drop in success rate (paired: McNemar p < 0.05; unpaired: "
+                              "Newcombe's interval below 0) or in placement error")
+    compare.add_argument("--plot", default=None, metavar="FILE.png",
+                         help="also write a picture with the flips ringed (needs matplotlib)")
+    compare.set_defaults(func=cmd_compare)
+    plot = kind(prog=f"{p.prog} plot", description="Draw a sweep: each scenario over the two "
+                "varied keys that matter most, and the placement error.")
+    plot.add_argument("dir", metavar="DIR", help="a result folder, or a golden NAME.toml with "
+                                                 "NAME.results.parquet")
+    plot.add_argument("--out", default=None, metavar="FILE.png",
+                      help="the picture (default DIR/sweep.png; NAME.png for a golden)")
+    plot.set_defaults(func=cmd_plot)
+    extra = {"compare": compare, "plot": plot}
+    parse_run = p.parse_known_args
+
+    def parse_known_args(args=None, namespace=None):
+        if args and args[0] in extra:
+            return extra[args[0]].parse_known_args(args[1:], namespace)
+        return parse_run(args, namespace)
+
+    p.parse_known_args = parse_known_args
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from twin.sweep.compare import compare, load_run, write_report
+
+    if args.report and not args.report.endswith((".md", ".json")):
+        raise ConfigError(f"--report {args.report!r} is invalid; expected a file ending in .md "
+                          "or .json")
+    if args.plot:
+        _plot_target(args.plot)
+    a, b = load_run(args.a), load_run(args.b)
+    result = compare(a, b)
+    print(result.text(), end="")
+    if args.report:
+        write_report(result, args.report)
+        print(f"wrote {args.report}")
+    if args.plot:
+        from twin.sweep.plot import plot_sweep
+
+        paired = result.result if result.is_paired else None
+        plot_sweep(b.side, args.plot, f"{b.label} against {a.label}", paired, a.side)
+        print(f"wrote {args.plot}")
+    if args.fail_if_worse and result.problems:
+        raise Worse(f"{b.label} is worse than {a.label}: " + "; ".join(result.problems))
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from twin.sweep.compare import load_run
+
+    out = args.out
+    if out is None:
+        path = Path(args.dir)
+        out = str(path / "sweep.png") if path.is_dir() else path.stem + ".png"
+    _plot_target(out)
+    run = load_run(args.dir)
+    _plot_run(run.side, out, run.spec, run.label)
+    return 0
+
+
+def _plot_target(path: str) -> None:
+    """matplotlib importable and the picture a .png, checked before any work."""
+    from twin.sweep.plot import pyplot
+
+    if not path.endswith(".png"):
+        raise ConfigError(f"plot {path!r} is invalid; expected a file ending in .png")
+    pyplot()
+
+
+def _plot_run(side, out: str, spec, label: str) -> None:
+    from twin.sweep.plot import plot_sweep
+
+    n, ok = side.n, int(side.ok.sum())
+    title = f"{label}: {spec.task} on {spec.robot}, seed {spec.seed}: {ok}/{n} ok"
+    keys = plot_sweep(side, out, title)
+    print(f"wrote {out} (axes: {', '.join(keys) or 'scenario'})")
+
+
+class Worse(TwinError):
+    """--fail-if-worse: B is worse than A beyond sampling noise."""
+
+    exit_code = 1
 
 
 def sweep_spec(args: argparse.Namespace):
@@ -134,6 +246,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     spec = sweep_spec(args)
     prepare(spec)  # every key, distribution and parameter checked before anything runs
+    if args.plot:
+        if args.only is not None:
+            raise ConfigError("--plot draws a whole sweep; expected it without --only")
+        _plot_target("sweep.png")  # matplotlib is there, before anything runs
     if args.only is not None and args.resume:
         raise ConfigError("--only and --resume cannot go together; expected one of them")
     if args.only is not None and max(args.only) >= spec.scenarios:
@@ -180,6 +296,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         for line in summary_lines(spec, summary, done, executor, out, args.save):
             print(line)
         print(f"wrote {out / 'results.parquet'}, {out / 'summary.json'}, {out / 'sweep.toml'}")
+        if args.plot and done.rows:
+            from twin.sweep.paired import read_side
+
+            _plot_run(read_side(out / "results.parquet", str(out)), str(out / "sweep.png"), spec,
+                      str(out))
     if done.stopped_by is not None:
         print(f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` runs the rest",
               file=sys.stderr)

@@ -1,10 +1,18 @@
 """Statistical goldens: a sweep definition `NAME.toml` with its expected summary `NAME.summary.json`
 beside it. Checking re-runs the sweep and judges it by statistics, not bytes: the success rate
 must lie in the golden's Wilson 95 % interval, and the placement-error percentiles (p50, p95, max)
-within the definition's tolerances (`[tolerance]`, else spec.TOLERANCES). `update` rewrites the
-summary when it changed at all (atomically: a temporary file beside it, renamed into place). A
-golden's files are read only when regular files of at most MAX_BYTES, and its summary is validated
-before it judges anything: a NaN or an infinite interval would otherwise pass every run."""
+within the definition's tolerances (`[tolerance]`, else spec.TOLERANCES).
+
+A golden that also keeps its per-scenario results beside it (`NAME.results.parquet`: scenario,
+the varied values, outcome, error, placement_error_mm; no wall-clock columns) is judged paired
+instead (twin.sweep.paired): the new run's scenarios against the same scenarios of the golden,
+by the definition's `[tolerance]` rule `paired` ("significant", the default, or "strict") and
+`placement_shift_mm`. A golden without results checks by its summary, as before.
+
+`update` rewrites the summary and the results when they changed at all (atomically: a temporary
+file beside each, renamed into place). A golden's files are read only when regular files of at
+most MAX_BYTES (the results: paired.MAX_RESULTS_BYTES), and its summary is validated before it
+judges anything: a NaN or an infinite interval would otherwise pass every run."""
 
 from __future__ import annotations
 
@@ -17,11 +25,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from stat import S_IMODE, S_ISREG
 
+import pyarrow as pa
+import pyarrow.parquet as pq
+
 from twin.errors import ConfigError, TwinError
 from twin.model.json_values import load_json_text, load_toml_text
-from twin.sweep.results import summary, summary_text
+from twin.sweep import paired
+from twin.sweep.results import summary, summary_text, table
 from twin.sweep.runner import run_sweep
-from twin.sweep.spec import load_spec, prepare
+from twin.sweep.spec import SweepSpec, load_spec, prepare
 from twin.sweep.worker import Job
 from twin.verify.check import Outcome
 
@@ -33,6 +45,42 @@ MAX_BYTES = 4 * 2**20  # the largest definition or summary read: a golden is a f
 def summary_path(definition: str | os.PathLike) -> Path:
     path = Path(definition)
     return path.with_name(path.stem + ".summary.json")
+
+
+def results_path(definition: str | os.PathLike) -> Path:
+    path = Path(definition)
+    return path.with_name(path.stem + ".results.parquet")
+
+
+META_KEY = b"twin.sweep"  # the results' schema metadata: the seed and varied keys that made them
+
+
+def golden_table(spec: SweepSpec, rows: list[dict]) -> pa.Table:
+    """A golden's per-scenario results: scenario, the varied keys, outcome, error and
+    placement_error_mm of each scenario (no seed column: it is in the metadata with the varied
+    keys; no counts or times)."""
+    full = table(spec, rows)
+    keys = [k for k, _ in spec.vary]
+    out = full.select(["scenario", *keys, "outcome", "error", "placement_error_mm"])
+    return out.replace_schema_metadata({META_KEY: json.dumps(_meta(spec)).encode()})
+
+
+def _meta(spec: SweepSpec) -> dict:
+    return {"seed": spec.seed, "vary": [list(v) for v in spec.vary]}
+
+
+def _read_results(path: Path) -> tuple[paired.Side, dict]:
+    """A golden's results as a paired.Side, with the seed and varied keys that made them."""
+    side = paired.read_side(path, path.name)
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+        meta = json.loads(raw) if raw else None
+    except (ValueError, OSError, pa.ArrowException):
+        meta = None
+    if not isinstance(meta, dict) or not isinstance(meta.get("seed"), int):
+        raise ConfigError(f"sweep golden results {str(path)!r} lack their seed (schema metadata "
+                          f"{META_KEY.decode()!r}); expected a file `twin check --update` wrote")
+    return side, meta
 
 
 def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -126,9 +174,10 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
 
 
 def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
-    """Re-run one sweep golden on executor and judge it; an Outcome as verify.check gives for a recording."""
+    """Re-run one sweep golden on executor and judge it; an Outcome as verify.check gives for a
+    recording. Paired when the golden keeps its results, else by its summary."""
     t0 = time.perf_counter()
-    expected_path = summary_path(definition)
+    expected_path, scenarios_path = summary_path(definition), results_path(definition)
     try:
         spec = load_spec(definition)
         prepare(spec)
@@ -136,23 +185,70 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
         if golden is None and not update:
             raise ConfigError(f"sweep golden {definition!r} has no {expected_path.name} beside it; "
                               f"`twin check --update {definition}` writes it")
+        reference = _read_results(scenarios_path) if scenarios_path.exists() else None
         done = run_sweep(Job(spec, None, "none"), range(spec.scenarios), executor)
         if done.stopped_by is not None:
             raise done.stopped_by
         new = summary(spec, done.rows)
-        report = _report(golden, new)
-        problems = judge(golden, new, spec.tolerances()) if golden is not None else ["no golden summary yet"]
+        new_table = golden_table(spec, done.rows)
+        if reference is not None:
+            problems, report, within = _judge_paired(definition, spec, reference, new_table)
+            report += "\n" + _report(golden, new)
+        elif golden is not None:
+            problems, report = judge(golden, new, spec.tolerances()), _report(golden, new)
+            within = "" if new == golden else "within tolerance: " + _moves(golden, new)
+        else:
+            problems, report, within = ["no golden summary yet"], _report(golden, new), ""
         seconds = time.perf_counter() - t0
-        if update and new != golden:
-            _write_atomically(expected_path, new)
-            return Outcome(definition, "updated", 0, "rewritten; was: " + ("; ".join(problems) or "within tolerance"),
-                           report, spec.scenarios, seconds)
+        if update:
+            wrote = []
+            if new != golden:
+                _write_atomically(expected_path, new)
+                wrote.append(expected_path.name)
+            if reference is None or reference[1] != _meta(spec) or not reference[0].table.equals(
+                    paired.side_from_table(new_table, "now").table):
+                _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
+                wrote.append(scenarios_path.name)
+            if wrote:
+                was = "; ".join(problems) or "within tolerance"
+                return Outcome(definition, "updated", 0, f"rewrote {', '.join(wrote)}; was: {was}",
+                               report, spec.scenarios, seconds)
         if problems:
-            return Outcome(definition, "differ", 1, "; ".join(problems), report, spec.scenarios, seconds)
-        detail = "matches" if new == golden else "within tolerance: " + _moves(golden, new)
-        return Outcome(definition, "match", 0, detail, report, spec.scenarios, seconds)
+            return Outcome(definition, "differ", 1, "; ".join(problems), report, spec.scenarios,
+                           seconds)
+        return Outcome(definition, "match", 0, within or "matches", report, spec.scenarios, seconds)
     except TwinError as err:
         return Outcome(definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+
+
+def _judge_paired(definition: str, spec: SweepSpec, reference: tuple[paired.Side, dict],
+                  new_table: pa.Table) -> tuple[list[str], str, str]:
+    """Problems, the report and a within-tolerance note ("" when nothing moved) of the new run
+    paired with the golden's results. Another seed or set of scenarios is a problem of its own:
+    those scenarios are not the same ones."""
+    side, meta = reference
+    problems = []
+    if meta["seed"] != spec.seed:
+        problems.append(f"the definition's seed {spec.seed} is not the one of {side.label} "
+                        f"({meta['seed']}): its scenarios are others; `twin check --update "
+                        f"{definition}` after an intended change")
+    p = paired.pair(side, paired.side_from_table(new_table, "now"))
+    if p.only_reference or p.only_new:
+        problems.append(f"the golden's results hold {side.n} scenarios and the run "
+                        f"{spec.scenarios} ({p.n} in both)")
+    if p.values_moved:
+        problems.append("varied values differ from the golden's: " + ", ".join(
+            f"{k} in {c} scenarios" for k, c in p.values_moved.items()))
+    rule = spec.tolerance.get("paired", "significant")
+    problems += paired.problems(p, rule, spec.tolerances()["placement_shift_mm"])
+    if problems and (p.worse or p.better):
+        problems.append(f"re-run: {paired.rerun_hint(p, definition)}")
+    within = ""
+    if p.worse or p.better or p.placed_changed or (p.largest_move and p.largest_move[1] != 0):
+        within = f"within tolerance ({rule}): {paired.flip_text(p)}; {paired.rate_text(p)}"
+        if p.shift is not None:
+            within += f"; paired placement shift median {p.shift[0]:+.3f} mm"
+    return problems, paired.report_text(p, definition), within
 
 
 def _read(path: Path) -> dict:
@@ -232,6 +328,11 @@ def _write_atomically(path: Path, data: dict) -> None:
     if len(text.encode()) > MAX_BYTES:
         raise ConfigError(f"the new summary of {path.name} would hold {len(text.encode())} bytes; expected at most "
                           f"{MAX_BYTES}; not written")
+    _publish_atomically(path, lambda p: Path(p).write_text(text))
+
+
+def _publish_atomically(path: Path, write) -> None:
+    """write(a temporary path beside path), then rename it into place, keeping path's mode."""
     try:
         mode = S_IMODE(os.stat(path).st_mode)
     except OSError:
@@ -239,14 +340,15 @@ def _write_atomically(path: Path, data: dict) -> None:
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".partial", dir=path.parent)
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
+        os.close(fd)
+        write(tmp)
         os.chmod(tmp, mode)
         os.replace(tmp, path)
-    except OSError as err:
+    except (OSError, pa.ArrowException) as err:
         if tmp is not None:
             Path(tmp).unlink(missing_ok=True)
-        raise ConfigError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
+        why = getattr(err, "strerror", None) or err
+        raise ConfigError(f"cannot write {str(path)!r}: {why}") from err
 
 
 def _moves(golden: dict, new: dict) -> str:

@@ -24,7 +24,14 @@ from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 
 from twin.errors import TwinError
-from twin.sweep.worker import Job, confirm_scenario, failed_row, keep_freed_memory, run_scenario, warm
+from twin.sweep.worker import (
+    Job,
+    confirm_scenario,
+    failed_row,
+    keep_freed_memory,
+    run_scenario,
+    warm,
+)
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
 OOM_EVENTS = "/sys/fs/cgroup/memory.events"  # cgroup v2: oom_kill counts the processes the OOM killer ended

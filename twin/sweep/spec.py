@@ -24,7 +24,9 @@ TOLERANCES = {  # what a statistical golden allows by default (recordings/sweeps
     "placement_p50_mm": 0.5,
     "placement_p95_mm": 1.0,
     "placement_max_mm": 2.0,
+    "placement_shift_mm": 0.5,  # a paired golden (NAME.results.parquet): twin.sweep.paired
 }
+PAIRED_RULES = ("significant", "strict")  # tolerance `paired`: a paired golden's verdict rule
 
 
 @dataclass(frozen=True)
@@ -55,10 +57,16 @@ class SweepSpec:
                                                math.isfinite(self.timeout_s) and self.timeout_s > 0):
             raise ConfigError(f"timeout_s {self.timeout_s!r} is invalid; expected seconds of simulated time > 0")
         for name, value in self.tolerance.items():
+            if name == "paired":
+                if value not in PAIRED_RULES:
+                    raise ConfigError(f"tolerance paired = {value!r:.60} is invalid; expected "
+                                      '"significant" or "strict"')
+                continue
             if name not in TOLERANCES or isinstance(value, bool) or not isinstance(value, (int, float)) or \
                     not math.isfinite(value) or value < 0:  # a NaN tolerance would pass any move
                 raise ConfigError(f"tolerance {name} = {value!r:.60} is invalid; expected one of "
-                                  f"{', '.join(TOLERANCES)} = a finite number >= 0 (mm)")
+                                  f"{', '.join(TOLERANCES)} = a finite number >= 0 (mm), "
+                                  'or paired = "significant" or "strict"')
 
     def tolerances(self) -> dict[str, float]:
         return {**TOLERANCES, **self.tolerance}

@@ -59,3 +59,97 @@ def summarize(rows: list[dict]) -> dict:
     return {"scenarios": n, "ok": ok, "failed": n - ok, "success_rate": ok / n if n else 0.0, "wilson95": [lo, hi],
             "placement_error_mm": percentiles(errors),
             "failures_by_reason": dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))}
+
+
+# Paired and unpaired comparisons of two sweeps. "Difference" is always new minus reference.
+
+EXACT_UP_TO = 2000  # binomial tails summed in exact integers up to this many trials, in logs beyond
+
+
+def newcombe_unpaired(ok1: int, n1: int, ok2: int, n2: int, z: float = Z95) -> tuple[float, float]:
+    """Newcombe's hybrid score interval (1998, method 10 for independent proportions) of
+    ok1/n1 - ok2/n2: each rate's Wilson interval, the distances to its ends added in squares."""
+    p1, p2 = ok1 / n1 if n1 else 0.0, ok2 / n2 if n2 else 0.0
+    l1, u1 = wilson(ok1, n1, z)
+    l2, u2 = wilson(ok2, n2, z)
+    d = p1 - p2
+    return d - math.hypot(p1 - l1, u2 - p2), d + math.hypot(u1 - p1, p2 - l2)
+
+
+def newcombe_paired(both: int, only1: int, only2: int, neither: int,
+                    z: float = Z95) -> tuple[float, float]:
+    """Newcombe's interval (1998, method 10 for paired proportions) of p1 - p2, where p1 =
+    (both + only1) / n and p2 = (both + only2) / n: the two marginal Wilson intervals combined
+    with phi, the correlation of the pairs, corrected towards 0 by n/2 when positive (as
+    Newcombe defines it; 0 when a margin is empty)."""
+    n = both + only1 + only2 + neither
+    if n == 0:
+        return -1.0, 1.0
+    s1, s2 = both + only1, both + only2
+    p1, p2 = s1 / n, s2 / n
+    l1, u1 = wilson(s1, n, z)
+    l2, u2 = wilson(s2, n, z)
+    margins = s1 * (n - s1) * s2 * (n - s2)
+    cross = both * neither - only1 * only2
+    if margins == 0:
+        phi = 0.0
+    elif cross > n / 2:
+        phi = (cross - n / 2) / math.sqrt(margins)
+    elif cross >= 0:
+        phi = 0.0
+    else:
+        phi = cross / math.sqrt(margins)
+    d = p1 - p2
+    dl = (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2
+    du = (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2
+    return max(-1.0, d - math.sqrt(max(dl, 0.0))), min(1.0, d + math.sqrt(max(du, 0.0)))
+
+
+def half_binomial_cdf(k: int, n: int) -> float:
+    """P(X <= k) for X ~ Binomial(n, 1/2): exact (integers) up to EXACT_UP_TO trials, else a
+    log-space sum (relative error about 1e-12)."""
+    if k < 0:
+        return 0.0
+    if k >= n:
+        return 1.0
+    if n <= EXACT_UP_TO:
+        return sum(math.comb(n, i) for i in range(k + 1)) / 2**n
+    logs = _log_half_pmf(n)[: k + 1]
+    top = logs.max()
+    return float(min(1.0, math.exp(top) * np.exp(logs - top).sum()))
+
+
+def _log_half_pmf(n: int) -> np.ndarray:
+    """log P(X = i), i = 0..n, X ~ Binomial(n, 1/2), by the recurrence
+    C(n, i) = C(n, i-1) (n-i+1) / i."""
+    i = np.arange(1, n + 1, dtype=float)
+    return np.concatenate(([0.0], np.cumsum(np.log(n - i + 1) - np.log(i)))) - n * math.log(2)
+
+
+def mcnemar_exact(worse: int, better: int) -> float:
+    """McNemar's exact test: the two-sided p-value of worse vs better discordant pairs under
+    H0 (each discordant pair equally likely either way), 2 P(X <= min) capped at 1."""
+    n = worse + better
+    return 1.0 if n == 0 else min(1.0, 2 * half_binomial_cdf(min(worse, better), n))
+
+
+def median_ci(values: np.ndarray, level: float = 0.95) -> tuple[float, float, float] | None:
+    """The median of values and its distribution-free interval from order statistics (the sign
+    test's inversion): [x(k), x(n+1-k)] for the largest k with 2 P(Bin(n, 1/2) <= k-1) <= 1 -
+    level, so its coverage is at least level. Too few values for that (n < 6 at 95 %): the
+    interval is the range. None when there are no values."""
+    x = np.sort(np.asarray(values, dtype=float))
+    n = len(x)
+    if n == 0:
+        return None
+    median = float(np.median(x))
+    lo, hi = 0, n + 1  # k = 0 stands for "no order statistic qualifies"
+    while hi - lo > 1:  # the tail P(X <= k-1) grows with k: bisect for the largest qualifying k
+        mid = (lo + hi) // 2
+        if 2 * half_binomial_cdf(mid - 1, n) <= 1 - level:
+            lo = mid
+        else:
+            hi = mid
+    if lo == 0:
+        return median, float(x[0]), float(x[-1])
+    return median, float(x[lo - 1]), float(x[n - lo])

@@ -1,0 +1,183 @@
+"""Paired statistical goldens: `twin check --update NAME.toml` keeps NAME.results.parquet beside the
+definition, and `twin check NAME.toml` pairs the new run with it scenario by scenario: flips both
+ways are named even when the success rate stays the same, by the [tolerance] rule; the verdict is
+the same whatever the executor or job count."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+import pytest
+
+from twin.cli.main import main
+from twin.sweep.executors import make_executor
+from twin.sweep.golden import check_sweep
+
+DEFINITION = """\
+task = "pick_place"
+seed = 3
+scenarios = 20
+
+[params]
+cycles = 1
+pause_s = 0.1
+max_error_m = 0.03
+
+[vary]
+"box.x_m" = "normal(0.2, 0.012)"
+"box.y_m" = "normal(0.7, 0.012)"
+"""
+
+
+@pytest.fixture(scope="module")
+def golden(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("paired")
+    (folder / "small.toml").write_text(DEFINITION)
+    assert main(["check", str(folder / "small.toml"), "--update", "--jobs", "2"]) == 0
+    return folder
+
+
+def test_update_keeps_the_per_scenario_results_and_check_pairs_them(golden, capsys):
+    table = pq.read_table(golden / "small.results.parquet")
+    assert table.column_names == [
+        "scenario",
+        "box.x_m",
+        "box.y_m",
+        "outcome",
+        "error",
+        "placement_error_mm",
+    ]
+    assert table.column("scenario").to_pylist() == list(range(20))
+    meta = json.loads(table.schema.metadata[b"twin.sweep"])
+    assert meta == {
+        "seed": 3,
+        "vary": [["box.x_m", "normal(0.2, 0.012)"], ["box.y_m", "normal(0.7, 0.012)"]],
+    }
+    summary = json.loads((golden / "small.summary.json").read_text())
+    assert summary["ok"] == pc.sum(pc.equal(table.column("outcome"), "ok")).as_py()
+    assert 0 < summary["ok"] < 20  # some boxes start out of the pad's reach: both outcomes occur
+    capsys.readouterr()
+    assert main(["check", str(golden / "small.toml"), "-v"]) == 0
+    assert " match " in capsys.readouterr().out
+
+
+def _swap_two(golden, folder, strict: bool):
+    """A copy of the golden whose results have one ok and one failed scenario swapped, as if the
+    code that made them flipped those two both ways: the same success rate."""
+    text = DEFINITION + ('\n[tolerance]\npaired = "strict"\n' if strict else "")
+    (folder / "g.toml").write_text(text)
+    shutil.copy(golden / "small.summary.json", folder / "g.summary.json")
+    table = pq.read_table(golden / "small.results.parquet")
+    rows = table.to_pylist()
+    ok = next(r for r in rows if r["outcome"] == "ok")
+    failed = next(r for r in rows if r["outcome"] != "ok")
+    ok_copy = dict(ok)
+    ok.update(
+        outcome=failed["outcome"],
+        error=failed["error"],
+        placement_error_mm=failed["placement_error_mm"],
+    )
+    failed.update(outcome="ok", error="", placement_error_mm=ok_copy["placement_error_mm"])
+    pq.write_table(pa.Table.from_pylist(rows, schema=table.schema), folder / "g.results.parquet")
+    return folder / "g.toml", ok["scenario"], failed["scenario"]
+
+
+def test_flips_both_ways_at_the_same_rate_are_named_and_fail_under_strict(golden, tmp_path, capsys):
+    definition, became_ok, became_failed = _swap_two(golden, tmp_path, strict=True)
+    capsys.readouterr()
+    assert main(["check", str(definition)]) == 1
+    out = capsys.readouterr().out
+    assert " differ " in out
+    assert (
+        f"2 scenarios flipped (strict: any flip fails): ok->failed 1 ({became_failed}), "
+        f"failed->ok 1 ({became_ok})"
+    ) in out
+    assert (
+        f"re-run: twin sweep {definition} --only {became_failed} --out runs/s{became_failed}" in out
+    )
+    assert main(["check", str(definition), "-v"]) == 1
+    report = capsys.readouterr().out
+    assert (
+        f"scenario {became_failed}: box.x_m=" in report
+        and "paired difference +0.00 points" in report
+    )
+    assert "McNemar exact p = 1" in report
+    assert (
+        main(
+            [
+                "sweep",
+                str(definition),
+                "--only",
+                str(became_failed),
+                "--out",
+                str(tmp_path / "again"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )  # the re-run the verdict names: that scenario, recorded
+    assert (tmp_path / "again" / "failures" / f"scenario-{became_failed}.mcap").exists()
+
+
+def test_the_significant_rule_names_the_flips_and_passes_a_balanced_change(
+    golden, tmp_path, capsys
+):
+    definition, became_ok, became_failed = _swap_two(golden, tmp_path, strict=False)
+    capsys.readouterr()
+    assert main(["check", str(definition)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        f"within tolerance (significant): ok->failed 1 ({became_failed}), "
+        f"failed->ok 1 ({became_ok})"
+        in out
+    )
+    assert main(["check", str(definition), "--update"]) == 0  # the results follow the code again
+    assert pq.read_table(definition.with_name("g.results.parquet")).equals(
+        pq.read_table(golden / "small.results.parquet")
+    )
+    capsys.readouterr()
+    assert main(["check", str(definition)]) == 0
+    assert "matches" in capsys.readouterr().out
+
+
+def test_a_golden_without_results_checks_by_its_summary(golden, tmp_path, capsys):
+    shutil.copy(golden / "small.toml", tmp_path / "old.toml")
+    summary = json.loads((golden / "small.summary.json").read_text())
+    summary["placement_error_mm"]["p50"] += 0.7
+    (tmp_path / "old.summary.json").write_text(json.dumps(summary))
+    capsys.readouterr()
+    assert main(["check", str(tmp_path / "old.toml")]) == 1
+    assert "placement_error_mm.p50 moved -0.700 mm" in capsys.readouterr().out
+    assert not (tmp_path / "old.results.parquet").exists()
+
+
+def test_another_seed_or_a_bad_results_file_is_named(golden, tmp_path, capsys):
+    definition, _, _ = _swap_two(golden, tmp_path, strict=False)
+    definition.write_text(DEFINITION.replace("seed = 3", "seed = 4"))
+    capsys.readouterr()
+    assert main(["check", str(definition)]) == 1
+    assert (
+        "the definition's seed 4 is not the one of g.results.parquet (3)" in capsys.readouterr().out
+    )
+    definition.write_text(DEFINITION)
+    (tmp_path / "g.results.parquet").write_text("not parquet")
+    assert main(["check", str(definition)]) == 2
+    out = capsys.readouterr().out
+    assert "g.results.parquet' cannot be read as Parquet" in out and "Traceback" not in out
+
+
+def test_the_paired_verdict_is_the_same_whatever_the_executor(golden, tmp_path):
+    definition, _, _ = _swap_two(golden, tmp_path, strict=True)
+    outcomes = []
+    for name, jobs in (("local", 1), ("local", 2), ("dask", 2)):
+        executor = make_executor(name, jobs)
+        try:
+            outcomes.append(check_sweep(str(definition), executor))
+        finally:
+            executor.close()
+    assert {o.status for o in outcomes} == {"differ"}
+    assert len({o.summary for o in outcomes}) == 1 and len({o.report for o in outcomes}) == 1

@@ -66,7 +66,12 @@ def cli_markdown() -> str:
     lines += [
         f"| [`twin {name}`](#twin-{name}) | {helps.get(name, '')} |" for name in _subcommands(root)
     ]
+    commands = {}
     for name, sub in _subcommands(root).items():
+        commands[name] = sub
+        for word, extra in getattr(sub, "extra_commands", {}).items():  # twin sweep compare, plot
+            commands[f"{name} {word}"] = extra
+    for name, sub in commands.items():
         lines += ["", f"## twin {name}", "", helps.get(name, ""), ""]
         if sub.description:
             lines += [sub.description, ""]

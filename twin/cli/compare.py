@@ -113,9 +113,12 @@ def cmd_check(args: argparse.Namespace) -> int:
     tol = _tolerances(args)
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
-    recordings, sweeps = split_paths(args.paths)
-    paths = golden_paths(recordings) if recordings or not sweeps else []
-    progress = Progress(len(paths) + len(sweeps))
+    from twin.sweep.search_golden import check_search, split_search
+
+    searches, rest = split_search(args.paths)  # recordings/search/NAME.toml with NAME.expect.json
+    recordings, sweeps = split_paths(rest)
+    paths = golden_paths(recordings) if recordings or not (sweeps or searches) else []
+    progress = Progress(len(paths) + len(sweeps) + len(searches))
     executor = make_executor(args.executor, args.jobs, args.scheduler) if sweeps or args.executor == "dask" else None
     try:
         run_many = executor.map_unordered if args.executor == "dask" else None
@@ -123,6 +126,9 @@ def cmd_check(args: argparse.Namespace) -> int:
                              allow_error=args.allow_error, run_many=run_many) if paths else []
         for definition in sweeps:  # statistical goldens: each sweep spread over the executor's workers
             outcomes.append(check_sweep(definition, executor, update=args.update))
+            progress(outcomes[-1])
+        for definition in searches:  # a failure found by `twin search`: does it still fail that way?
+            outcomes.append(check_search(definition, update=args.update))
             progress(outcomes[-1])
     finally:
         if executor is not None:

@@ -20,6 +20,7 @@ from twin.cli.args import (
 from twin.cli.compare import add_compare_commands
 from twin.cli.export import add_export_command
 from twin.cli.record import add_record_commands, add_record_options, record_paths
+from twin.cli.search import add_search_command
 from twin.cli.serve import add_serve_command
 from twin.cli.sweep import add_sweep_command
 from twin.cli.view import add_view_command
@@ -184,6 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_record_commands(sub)
     add_serve_command(sub)
     add_sweep_command(sub)
+    add_search_command(sub)
     add_view_command(sub)
     add_export_command(sub)
     return parser

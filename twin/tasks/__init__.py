@@ -11,11 +11,11 @@ from pathlib import Path
 
 from twin.errors import ConfigError, TaskError, TaskTimeout, TwinError, exception_text
 from twin.model.sink import Sink
-from twin.tasks import pick_place, seed000, seed001, seed002
+from twin.tasks import pick_place, pick_place_vision, seed000, seed001, seed002
 
 TaskFn = Callable[..., None]
 TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run, "seed000": seed000.run, "seed001": seed001.run,
-                             "seed002": seed002.run}
+                             "seed002": seed002.run, "pick_place_vision": pick_place_vision.run}
 
 
 def resolve(name_or_path: str) -> TaskFn:

@@ -1,0 +1,211 @@
+"""A failure found by `twin search`, kept as a regression test: `recordings/search/NAME.toml` (a
+one-scenario sweep definition holding the failing values as constants), `NAME.mcap` (its recording,
+for `twin replay`) and `NAME.expect.json` (what it is expected to do: fail, and with which reason).
+
+`twin check NAME.toml` runs the scenario again: green while it fails the same way (the same reason,
+numbers aside), red when it now passes ("the boundary moved") or fails another way; `--update`
+accepts what it does now (the expectation and the recording are rewritten)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from twin.errors import ConfigError, RecordingError, TwinError
+from twin.model.json_values import load_json_text
+from twin.sweep.sampling import RandomSampler
+from twin.sweep.search import run_probe
+from twin.sweep.spec import SweepSpec, dump_spec, load_spec, prepare
+from twin.sweep.stats import reason
+from twin.sweep.worker import _run  # the run a sweep records for a scenario, byte for byte
+from twin.verify.check import Outcome
+
+SEARCH_DIR = Path("recordings") / "search"
+EXPECT_SUFFIX = ".expect.json"
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,99}$")
+MAX_BYTES = 1 << 20  # an expectation is a few hundred bytes
+
+
+def check_name(name: str) -> str:
+    """A golden's name: letters, digits, '_' and '-' (it becomes three file names)."""
+    if not _NAME.match(name):
+        raise ConfigError(
+            f"--save-golden {name!r} is invalid; expected a name of letters, digits, '_' or '-' "
+            "(at most 100)"
+        )
+    return name
+
+
+def expect_path(definition: str | os.PathLike) -> Path:
+    path = Path(definition)
+    return path.with_name(path.stem + EXPECT_SUFFIX)
+
+
+def record_scenario(spec: SweepSpec, dest: Path) -> None:
+    """Record the one-scenario definition's run to dest, whatever its outcome (in this process): the
+    file a sweep of that definition writes for its scenario 0."""
+    prep = prepare(spec)
+    values = RandomSampler(spec.seed, prep.keys).values(0)  # constants: the scenario's values
+    _run(prep, values, 0, dest)
+
+
+def expectation(outcome: str, error: str) -> dict:
+    return {"outcome": outcome, "reason": reason(error) if outcome != "ok" else "", "error": error}
+
+
+def save_golden(
+    name: str, spec: SweepSpec, outcome: str, error: str, found: dict, folder: Path = SEARCH_DIR
+) -> list[Path]:
+    """Write NAME.toml, NAME.mcap and NAME.expect.json into folder (made if missing); `found` is
+    what the search reported about it (kept in the expectation, for people)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"cannot make {str(folder)!r}: {err.strerror or err}") from err
+    definition, recording = folder / f"{name}.toml", folder / f"{name}.mcap"
+    task = spec.task
+    if (
+        task.endswith(".py") and Path(task).is_file()
+    ):  # found relative to the definition, as load_spec does
+        task = os.path.relpath(os.path.abspath(task), os.path.abspath(folder))
+    _write(definition, dump_spec(SweepSpec(**{**spec.__dict__, "task": task})))
+    record_scenario(spec, recording)
+    _write(
+        expect_path(definition),
+        json.dumps({**expectation(outcome, error), "search": found}, indent=2, allow_nan=False)
+        + "\n",
+    )
+    return [definition, recording, expect_path(definition)]
+
+
+def _write(path: Path, text: str) -> None:
+    partial = path.with_name(path.name + ".partial")
+    try:
+        partial.write_text(text)
+        os.replace(partial, path)
+    except OSError as err:
+        partial.unlink(missing_ok=True)
+        raise RecordingError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
+
+
+def is_search_golden(path: Path) -> bool:
+    return path.suffix == ".toml" and expect_path(path).is_file()
+
+
+def split_search(paths: Sequence[str]) -> tuple[list[str], list[str]]:
+    """The arguments of `twin check` split into search goldens (a NAME.toml with NAME.expect.json
+    beside it, or a folder of them, such as recordings/search) and the rest, left as they were."""
+    searches, rest = [], []
+    for p in paths:
+        path = Path(p)
+        if path.is_file() and is_search_golden(path):
+            searches.append(p)
+        elif path.is_dir() and any(path.glob("*" + EXPECT_SUFFIX)):
+            found = sorted(str(t) for t in path.glob("*.toml") if is_search_golden(t))
+            names = {Path(t).stem for t in found}
+            others = [
+                f.name
+                for f in path.iterdir()
+                if f.suffix in (".toml", ".mcap") and f.stem not in names
+            ]
+            if others:
+                raise ConfigError(
+                    f"folder {p!r} holds search goldens and {others[0]!r}; expected search goldens "
+                    "in a folder of their own (or name each file)"
+                )
+            searches += found
+        else:
+            rest.append(p)
+    return searches, rest
+
+
+def read_expectation(definition: str) -> dict:
+    path = expect_path(definition)
+    try:
+        if path.stat().st_size > MAX_BYTES:
+            raise ConfigError(f"search golden {str(path)!r} is larger than {MAX_BYTES} bytes")
+        data = load_json_text(path.read_text(), f"search golden {str(path)!r} is not valid JSON")
+    except OSError as err:
+        raise ConfigError(
+            f"search golden {str(path)!r} cannot be read: {err.strerror or err}"
+        ) from err
+    if (
+        not isinstance(data, dict)
+        or data.get("outcome") not in ("ok", "error")
+        or not isinstance(data.get("reason"), str)
+        or not isinstance(data.get("error", ""), str)
+    ):
+        raise ConfigError(
+            f'search golden {str(path)!r} is invalid; expected outcome "ok" or "error" '
+            "and a reason text"
+        )
+    return data
+
+
+def verdict(expected: dict, outcome: str, error: str) -> tuple[str, str]:
+    """("match" or "differ", one line) for a run that gave outcome and error."""
+    if expected["outcome"] == "ok":
+        if outcome == "ok":
+            return "match", "passes, as expected"
+        return "differ", f"now fails: {error}; `--update` to accept"
+    if outcome == "ok":
+        return "differ", "now passes: the boundary moved; `--update` to accept"
+    if reason(error) != expected["reason"]:
+        return "differ", (
+            f"fails differently: expected {expected['reason']!r}, now {error!r}; "
+            "`--update` to accept"
+        )
+    return "match", f"fails the same way: {error}"
+
+
+def check_search(definition: str, *, update: bool = False) -> Outcome:
+    """Run a search golden's scenario again and judge it against its expectation."""
+    t0 = time.perf_counter()
+    try:
+        spec = load_spec(definition)
+        if spec.scenarios != 1:
+            raise ConfigError(
+                f"search golden {definition!r} has scenarios = {spec.scenarios}; expected 1"
+            )
+        prepare(spec)
+        expected = read_expectation(definition)
+        outcome, error = run_probe(spec, None)
+        status, line = verdict(expected, outcome, error)
+        report = (
+            f"expected: {expected['outcome']} {expected.get('error', '')!r}\n"
+            f"now:      {outcome} {error!r}\n"
+        )
+        if status == "differ" and update:
+            record_scenario(spec, Path(definition).with_suffix(".mcap"))
+            kept = {k: v for k, v in expected.items() if k not in ("outcome", "reason", "error")}
+            _write(
+                expect_path(definition),
+                json.dumps({**expectation(outcome, error), **kept}, indent=2, allow_nan=False)
+                + "\n",
+            )
+            return Outcome(
+                definition,
+                "updated",
+                0,
+                f"rewrote {expect_path(definition).name} and the recording; was: {line}",
+                report,
+                1,
+                time.perf_counter() - t0,
+            )
+        return Outcome(
+            definition,
+            status,
+            0 if status == "match" else 1,
+            line,
+            report,
+            1,
+            time.perf_counter() - t0,
+        )
+    except TwinError as err:
+        return Outcome(
+            definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
+        )

@@ -153,6 +153,7 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
         return parse_run(args, namespace)
 
     p.parse_known_args = parse_known_args
+    p.extra_commands = extra  # for the generated CLI reference (tools/docs_reference.py)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:

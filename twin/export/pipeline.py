@@ -65,7 +65,7 @@ def _default_task(ep: Episode) -> str:
 def provenance(sources: list[Source], eps: list[Episode], fps: int, mode: str, verified: bool) -> dict:
     """meta/twin_provenance.json: how the dataset was made and from which files (name and sha256),
     whether each replayed exactly, and which episodes came from it."""
-    from twin.record.metadata import versions
+    from twin.record.mcap.metadata import versions
 
     entries = []
     for source in sources:

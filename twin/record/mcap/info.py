@@ -20,6 +20,7 @@ from twin.model.config import TwinConfig
 from twin.model.types import Event
 from twin.record.machine import machine_text
 from twin.record.mcap import schemas as S
+from twin.record.mcap.metadata import parse_config, parse_run
 from twin.record.mcap.reader import (
     Message,
     Scan,
@@ -29,7 +30,6 @@ from twin.record.mcap.reader import (
     parse_robot_description,
     scan,
 )
-from twin.record.metadata import parse_config, parse_run
 
 
 @dataclass

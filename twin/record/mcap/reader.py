@@ -32,7 +32,7 @@ from twin.model.types import Command, Event
 from twin.record.mcap import scan as mcap_scan
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json, wire
-from twin.record.metadata import located_config, parse_config, parse_run
+from twin.record.mcap.metadata import located_config, parse_config, parse_run
 
 MAGIC = mcap_scan.MAGIC
 Message = mcap_scan.Message

@@ -31,8 +31,8 @@ from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire
 from twin.record.mcap.blocks import BlockEncoder
+from twin.record.mcap.metadata import check_run, portable_config, run_metadata
 from twin.record.mcap.scene_tf import WORLD, SceneTransforms
-from twin.record.metadata import check_run, portable_config, run_metadata
 from twin.record.outputs import partial_path, publish
 
 BLOCK_S = 0.25

@@ -91,9 +91,9 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
 def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
     targets it set and the holds it made and ended (from one twin run; read it, do not change it)."""
-    from twin.model.collectors import FrameCollector
     from twin.sim.twin import Twin
     from twin.tasks import TASKS
+    from twin.verify.collectors import FrameCollector
 
     collector = FrameCollector()
     twin = Twin(sinks=[collector])

@@ -19,7 +19,8 @@ import time
 from pathlib import Path
 
 from twin.model.config import TwinConfig
-from twin.model.images import camera, camera_view, encode
+from twin.model.images import camera, camera_view
+from twin.pictures import encode
 from twin.record import open_recorders
 from twin.sim.camera import CameraRenderer, RenderWorld
 from twin.sim.twin import Twin

@@ -25,10 +25,10 @@ from pathlib import Path
 from typing import NamedTuple
 
 from twin.model.config import TwinConfig
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
+from twin.record.rows import FrameRows
 from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
 
@@ -88,7 +88,7 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
 def packed_run() -> tuple[TwinConfig, FrameRows, bytearray, list]:
     """pick_place's 16-cycle run as its recorder processes get it: (config, row layout, the rows
     packed one after another, its events)."""
-    from twin.model.collectors import FrameCollector
+    from twin.verify.collectors import FrameCollector
 
     config = TwinConfig()
     collector = FrameCollector()

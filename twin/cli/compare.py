@@ -91,8 +91,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     rec = load(args.recording)
     if args.record:
         from twin.record import open_recorders
+        from twin.sim.world import engine_versions
 
-        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record) as sinks:
+        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record,
+                            engine=engine_versions()) as sinks:
             new = replay(rec, sinks=sinks)
         new.path, new.finalized = args.record, True  # the file was finalized as the block closed
     else:

@@ -18,6 +18,7 @@ from twin.model.images import CameraImage
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.sim.twin import Twin
+from twin.sim.world import engine_versions
 
 SIMULATION_STOPPED = 0x00
 SIMULATION_PAUSED = 0x08
@@ -137,7 +138,8 @@ class Scene:
                "params": {"robot": self.config.profile.name, "mode": self.mode, "run": self.run_index}}
         stack = contextlib.ExitStack()
         try:
-            sinks = stack.enter_context(open_recorders(self.config, run, mcap_path=mcap, rrd_path=rrd, rate=self.rate))
+            sinks = stack.enter_context(open_recorders(self.config, run, mcap_path=mcap, rrd_path=rrd,
+                                                      rate=self.rate, engine=engine_versions()))
         except BaseException:
             stack.close()
             self.run_index -= 1

@@ -20,9 +20,10 @@ import numpy as np
 from twin.errors import ConfigError
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
-from twin.model.images import CameraImage, CameraSpec, camera_view, encode, optical_pose
+from twin.model.images import CameraImage, CameraSpec, camera_view, optical_pose
 from twin.model.sink import Sink
 from twin.model.types import Frame
+from twin.pictures import encode
 from twin.sim.world import World, pb
 
 

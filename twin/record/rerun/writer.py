@@ -21,12 +21,12 @@ from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage, recorded_images
 from twin.model.recording import Recording
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.outputs import partial_path, publish
 from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
+from twin.record.rows import FrameRows
 from twin.robot.urdf import urdf_text as profile_urdf_text
 
 # Each send costs ~0.1 ms of the SDK's Python whatever its length, 16 sends a batch: the recorder

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from twin.cli.args import whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
-from twin.errors import ConfigError
+from twin.errors import ConfigError, OutputError
 
 _TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
     f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
@@ -135,7 +135,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         try:
             Path(args.junit).write_text(render_check_junit(outcomes))
         except OSError as err:
-            raise ConfigError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
+            raise OutputError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
     for o in outcomes:
         if o.status in ("differ", "refused") and args.verbose:
             print(f"== {o.path}\n{o.report}")

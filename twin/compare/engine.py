@@ -86,7 +86,7 @@ class FinalPose:
 
 @dataclass
 class DiffResult:
-    golden: dict  # describe(): path, profile, run, frames
+    golden: dict  # run_summary(): path, profile, run, frames
     candidate: dict
     tolerances: Tolerances
     fields: list[FieldStat]
@@ -228,7 +228,7 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
     notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
 
     result = DiffResult(
-        golden=describe(golden), candidate=describe(candidate), tolerances=tol, fields=fields,
+        golden=run_summary(golden), candidate=run_summary(candidate), tolerances=tol, fields=fields,
         events_matched=matched, events_shifted=shifted, event_diffs=event_diffs, final_poses=finals,
         length=length, steps_compared=int(gi.shape[0]),
         config_differences=config_differences({**golden.config.to_dict(), "run": golden.run or {}},
@@ -527,7 +527,7 @@ def _first(fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int,
     return min(candidates, key=lambda d: d.step) if candidates else None
 
 
-def describe(rec: Recording) -> dict:
+def run_summary(rec: Recording) -> dict:
     f = rec.frames
     return {
         "path": rec.path, "profile": rec.config.profile.name, "run": rec.run,

@@ -11,7 +11,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.errors import ConfigError, OutputError
 
 PARTIAL_SUFFIX = ".partial"
 DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no other folder is
@@ -20,7 +20,7 @@ DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no 
 def make_default_folder(folder: str | os.PathLike) -> bool:
     """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so the
     README's first command works in a fresh clone; any other folder is the user's to create.
-    True if `folder` exists (now). ConfigError if runs/ cannot be made."""
+    True if `folder` exists (now). OutputError if runs/ cannot be made."""
     folder = Path(folder)
     if folder.is_dir() or folder != Path(DEFAULT_FOLDER):
         return folder.is_dir()
@@ -29,7 +29,7 @@ def make_default_folder(folder: str | os.PathLike) -> bool:
     except FileExistsError:  # a file of that name
         return False
     except OSError as err:
-        raise ConfigError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
+        raise OutputError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
     return True
 
 

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from twin.errors import ConfigError, TwinError
+from twin.errors import ConfigError, OutputError, TwinError
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
 from twin.model.sink import Sink
@@ -186,7 +186,7 @@ class Scene:
             except TwinError:
                 raise
             except Exception as err:
-                raise ConfigError(f"could not finalize the recording {self._files}: {err}") from err
+                raise OutputError(f"could not finalize the recording {self._files}: {err}") from err
 
     def advance(self, n: int) -> None:
         """Step the twin n physics steps if the simulation is running."""

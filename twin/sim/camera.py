@@ -17,7 +17,7 @@ import os
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.errors import HelperError
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage, CameraSpec, camera_view, optical_pose
@@ -147,17 +147,17 @@ class _RenderProcess:
         try:
             self._conn.send_bytes(marshal.dumps((tuple(c.name for c in cameras), tuple(frame))))
         except OSError as err:
-            raise ConfigError(f"the camera render process stopped: {err}") from err
+            raise HelperError(f"the camera render process stopped: {err}") from err
         self.pending += 1
 
     def receive(self) -> list[CameraImage]:
         try:
             reply = self._conn.recv_bytes()
         except (EOFError, OSError) as err:
-            raise ConfigError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
+            raise HelperError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
         self.pending -= 1
         if reply.startswith(_FAILED):
-            raise ConfigError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")
+            raise HelperError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")
         return [CameraImage(*item) for item in marshal.loads(reply)]
 
     def close(self) -> None:

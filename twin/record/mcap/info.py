@@ -116,7 +116,7 @@ class _Reading:
         return out
 
 
-def describe(path: str | Path, *, keep_events: bool = True) -> Info:
+def read_info(path: str | Path, *, keep_events: bool = True) -> Info:
     """Read as much of the file as is readable and summarize it (RecordingError if it is not an MCAP
     file at all); what is unreadable or foreign is listed in `problems`. keep_events: keep every
     readable event in `event_list` (else only their counts by kind)."""

@@ -137,7 +137,7 @@ def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(pick_pla
         path = tmp_path / f"background_{background}.mcap"
         recorder = McapRecorder(path, config, {"source": "task", "task": "", "params": {}},
                                 urdf=urdf_text(config.profile))
-        renderer = CameraRenderer(config, [recorder], background=background)
+        renderer = CameraRenderer(config, recorder.on_image, background=background)
         for i in range(len(frames)):
             frame = frames.frame(i)
             recorder.on_frame(frame)

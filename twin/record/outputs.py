@@ -11,7 +11,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from twin.errors import ConfigError, OutputError
+from twin.errors import ConfigError, OutputError, TwinError
 
 PARTIAL_SUFFIX = ".partial"
 DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no other folder is
@@ -64,6 +64,18 @@ def check_output(path: str | os.PathLike, suffix: str, *, inputs: Iterable[str |
             link = "" if p.absolute() == Path(source).absolute() else " (the same file under another name)"
             raise ConfigError(f"{option} {str(path)!r} would overwrite its input {str(source)!r}{link}; "
                               "expected another path")
+    return p
+
+
+def check_target(path: str | os.PathLike, what: str, expected: str, *, error: type[TwinError] = ConfigError,
+                 folder: bool = False) -> Path:
+    """`path` as a Path a writer may create: the folder it goes in exists, and it is no folder (with
+    folder=True: no file). `error` saying which, naming `what` and the `expected` kind of path."""
+    p = Path(path)
+    if not p.parent.is_dir():
+        raise error(f"cannot write {what} {str(path)!r}: folder {str(p.parent)!r} does not exist; create it first")
+    if (p.exists() and not p.is_dir()) if folder else p.is_dir():
+        raise error(f"cannot write {what} {str(path)!r}: it is a {'file' if folder else 'folder'}; expected {expected}")
     return p
 
 

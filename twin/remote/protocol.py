@@ -8,7 +8,6 @@ turns bad input into a RequestError whose message names the problem, never a cra
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import cbor2
 
 from twin.errors import exception_text
+from twin.model.json_values import finite_number
 
 PROTOCOL_VERSION = 2
 # Limits on what a client may send (README, "Remote control"); over each, the client gets an error reply.
@@ -217,13 +217,10 @@ def _int(v: Any) -> int:
 
 
 def _float(v: Any) -> float:
-    try:
-        ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-    except OverflowError:  # an int too large for a float
-        ok = False
-    if not ok:
+    number = finite_number(v)
+    if number is None:
         raise TypeError("a finite number")
-    return float(v)
+    return number
 
 
 def _str(v: Any) -> str:

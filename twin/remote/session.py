@@ -39,11 +39,15 @@ class _Relay(Sink):
         self.targets: list = []
         self.holding = True
 
-    def on_frame(self, frame: Frame) -> None:
+    def _pass(self, method: str, item: Any) -> None:
+        """Hold item while stopped; hand it to the recorders attached (none while stopped)."""
         if self.holding:
-            self.pending.append(("on_frame", frame))
+            self.pending.append((method, item))
         for s in self.targets:
-            s.on_frame(frame)
+            getattr(s, method)(item)
+
+    def on_frame(self, frame: Frame) -> None:
+        self._pass("on_frame", frame)
 
     def on_command(self, command: Command) -> None:
         if self.holding:
@@ -51,21 +55,13 @@ class _Relay(Sink):
                 raise ConfigError(f"the simulation is stopped and already holds {MAX_PENDING_COMMANDS} commands "
                                   "for its next run; start it (sim.startSimulation) or stop sending")
             self.pending_commands += 1
-            self.pending.append(("on_command", command))
-        for s in self.targets:
-            s.on_command(command)
+        self._pass("on_command", command)
 
     def on_event(self, event: Event) -> None:
-        if self.holding:
-            self.pending.append(("on_event", event))
-        for s in self.targets:
-            s.on_event(event)
+        self._pass("on_event", event)
 
     def on_image(self, image: CameraImage) -> None:
-        if self.holding:
-            self.pending.append(("on_image", image))
-        for s in self.targets:
-            s.on_image(image)
+        self._pass("on_image", image)
 
     def attach(self, sinks: list) -> None:
         for method, item in self.pending:

@@ -7,7 +7,6 @@ produces a Frame; every discrete happening an Event. All three go to the sinks, 
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
@@ -15,6 +14,7 @@ from typing import Any
 from twin.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
+from twin.model.json_values import finite_number
 from twin.model.keymaps import KeyPlayer
 from twin.model.sink import Sink
 from twin.model.types import COMMAND_ARGS, NO_BODY, Command, Event, Frame
@@ -417,13 +417,10 @@ def _json_data(kind: str, data: dict) -> dict:
 
 
 def _number(value: Any, what: str) -> float:
-    try:
-        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-    except OverflowError:  # an int too large for a float
-        ok = False
-    if not ok:
+    number = finite_number(value)
+    if number is None:
         raise ConfigError(f"{what} {value!r:.40} is invalid; expected a finite number")
-    return float(value)
+    return number
 
 
 def _replaced(values: tuple, i: int, value) -> tuple:

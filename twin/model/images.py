@@ -25,6 +25,7 @@ MOUNTS = ("world", "pad")  # eye and target in world axes, or in the pad tip's f
 DEFAULT_SIZE_PX = (320, 240)
 DEFAULT_RATE_HZ = 15.0
 MAX_SIDE_PX = 4096
+CAMERA_FRAME_PREFIX = "camera_"  # a camera's frame_id in /tf: the prefix, then its name
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,7 @@ class CameraSpec:
     @property
     def frame_id(self) -> str:
         """The camera's coordinate frame in MCAP (/tf) and Foxglove."""
-        return f"camera_{self.name}"
+        return f"{CAMERA_FRAME_PREFIX}{self.name}"
 
 
 # The built-in cameras. overhead: straight down on the workspace (robot base, pick point (0.2, 0.7)
@@ -146,8 +147,9 @@ class CameraImage(NamedTuple):
 
 @dataclass
 class CameraTrack:
-    """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]).
-    source: the file they were read from ("" in memory), named when a picture is bad."""
+    """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]),
+    taken from pose[i] (x, y, z, qx, qy, qz, qw: the camera's /tf in the file; empty when a file holds
+    none). source: the file they were read from ("" in memory), named when a picture is bad."""
 
     name: str
     width_px: int
@@ -157,6 +159,7 @@ class CameraTrack:
     t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     data: list[bytes] = field(default_factory=list)
     source: str = ""
+    pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 7), dtype=np.float64))
 
     def __len__(self) -> int:
         return len(self.data)
@@ -189,7 +192,8 @@ class CameraTrack:
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
         return CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
                            np.array([im.step for im in images], dtype=np.int64),
-                           np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images])
+                           np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images],
+                           pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7))
 
 
 def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[str, CameraTrack]:
@@ -200,14 +204,21 @@ def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[s
 
 def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTrack], frame_steps: np.ndarray,
                     pad_poses: np.ndarray) -> list[CameraImage]:
-    """A recording's pictures as CameraImages in step order (camera order within a step), each with its
-    camera's pose from the recorded frame at (or, in a decimated file, just before) its step."""
+    """A recording's pictures as CameraImages in step order (camera order within a step), each with the
+    pose its track holds (the file's /tf). A track without poses (a file that holds none) has them
+    worked out from the recorded frame at (or, in a decimated file, just before) its step."""
     out = []
     for spec in cameras:
         track = by_name.get(spec.name)
-        for i in range(len(track) if track is not None and len(frame_steps) else 0):
+        if track is None or not len(frame_steps):
+            continue
+        held = len(track.pose) == len(track)
+        for i in range(len(track)):
             step = int(track.step[i])
-            row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
-            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i],
-                                   optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))))
+            if held:
+                pose = tuple(track.pose[i].tolist())
+            else:
+                row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
+                pose = optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))
+            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose))
     return sorted(out, key=lambda im: im.step)

@@ -91,9 +91,9 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
 def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
     targets it set and the holds it made and ended (from one twin run; read it, do not change it)."""
-    from twin.model.collectors import FrameCollector
     from twin.sim.twin import Twin
     from twin.tasks import TASKS
+    from twin.verify.collectors import FrameCollector
 
     collector = FrameCollector()
     twin = Twin(sinks=[collector])
@@ -115,8 +115,10 @@ def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     return n_steps, actions
 
 
-def replay_motion(world, n_steps: int, actions: dict[int, list[tuple]]) -> None:
-    """Step the bare World through a motion from motion_actions."""
+def replay_motion(world, n_steps: int, actions: dict[int, list[tuple]],
+                  after_step: Callable[[int], None] | None = None) -> None:
+    """Step the bare World through a motion from motion_actions; after_step(step) after each step
+    (a baseline's own work: reading the state, logging it)."""
     v_max = world.max_velocities()
     for step in range(n_steps):
         for action in actions.get(step, ()):
@@ -127,6 +129,8 @@ def replay_motion(world, n_steps: int, actions: dict[int, list[tuple]]) -> None:
             else:
                 world.detach()
         world.step()
+        if after_step is not None:
+            after_step(step + 1)
 
 
 def pick_place_physics_steps_per_s(cycles: int = 2) -> float:

@@ -19,9 +19,10 @@ import time
 from pathlib import Path
 
 from twin.model.config import TwinConfig
-from twin.model.images import camera, camera_view, encode
+from twin.model.images import camera, camera_view
+from twin.pictures import encode
 from twin.record import open_recorders
-from twin.sim.camera import CameraRenderer, RenderWorld
+from twin.sim.camera import RenderWorld
 from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
 
@@ -56,13 +57,10 @@ def picture_ms(name: str) -> tuple[float, float]:
 def recorded_camera_run(folder: Path, *, background: bool = True) -> tuple[float, int]:
     """(steps/s, pictures) of pick_place recorded to MCAP with the overhead camera, twin built to files
     finalized excluded: stepping only, as the physics baselines are timed. background False: the
-    pictures drawn in the stepping thread (the twin's renderer swapped for an in-process one)."""
+    pictures drawn in the stepping thread (Twin(camera_background=False))."""
     config = TwinConfig(cameras=(camera("overhead"),))
     with open_recorders(config, RUN, mcap_path=folder / "camera.mcap") as sinks:
-        twin = Twin(config, sinks=sinks)
-        if not background:
-            twin.sinks[-1].close()
-            twin.sinks[-1] = CameraRenderer(config, twin.sinks, background=False)
+        twin = Twin(config, sinks=sinks, camera_background=background)
         t0 = time.perf_counter()
         run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
         rate = twin.step_index / (time.perf_counter() - t0)

@@ -2,6 +2,9 @@
 
 pick_place run without recording, with MCAP, with MCAP + Rerun, each as a ratio to the
 physics-only step rate; MCAP bytes per simulated minute; the recorder's cost per step; load time.
+And against what a user would pick instead: the reads floor (the same motion with a Frame's engine
+reads and nothing else) and a hand-written logger (rr.log of the joints and the box plus one JSON
+MCAP message a step): `record_both_vs_reads`, `record_both_vs_naive`.
 tools/bench.py calls bench(ctx); `python tools/bench_record.py` runs it alone.
 
 Each run is timed twice over: its stepping (first Frame to last, what the physics-only baseline
@@ -25,15 +28,15 @@ from pathlib import Path
 from typing import NamedTuple
 
 from twin.model.config import TwinConfig
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
+from twin.record.rows import FrameRows
 from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # run alone: bench.py beside this file
-from bench import pick_place_physics_steps_per_s
+from bench import motion_actions, pick_place_physics_steps_per_s, replay_motion
 
 CYCLES = 16
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": CYCLES}}
@@ -88,7 +91,7 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
 def packed_run() -> tuple[TwinConfig, FrameRows, bytearray, list]:
     """pick_place's 16-cycle run as its recorder processes get it: (config, row layout, the rows
     packed one after another, its events)."""
-    from twin.model.collectors import FrameCollector
+    from twin.verify.collectors import FrameCollector
 
     config = TwinConfig()
     collector = FrameCollector()
@@ -132,6 +135,65 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int, run: tuple, writer: st
     return best / n * 1e6
 
 
+def reads_floor_steps_per_s(cycles: int = 2) -> float:
+    """The reads floor: pick_place's motion on the bare World (as the motion baseline) plus, every
+    step, the engine reads a Frame is made of (World.state) and nothing else: the most any logger
+    that records what a Frame holds can reach."""
+    from twin.sim.world import World
+
+    n_steps, actions = motion_actions(cycles)
+    world = World(TwinConfig())
+    try:
+        t0 = time.perf_counter()
+        replay_motion(world, n_steps, actions, lambda step: world.state())
+        return n_steps / (time.perf_counter() - t0)
+    finally:
+        world.close()
+
+
+def naive_logger_steps_per_s(folder: Path, cycles: int = 2) -> float:
+    """What a user writes without twin: the same motion, and every step its reads, an rr.log of the
+    joints and of the box, and one JSON message in an MCAP file. Stepping timed, as the twin's is
+    (the files' finish excluded)."""
+    import json
+
+    import rerun as rr
+    from mcap.writer import Writer
+
+    from twin.sim.world import World
+
+    n_steps, actions = motion_actions(cycles)
+    config = TwinConfig()
+    world = World(config)
+    stream = rr.RecordingStream("twin_bench_naive")
+    stream.save(folder / "naive.rrd")
+    with open(folder / "naive.mcap", "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        schema = writer.register_schema("state", "jsonschema", b'{"type": "object"}')
+        channel = writer.register_channel("/state", "json", schema)
+
+        def log(step: int) -> None:
+            q, _, _, poses, _, _ = world.state()
+            box = poses[0]
+            t_ns = step * config.dt_ns
+            stream.set_time("step", sequence=step)
+            stream.log("joints", rr.Scalars(q))
+            stream.log("box", rr.Transform3D(translation=box[:3], quaternion=rr.Quaternion(xyzw=box[3:7])))
+            writer.add_message(channel, log_time=t_ns, publish_time=t_ns,
+                               data=json.dumps({"step": step, "q": q, "box": box}).encode())
+
+        try:
+            t0 = time.perf_counter()
+            replay_motion(world, n_steps, actions, log)
+            rate = n_steps / (time.perf_counter() - t0)
+        finally:
+            writer.finish()
+            stream.flush()
+            world.close()
+    return rate
+
+
 def _have_rerun_writer() -> bool:
     try:
         import twin.record.rerun.writer  # noqa: F401
@@ -152,8 +214,13 @@ def bench(ctx) -> list[tuple[str, str]]:
         folder = Path(tmp)
         runs: dict[str, list[Timed]] = {name: [] for name in modes}
         motion: list[float] = []  # each repeat's own physics-only baseline, taken just before its modes
+        reads: list[float] = []  # and the reads floor and the hand-written logger, beside it
+        naive: list[float] = []
         for _ in range(repeats):  # the modes take turns
             motion.append(pick_place_physics_steps_per_s())
+            reads.append(reads_floor_steps_per_s())
+            if "twin + MCAP + Rerun" in modes:
+                naive.append(naive_logger_steps_per_s(folder))
             for name, (mcap, rrd) in modes.items():
                 runs[name].append(timed_run(folder, mcap=mcap, rrd=rrd))
         ctx.figures["record_motion_steps_per_s"] = statistics.median(motion)
@@ -198,6 +265,7 @@ def bench(ctx) -> list[tuple[str, str]]:
                          f"{both / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"))
             rows.append(("MCAP + Rerun recorders cost per step (wall, in the run)",
                          f"{(1 / both - 1 / plain) * 1e6:.2f} us"))
+        rows.extend(_user_baselines(ctx, runs, motion, reads, naive))
         run = packed_run()  # one run fed to each writer
         for writer, label in (("mcap", "MCAP"), ("rrd", "Rerun")):
             if writer == "rrd" and "twin + MCAP + Rerun" not in rates:
@@ -212,6 +280,31 @@ def bench(ctx) -> list[tuple[str, str]]:
         recording = load(folder / "bench.mcap")
         load_s = time.perf_counter() - t0
         rows.append(("load() per simulated minute", f"{load_s / sim_min * 1000:.1f} ms ({len(recording.frames)} frames)"))
+    return rows
+
+
+def _user_baselines(ctx, runs: dict[str, list[Timed]], motion: list[float], reads: list[float],
+                    naive: list[float]) -> list[tuple[str, str]]:
+    """The reads floor and the hand-written logger, each paired repeat by repeat with the motion
+    baseline and with twin + MCAP + Rerun: record_both_vs_reads, record_both_vs_naive for --json."""
+    def paired(a: list[float], b: list[float]) -> float:
+        return statistics.median(x / y for x, y in zip(a, b, strict=True))
+
+    ctx.figures["record_reads_steps_per_s"] = statistics.median(reads)
+    ctx.figures["record_reads_vs_motion"] = paired(reads, motion)
+    rows = [("the reads floor: the same motion, a Frame's engine reads and nothing else (steps/s)",
+             f"{statistics.median(reads):,.0f} ({ctx.figures['record_reads_vs_motion']:.2f}x same motion)")]
+    if not naive:
+        return rows
+    both = [t.steps / t.stepping_s for t in runs["twin + MCAP + Rerun"]]
+    ctx.figures["record_naive_steps_per_s"] = statistics.median(naive)
+    ctx.figures["record_naive_vs_motion"] = paired(naive, motion)
+    ctx.figures["record_both_vs_reads"] = paired(both, reads)
+    ctx.figures["record_both_vs_naive"] = paired(both, naive)
+    rows.append(("a hand-written logger: rr.log of joints and box + one JSON MCAP message a step (steps/s)",
+                 f"{statistics.median(naive):,.0f} ({ctx.figures['record_naive_vs_motion']:.2f}x same motion)"))
+    rows.append(("twin + MCAP + Rerun against the reads floor; against the hand-written logger",
+                 f"{ctx.figures['record_both_vs_reads']:.2f}x; {ctx.figures['record_both_vs_naive']:.2f}x"))
     return rows
 
 

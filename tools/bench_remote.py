@@ -7,45 +7,21 @@ calls/s and 2,000 steps/s). tools/bench.py calls bench(ctx); `python tools/bench
 
 from __future__ import annotations
 
-import re
-import signal
 import statistics
-import subprocess
 import sys
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 from coppeliasim_zmqremoteapi_client import RemoteAPIClient
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from support.server import ServerProcess  # the tests' `twin serve` subprocess, shared
 
 CALLS = 10_000
 STEPS = 3_000
 TARGET_CALLS_PER_S = 5_000
 TARGET_STEPS_PER_S = 2_000
-
-
-class _Server:
-    def __init__(self) -> None:
-        self.proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--stepped", "--port", "0", "--no-record"],
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        deadline = time.monotonic() + 60
-        for line in self.proc.stdout:
-            m = re.search(r"listening on tcp://127\.0\.0\.1:(\d+)", line)
-            if m:
-                self.port = int(m.group(1))
-                return
-            if time.monotonic() > deadline:
-                break
-        self.close()
-        raise RuntimeError("twin serve did not start")
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
 
 
 def measure(port: int, calls: int = CALLS, steps: int = STEPS) -> tuple[float, float]:
@@ -93,11 +69,8 @@ def server_side_us(requests: int = 20_000) -> float:
 
 def bench(ctx) -> list[tuple[str, str]]:
     repeats = max(1, int(getattr(ctx, "repeats", 1)))
-    server = _Server()
-    try:
+    with ServerProcess("--stepped") as server:
         samples = [measure(server.port) for _ in range(repeats)]
-    finally:
-        server.close()
     calls = statistics.median(s[0] for s in samples)
     steps = statistics.median(s[1] for s in samples)
     return [

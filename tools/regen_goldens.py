@@ -28,6 +28,7 @@ from twin.errors import TwinError
 from twin.model.config import SceneObject, SuctionParams, TwinConfig
 from twin.model.profiles import PROFILES
 from twin.record import open_recorders
+from twin.sim.world import engine_versions
 from twin.verify.check import record_task
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -123,7 +124,8 @@ def make(golden: Golden, out_dir: Path = RECORDINGS) -> Path:
         return make_session(golden, out_dir)
     path = out_dir / f"{golden.name}.mcap"
     run = {"source": "task", "task": golden.task, "params": golden.params}
-    with open_recorders(golden.config, run, mcap_path=path, rate=golden.rate) as sinks:
+    with open_recorders(golden.config, run, mcap_path=path, rate=golden.rate,
+                        engine=engine_versions()) as sinks:
         record_task(golden.config, golden.task, golden.params, sinks=sinks)
     return path
 

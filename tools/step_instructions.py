@@ -23,7 +23,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bench import motion_actions, replay_motion  # tools/bench.py, beside this file: the same baseline
+from bench import (  # tools/bench.py, beside this file: the same baseline
+    motion_actions,
+    replay_motion,
+)
 
 MODES = ("physics", "alone", "mcap", "both")
 CYCLES = (2, 4)

@@ -22,6 +22,16 @@ class ConfigError(TwinError):
     """A profile, scene, key map or parameter is malformed or unknown."""
 
 
+class OutputError(TwinError):
+    """An output (a report, a folder, a recording being finalized) could not be written: the system
+    refused it (permissions, a full disk). Exit 2, as for a bad output path."""
+
+
+class HelperError(TwinError):
+    """A helper process of the twin (the camera renderer) stopped or failed; the message says which
+    and how (its exit code, or the error it sent). Exit 2, as the input errors it most often follows."""
+
+
 class OutOfReach(TwinError):
     """A target lies outside the reachable annulus or the joint limits: the task failed (exit 1;
     3 is kept for runs that cannot be compared)."""

@@ -13,11 +13,11 @@ from pathlib import Path
 import pytest
 
 from twin.cli import main
-from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.profiles import PROFILES
 from twin.sim.twin import Twin
 from twin.tasks import TASKS, resolve, run_task
+from twin.verify.collectors import FrameCollector
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 FAR = FIXTURES / "far_task.py"

@@ -11,7 +11,7 @@ from twin.cli.main import main
 from twin.compare.engine import compare
 from twin.compare.report import render_markdown
 from twin.compare.tolerances import Tolerances
-from twin.model.images import encode
+from twin.pictures import encode
 
 
 def _with_darkened_picture(rec, camera: str, index: int):

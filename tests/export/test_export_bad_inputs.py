@@ -32,7 +32,7 @@ from support.cli import TWIN, twin
 
 import twin as twin_pkg
 from twin.export import episodes as episodes_module
-from twin.model.images import png_bytes
+from twin.pictures import png_bytes
 from twin.record.mcap import schemas as S
 from twin.verify.replay import save
 

@@ -14,7 +14,14 @@ from twin.errors import ConfigError
 from twin.model import config as C
 from twin.model.config import TwinConfig, check_camera_view
 from twin.model.images import CAMERAS, CameraSpec
-from twin.model.json_values import MAX_DEPTH, all_finite, load_json_text, load_toml_text, nesting_depth, shown
+from twin.model.json_values import (
+    MAX_DEPTH,
+    all_finite,
+    load_json_text,
+    load_toml_text,
+    nesting_depth,
+    shown,
+)
 
 SCHEMAS = {"config": C.CONFIG_SCHEMA, "profile": C.PROFILE_SCHEMA, "object": C.OBJECT_SCHEMA,
            "engine": C.ENGINE_SCHEMA, "suction": C.SUCTION_SCHEMA, "camera": C.CAMERA_SCHEMA}

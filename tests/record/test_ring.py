@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 from support.runs import record_pick_place
 
-from twin.model.rows import FrameRows
 from twin.record import process
 from twin.record.mcap.reader import load
 from twin.record.ring import FrameRing
+from twin.record.rows import FrameRows
 from twin.sim.twin import Twin
 
 FOUR_CYCLES = {"cycles": 4}  # about 4,480 frames: more than the ring's 4,096 rows at 240 Hz

@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 
 from twin import load as load_recording
-from twin.model.collectors import ColumnCollector
 from twin.model.config import TwinConfig
-from twin.model.images import CAMERAS, CameraSpec, camera, camera_view, decode_rgb, optical_pose
+from twin.model.images import CAMERAS, CameraSpec, camera, camera_view, optical_pose
 from twin.model.quat import rotate
+from twin.pictures import decode_rgb
 from twin.sim.camera import CameraRenderer, RenderWorld, render_frame
 from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
+from twin.verify.collectors import ColumnCollector
 
 SMALL = (160, 120)
 
@@ -136,7 +137,7 @@ def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(pick_pla
         path = tmp_path / f"background_{background}.mcap"
         recorder = McapRecorder(path, config, {"source": "task", "task": "", "params": {}},
                                 urdf=urdf_text(config.profile))
-        renderer = CameraRenderer(config, [recorder], background=background)
+        renderer = CameraRenderer(config, recorder.on_image, background=background)
         for i in range(len(frames)):
             frame = frames.frame(i)
             recorder.on_frame(frame)

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from twin.model.collectors import FrameCollector
 from twin.model.config import SceneObject, SuctionParams, TwinConfig
 from twin.model.profiles import PROFILES
 from twin.model.types import NO_BODY
 from twin.sim.twin import Twin
+from twin.verify.collectors import FrameCollector
 
 G_M_S2 = 9.81
 BOX_XY_M = (0.5, 0.0)

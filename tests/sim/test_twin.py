@@ -10,12 +10,12 @@ import pytest
 from support.runs import collect_pick_place, columns_digest
 
 from twin.errors import ConfigError, OutOfReach, UnknownName
-from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.profiles import PROFILES
 from twin.model.types import Command
 from twin.robot.kinematics import wrap_rad
 from twin.sim.twin import Twin
+from twin.verify.collectors import FrameCollector
 
 ONE_CYCLE = {"cycles": 1}
 

@@ -7,12 +7,13 @@ import hashlib
 from dataclasses import fields
 from pathlib import Path
 
-from twin.model.collectors import FrameCollector
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.record import open_recorders
+from twin.sim.world import engine_versions
 from twin.verify.check import record_task
+from twin.verify.collectors import FrameCollector
 
 ONE_CYCLE = {"cycles": 1}
 
@@ -29,7 +30,8 @@ def record_pick_place(path: Path | None = None, config: TwinConfig | None = None
     config = config or TwinConfig()
     if path is None:
         return record_task(config, "pick_place", params, sinks=sinks)
-    with open_recorders(config, pick_place_run(params), mcap_path=path, rate=rate, background=background) as files:
+    with open_recorders(config, pick_place_run(params), mcap_path=path, rate=rate, background=background,
+                        engine=engine_versions()) as files:
         return record_task(config, "pick_place", params, sinks=[*sinks, *files])
 
 

@@ -13,14 +13,21 @@ from support.teleop_plan import MAPS, plan
 
 from twin.cli import main
 from twin.errors import ConfigError
-from twin.model.collectors import FrameCollector
 from twin.model.keymaps import parse_keys
 from twin.model.profiles import PROFILES
 from twin.record.mcap.reader import load
 from twin.sim.twin import Twin
 from twin.tasks.pick_place import POINT_B_M
 from twin.teleop.screen import status_lines
-from twin.teleop.session import EventLog, Session, TeleopOptions, run_teleop, summary_lines, teleop_config
+from twin.teleop.session import (
+    EventLog,
+    Session,
+    TeleopOptions,
+    run_teleop,
+    summary_lines,
+    teleop_config,
+)
+from twin.verify.collectors import FrameCollector
 from twin.verify.replay import REPLAYED_EVENT_KINDS, collected, replay
 
 KEY_INTERVAL_S = 0.1

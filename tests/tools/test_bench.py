@@ -54,11 +54,15 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
     data = json.loads(out.read_text())
     for key in ("record_both_vs_motion", "record_both_vs_idle", "record_mcap_vs_motion", "twin_vs_motion",
                 "mcap_mb_per_sim_min", "physics_steps_per_s", "motion_physics_steps_per_s",
-                "record_mcap_writer_cpu_us_per_frame", "record_rrd_writer_cpu_us_per_frame"):
+                "record_mcap_writer_cpu_us_per_frame", "record_rrd_writer_cpu_us_per_frame",
+                "record_both_vs_reads", "record_both_vs_naive", "record_reads_vs_motion"):
         assert isinstance(data[key], float) and data[key] > 0, key
     # the record section pairs each repeat with its own sample of the same motion's baseline (one repeat: that one)
     assert abs(data["record_both_vs_motion"] - data["record_both_steps_per_s"] / data["record_motion_steps_per_s"]) < 1e-5
     assert abs(data["twin_vs_motion"] - data["twin_steps_per_s"] / data["motion_physics_steps_per_s"]) < 1e-5
+    # the two user baselines are paired with twin + MCAP + Rerun the same way
+    assert abs(data["record_both_vs_reads"] - data["record_both_steps_per_s"] / data["record_reads_steps_per_s"]) < 1e-5
+    assert abs(data["record_both_vs_naive"] - data["record_both_steps_per_s"] / data["record_naive_steps_per_s"]) < 1e-5
     assert any(r["section"] == "total" and r["measure"] == "wall time" for r in data["rows"])
     assert len(data["rows"]) == sum(1 for line in done.stdout.splitlines() if line.count("|") == 2) - 1
     bad = _bench("--only", "twin", "--json", str(tmp_path / "no" / "b.json"))

@@ -13,13 +13,13 @@ from support.runs import record_pick_place
 from twin.cli import main
 from twin.compare.engine import compare
 from twin.errors import RecordingError
-from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.keymaps import builtin_keymap
 from twin.model.types import Command
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
 from twin.sim.twin import Twin
+from twin.verify.collectors import FrameCollector
 from twin.verify.replay import REPLAYED_EVENT_KINDS, collected, replay, save
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from twin.cli.args import whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
-from twin.errors import ConfigError
+from twin.errors import ConfigError, OutputError
 
 _TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
     f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
@@ -91,8 +91,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     rec = load(args.recording)
     if args.record:
         from twin.record import open_recorders
+        from twin.sim.world import engine_versions
 
-        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record) as sinks:
+        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record,
+                            engine=engine_versions()) as sinks:
             new = replay(rec, sinks=sinks)
         new.path, new.finalized = args.record, True  # the file was finalized as the block closed
     else:
@@ -139,7 +141,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         try:
             Path(args.junit).write_text(render_check_junit(outcomes))
         except OSError as err:
-            raise ConfigError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
+            raise OutputError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
     for o in outcomes:
         if o.status in ("differ", "refused") and args.verbose:
             print(f"== {o.path}\n{o.report}")

@@ -28,6 +28,7 @@ from twin.errors import ConfigError, TwinError
 from twin.model.sink import Sink
 from twin.signals import Terminated, stop_signals_raise
 from twin.sim.twin import Twin
+from twin.sim.world import engine_versions
 from twin.tasks import TimeLimit, check_params, resolve, run_task, task_params
 
 DEFAULT_CYCLES = 2
@@ -54,7 +55,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     # `head` that stopped reading) must not turn a good run's recording into an error, nor leave the
     # twin (and its camera process) open.
     try:
-        with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate) as sinks:
+        with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate,
+                            engine=engine_versions()) as sinks:
             twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])  # the limit last: recorders see its frame
             wall0 = time.perf_counter()
             try:

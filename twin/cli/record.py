@@ -41,13 +41,13 @@ def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | No
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from twin.record.mcap.info import describe, format_info
+    from twin.record.mcap.info import format_info, read_info
 
     partial = partial_path(args.file)
     if not Path(args.file).exists() and partial.is_file():
         raise RecordingError(f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
                              f"of a run that was killed (or is still running); `twin recover {args.file}` restores it")
-    info = describe(args.file, keep_events=args.events)
+    info = read_info(args.file, keep_events=args.events)
     for line in format_info(info, all_events=args.events):
         print(line)
     if not info.intact:

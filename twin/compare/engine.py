@@ -16,7 +16,15 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from twin.compare.events import EventDiff, match_events
-from twin.compare.metrics import REVOLUTE, abs_error, differs, discrete_error, joint_error, norm_error, quat_angle
+from twin.compare.metrics import (
+    REVOLUTE,
+    abs_error,
+    differs,
+    discrete_error,
+    joint_error,
+    norm_error,
+    quat_angle,
+)
 from twin.compare.noise import NoiseFloor, command_number_difference
 from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
 from twin.errors import RecordingError, TwinError
@@ -86,7 +94,7 @@ class FinalPose:
 
 @dataclass
 class DiffResult:
-    golden: dict  # describe(): path, profile, run, frames
+    golden: dict  # run_summary(): path, profile, run, frames
     candidate: dict
     tolerances: Tolerances
     fields: list[FieldStat]
@@ -235,7 +243,7 @@ def compare(golden: Recording, candidate: Recording, tolerances: Tolerances | No
     notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
 
     result = DiffResult(
-        golden=describe(golden), candidate=describe(candidate), tolerances=tol, fields=fields,
+        golden=run_summary(golden), candidate=run_summary(candidate), tolerances=tol, fields=fields,
         events_matched=matched, events_shifted=shifted, event_diffs=event_diffs, final_poses=finals,
         length=length, steps_compared=int(gi.shape[0]),
         config_differences=config_differences({**golden.config.to_dict(), "run": golden.run or {}},
@@ -544,7 +552,7 @@ def _first(fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int,
     return min(candidates, key=lambda d: d.step)
 
 
-def describe(rec: Recording) -> dict:
+def run_summary(rec: Recording) -> dict:
     f = rec.frames
     return {
         "path": rec.path, "profile": rec.config.profile.name, "run": rec.run,

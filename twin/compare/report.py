@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from twin.compare.engine import DiffResult, Divergence, FieldStat
-from twin.errors import ConfigError
+from twin.errors import ConfigError, OutputError
 
 FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}
 
@@ -289,4 +289,4 @@ def write_report(result: DiffResult, path: str | os.PathLike) -> None:
     try:
         Path(path).write_text(text)
     except OSError as err:
-        raise ConfigError(f"cannot write report {str(path)!r}: {err.strerror}") from err
+        raise OutputError(f"cannot write report {str(path)!r}: {err.strerror}") from err

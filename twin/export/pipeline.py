@@ -10,15 +10,13 @@ from twin.errors import ConfigError
 from twin.export.episodes import Episode, episodes
 from twin.export.lerobot import Written, write_dataset
 from twin.export.sources import Source, check_recording, load_source, verify
+from twin.record.outputs import check_target
 
 
 def check_folder(out: Path, inputs: list[str], overwrite: bool) -> Path:
     """The dataset folder may be written: its parent exists, and it is new, an empty folder, or with
     overwrite an earlier dataset (it holds meta/info.json) holding none of the inputs."""
-    if not out.parent.is_dir():
-        raise ConfigError(f"cannot write dataset {str(out)!r}: folder {str(out.parent)!r} does not exist; create it first")
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"cannot write dataset {str(out)!r}: it is a file; expected a folder path")
+    check_target(out, "dataset", "a folder path", folder=True)
     if out.is_dir() and any(out.iterdir()):
         if not overwrite:
             raise ConfigError(f"dataset folder {str(out)!r} is not empty; expected a new or empty folder "
@@ -65,7 +63,7 @@ def _default_task(ep: Episode) -> str:
 def provenance(sources: list[Source], eps: list[Episode], fps: int, mode: str, verified: bool) -> dict:
     """meta/twin_provenance.json: how the dataset was made and from which files (name and sha256),
     whether each replayed exactly, and which episodes came from it."""
-    from twin.record.metadata import versions
+    from twin.record.mcap.metadata import versions
 
     entries = []
     for source in sources:

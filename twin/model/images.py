@@ -2,20 +2,15 @@
 sinks get through on_image) and all of one camera's pictures in a recording (CameraTrack).
 
 A camera is part of the scene's configuration (TwinConfig.cameras), so a replay renders it again.
-Pictures are stored encoded (PNG, fixed settings: the same pixels give the same bytes) and decoded
-with Pillow only when asked (CameraTrack.rgb). A picture read from a file is checked before it is
-decoded: its header (Pillow's Image.open reads nothing more) must declare the camera's configured
+Pictures are stored encoded (twin.pictures) and decoded only when asked (CameraTrack.rgb). A picture
+read from a file is checked before it is decoded: its header must declare the camera's configured
 format and size, so a damaged picture costs at most one configured-size decode, never a bomb's
 (CameraTrack.check, a RecordingError naming the file, the camera, the step and what was expected).
 """
 
 from __future__ import annotations
 
-import io
 import math
-import struct
-import warnings
-import zlib
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -23,13 +18,14 @@ import numpy as np
 
 from twin.errors import ConfigError, RecordingError
 from twin.model.quat import quat_from_axes, rotate
+from twin.pictures import checked_header, decode_rgb
 
 FORMATS = ("png", "jpeg")
 MOUNTS = ("world", "pad")  # eye and target in world axes, or in the pad tip's frame (x along its heading, z up)
 DEFAULT_SIZE_PX = (320, 240)
 DEFAULT_RATE_HZ = 15.0
 MAX_SIDE_PX = 4096
-PNG_COMPRESS_LEVEL = 1  # fixed: identical pixels give identical bytes (level 1: 0.36 ms a picture, level 6: 0.9-1.2)
+CAMERA_FRAME_PREFIX = "camera_"  # a camera's frame_id in /tf: the prefix, then its name
 
 
 @dataclass(frozen=True)
@@ -89,7 +85,7 @@ class CameraSpec:
     @property
     def frame_id(self) -> str:
         """The camera's coordinate frame in MCAP (/tf) and Foxglove."""
-        return f"camera_{self.name}"
+        return f"{CAMERA_FRAME_PREFIX}{self.name}"
 
 
 # The built-in cameras. overhead: straight down on the workspace (robot base, pick point (0.2, 0.7)
@@ -151,8 +147,9 @@ class CameraImage(NamedTuple):
 
 @dataclass
 class CameraTrack:
-    """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]).
-    source: the file they were read from ("" in memory), named when a picture is bad."""
+    """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]),
+    taken from pose[i] (x, y, z, qx, qy, qz, qw: the camera's /tf in the file; empty when a file holds
+    none). source: the file they were read from ("" in memory), named when a picture is bad."""
 
     name: str
     width_px: int
@@ -162,6 +159,7 @@ class CameraTrack:
     t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     data: list[bytes] = field(default_factory=list)
     source: str = ""
+    pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 7), dtype=np.float64))
 
     def __len__(self) -> int:
         return len(self.data)
@@ -179,7 +177,7 @@ class CameraTrack:
         is a picture of the camera's format and configured size. Reads headers only: microseconds each."""
         for k in range(len(self.data)) if i is None else (i,):
             try:
-                _checked_header(self.data[k], self.format, (self.width_px, self.height_px))
+                checked_header(self.data[k], self.format, (self.width_px, self.height_px))
             except ValueError as err:
                 raise self._bad(k, str(err)) from None
 
@@ -194,7 +192,8 @@ class CameraTrack:
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
         return CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
                            np.array([im.step for im in images], dtype=np.int64),
-                           np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images])
+                           np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images],
+                           pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7))
 
 
 def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[str, CameraTrack]:
@@ -205,107 +204,21 @@ def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[s
 
 def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTrack], frame_steps: np.ndarray,
                     pad_poses: np.ndarray) -> list[CameraImage]:
-    """A recording's pictures as CameraImages in step order (camera order within a step), each with its
-    camera's pose from the recorded frame at (or, in a decimated file, just before) its step."""
+    """A recording's pictures as CameraImages in step order (camera order within a step), each with the
+    pose its track holds (the file's /tf). A track without poses (a file that holds none) has them
+    worked out from the recorded frame at (or, in a decimated file, just before) its step."""
     out = []
     for spec in cameras:
         track = by_name.get(spec.name)
-        for i in range(len(track) if track is not None and len(frame_steps) else 0):
+        if track is None or not len(frame_steps):
+            continue
+        held = len(track.pose) == len(track)
+        for i in range(len(track)):
             step = int(track.step[i])
-            row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
-            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i],
-                                   optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))))
+            if held:
+                pose = tuple(track.pose[i].tolist())
+            else:
+                row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
+                pose = optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))
+            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose))
     return sorted(out, key=lambda im: im.step)
-
-
-def encode(rgb: np.ndarray, format: str = "png") -> bytes:
-    """(h, w, 3) uint8 pixels as PNG (png_bytes) or JPEG (Pillow, quality 90)."""
-    if format == "png":
-        return png_bytes(rgb)
-    from PIL import Image
-
-    out = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(out, format="JPEG", quality=90)
-    return out.getvalue()
-
-
-def png_bytes(rgb: np.ndarray) -> bytes:
-    """A PNG of (h, w, 3) uint8 pixels: 8-bit RGB, every row unfiltered, zlib level PNG_COMPRESS_LEVEL, no
-    other chunks, so the same pixels always give the same bytes. Written here rather than by Pillow,
-    whose filter search took 1.5-3 ms a 320x240 picture; this takes 0.36 ms (the renderer's flat colours
-    compress well without filters: 3.5 KB)."""
-    h, w, _ = rgb.shape
-    rows = np.empty((h, 1 + 3 * w), dtype=np.uint8)
-    rows[:, 0] = 0  # filter type None
-    pixels = rows[:, 1:].reshape(h, w, 3)  # a view into rows: the renderer's RGBA slice is copied once, strided
-    pixels[...] = rgb
-    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8 bits, truecolour, deflate, no filter choice, no interlace
-    return b"".join((b"\x89PNG\r\n\x1a\n", _png_chunk(b"IHDR", header),
-                     _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)), _png_chunk(b"IEND", b"")))
-
-
-def _png_chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-
-_PIL_FORMATS = {"png": "PNG", "jpeg": "JPEG"}
-_PNG_HEAD = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR"  # the signature, then the IHDR chunk's length and type
-
-
-def decode_rgb(data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None) -> np.ndarray:
-    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height) the
-    header is checked first and nothing else is decoded: ValueError saying what the bytes are instead,
-    also for pixel data Pillow cannot decode."""
-    with _open(data, format, size_px) as image:
-        if size_px is not None and image.size != tuple(size_px):
-            raise ValueError(f"is {image.size[0]}x{image.size[1]} px")
-        try:
-            image.load()
-            rgb = image.convert("RGB")
-        except Exception as err:  # noqa: BLE001 - Pillow raises OSError, SyntaxError, ValueError, ... on bad data
-            raise ValueError(f"does not decode ({_one_line(err)})") from None
-    pixels = np.asarray(rgb, dtype=np.uint8)
-    if size_px is not None and pixels.shape != (size_px[1], size_px[0], 3):
-        raise ValueError(f"decodes to shape {pixels.shape}")
-    return pixels
-
-
-def _checked_header(data: bytes, format: str, size_px: tuple[int, int]) -> None:
-    """ValueError unless the picture's header declares format and size_px (nothing is decoded)."""
-    with _open(data, format, size_px) as image:
-        if image.size != tuple(size_px):
-            raise ValueError(f"is {image.size[0]}x{image.size[1]} px")
-
-
-def _open(data: bytes, format: str | None, size_px: tuple[int, int] | None = None):
-    """Pillow's Image.open of the bytes (it reads the header only), for format when given. A PNG's
-    IHDR is read first: one of another size than size_px, or too large for Pillow, is refused with
-    its size before Pillow sees it; Pillow's own limit (DecompressionBombError, and the warning it
-    prints below that) never shows."""
-    from PIL import Image, UnidentifiedImageError
-
-    if not isinstance(data, (bytes, bytearray, memoryview)) or not len(data):
-        raise ValueError("is empty")
-    if format is not None and format not in _PIL_FORMATS:
-        raise ValueError(f"is in format {format!r}; expected one of {', '.join(_PIL_FORMATS)}")
-    if bytes(data[:16]) == _PNG_HEAD and len(data) >= 24 and format in (None, "png"):
-        w, h = struct.unpack(">II", bytes(data[16:24]))
-        limit = Image.MAX_IMAGE_PIXELS
-        if (size_px is not None and (w, h) != tuple(size_px)) or (limit and w * h > limit):
-            raise ValueError(f"is {w}x{h} px")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-        try:
-            return Image.open(io.BytesIO(bytes(data)), formats=None if format is None else [_PIL_FORMATS[format]])
-        except Image.DecompressionBombError:
-            raise ValueError(f"declares more than {Image.MAX_IMAGE_PIXELS} pixels") from None
-        except UnidentifiedImageError:
-            what = f"a {_PIL_FORMATS[format]} picture" if format else "a picture"
-            raise ValueError(f"is not {what} ({len(data)} bytes starting {bytes(data[:8])!r})") from None
-        except Exception as err:  # noqa: BLE001 - a damaged header: SyntaxError, OSError, struct.error, ...
-            raise ValueError(f"has a damaged header ({_one_line(err)})") from None
-
-
-def _one_line(err: BaseException) -> str:
-    text = " ".join(f"{type(err).__name__}: {err}".split())
-    return text if len(text) <= 120 else text[:117] + "..."

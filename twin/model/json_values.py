@@ -34,6 +34,15 @@ def all_finite(value: object) -> bool:
     return True
 
 
+def finite_number(value: object) -> float | None:
+    """value as a float if it is a finite int or float (a bool is no number), else None."""
+    try:
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    except OverflowError:  # an int too large for a float
+        return None
+    return float(value) if ok else None
+
+
 def finite_or_null(value: object) -> object:
     """value with every NaN or infinity replaced by None (JSON null)."""
     if isinstance(value, float):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Protocol
 
 from twin.errors import ConfigError, UnknownName
 from twin.model.json_values import load_json_text, load_toml_text
@@ -253,6 +254,69 @@ def keymap_for(profile: RobotProfile, path: str | Path | None = None) -> dict:
     if path:
         return load_keymap(path, profile)
     return validate_keymap(builtin_keymap(profile.name), profile)
+
+
+class KeyHands(Protocol):
+    """What a key's actions may do to a robot (the twin hands KeyPlayer one of these)."""
+
+    def joint(self, name: str | int) -> int: ...  # a joint by role, profile name or index
+    def target(self, joint: int) -> float: ...  # its motor target now
+    def limits(self, joint: int) -> tuple[float, float]: ...
+    def drive(self, joint: int, q: float) -> None: ...  # a new motor target
+    def place(self, joint: int, q: float) -> None: ...  # set at once, like sim.setJointPosition
+    def signal(self, name: str, value) -> None: ...
+
+
+class KeyPlayer:
+    """Plays a key map's actions (the list in the module doc) on a robot, in order. Keeps the map's
+    own joint variables ("add", "diff"), from 0 as the reports' scripts keep them."""
+
+    def __init__(self, keymap: dict, profile: RobotProfile) -> None:
+        self.keymap, self.profile = keymap, profile
+        self._values: dict[int, float] = {}
+
+    def press(self, key: str, hands: KeyHands) -> bool:
+        """Play key's actions; False if the map does not bind it (nothing done)."""
+        actions = self.keymap.get(key)
+        if actions is None:
+            return False
+        for action in actions:
+            self._play(key, action, hands)
+        return True
+
+    def _play(self, key: str, action: list, hands: KeyHands) -> None:
+        op, values = action[0], self._values
+        if op in ("jog", "jog_keep_heading"):
+            j = hands.joint(action[1])
+            before = hands.target(j)
+            hands.drive(j, before + float(action[2]))
+            if op == "jog_keep_heading" and hands.target(j) != before:  # turn back by what the joint moved
+                wrist = _WRIST
+                hands.drive(wrist, hands.target(wrist) - (hands.target(j) - before))
+        elif op == "target":
+            j = hands.joint(action[1])
+            lo, hi = hands.limits(j)
+            named = {"min": lo, "max": hi, "down": self.profile.z_down(), "up": self.profile.z_up()}
+            hands.drive(j, float(named.get(action[2], action[2])))
+        elif op == "position":
+            hands.place(hands.joint(action[1]), float(action[2]))
+        elif op == "add":
+            j = hands.joint(action[1])
+            values[j] = values.get(j, 0.0) + float(action[2])
+            (hands.place if action[3] == "position" else hands.drive)(j, values[j])
+        elif op == "diff":
+            j, a, b = (hands.joint(name) for name in action[1:4])
+            values[j] = values.get(a, 0.0) - values.get(b, 0.0)
+            hands.drive(j, values[j])
+        elif op == "signal":
+            hands.signal(action[1], action[2])
+        elif op == "suction":
+            hands.signal(self.profile.suction_signals[0], int(action[1]))
+        else:
+            raise ConfigError(f"key {key!r}: unknown action {op!r}")
+
+
+_WRIST = ROLES.index("wrist")  # joints in role order: the twin's joint indices
 
 
 def describe_action(action: list) -> str:

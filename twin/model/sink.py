@@ -4,13 +4,8 @@ overrides what it uses (a recorder all of them, an event log only on_event)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from twin.model.images import CameraImage
 from twin.model.types import Command, Event, Frame
-
-if TYPE_CHECKING:
-    from twin.model.rows import FrameRows
 
 OUTCOMES = ("ok", "error", "interrupted")  # how a run ended, as close() is told
 
@@ -21,8 +16,9 @@ class Sink:
     def on_frame(self, frame: Frame) -> None:
         pass
 
-    def on_rows(self, rows: FrameRows, buf) -> None:
-        """Many Frames at once, packed as `rows` lays them out (the recorder process is fed so):
+    def on_rows(self, rows, buf) -> None:
+        """Many Frames at once, packed as `rows` (a record.rows.FrameRows) lays them out (the recorder
+        process is fed so):
         the same as on_frame for each; writers override it to take the rows as columns."""
         for i in range(rows.count(buf)):
             self.on_frame(rows.frame(buf, i))

@@ -15,14 +15,16 @@ from twin.signals import Terminated
 
 @contextmanager
 def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | None = None,
-                   rrd_path: str | Path | None = None, rate: int = 1, background: bool = True) -> Iterator[list]:
+                   rrd_path: str | Path | None = None, rate: int = 1, background: bool = True,
+                   engine: dict[str, str] | None = None) -> Iterator[list]:
     """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file is
     finalized with run_outcome ok, or error/interrupted (and the message) when the block raised
     (interrupted: Ctrl-C, SIGTERM or SIGHUP). Files are written as NAME.partial and renamed into place
     when finalized; the folders must exist.
 
     background: the writers run in a recorder process on the other core (the same files, byte for
-    byte, at a fraction of the stepping thread's time); False keeps them in this process."""
+    byte, at a fraction of the stepping thread's time); False keeps them in this process.
+    engine: the simulation's versions the MCAP file names (sim.world.engine_versions())."""
     from twin.record.mcap.writer import McapRecorder
 
     urdf = urdf_text(config.profile)
@@ -33,10 +35,11 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
             from twin.record.process import RecorderProcess
 
             sinks.append(RecorderProcess(config, run, urdf=urdf, meshes=meshes,
-                                         mcap_path=mcap_path, rrd_path=rrd_path, rate=rate))
+                                         mcap_path=mcap_path, rrd_path=rrd_path, rate=rate,
+                                         engine=engine))
         elif mcap_path is not None:
             sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes,
-                                      rate=rate))
+                                      rate=rate, engine=engine))
         if rrd_path is not None and not background:
             from twin.record.rerun.writer import RerunRecorder
 

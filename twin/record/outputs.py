@@ -11,7 +11,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.errors import ConfigError, OutputError, TwinError
 
 PARTIAL_SUFFIX = ".partial"
 DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no other folder is
@@ -20,7 +20,7 @@ DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no 
 def make_default_folder(folder: str | os.PathLike) -> bool:
     """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so the
     README's first command works in a fresh clone; any other folder is the user's to create.
-    True if `folder` exists (now). ConfigError if runs/ cannot be made."""
+    True if `folder` exists (now). OutputError if runs/ cannot be made."""
     folder = Path(folder)
     if folder.is_dir() or folder != Path(DEFAULT_FOLDER):
         return folder.is_dir()
@@ -29,7 +29,7 @@ def make_default_folder(folder: str | os.PathLike) -> bool:
     except FileExistsError:  # a file of that name
         return False
     except OSError as err:
-        raise ConfigError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
+        raise OutputError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
     return True
 
 
@@ -64,6 +64,18 @@ def check_output(path: str | os.PathLike, suffix: str, *, inputs: Iterable[str |
             link = "" if p.absolute() == Path(source).absolute() else " (the same file under another name)"
             raise ConfigError(f"{option} {str(path)!r} would overwrite its input {str(source)!r}{link}; "
                               "expected another path")
+    return p
+
+
+def check_target(path: str | os.PathLike, what: str, expected: str, *, error: type[TwinError] = ConfigError,
+                 folder: bool = False) -> Path:
+    """`path` as a Path a writer may create: the folder it goes in exists, and it is no folder (with
+    folder=True: no file). `error` saying which, naming `what` and the `expected` kind of path."""
+    p = Path(path)
+    if not p.parent.is_dir():
+        raise error(f"cannot write {what} {str(path)!r}: folder {str(p.parent)!r} does not exist; create it first")
+    if (p.exists() and not p.is_dir()) if folder else p.is_dir():
+        raise error(f"cannot write {what} {str(path)!r}: it is a {'file' if folder else 'folder'}; expected {expected}")
     return p
 
 

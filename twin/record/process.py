@@ -27,10 +27,10 @@ from twin.errors import RecordingError
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
 from twin.record.ring import FrameRing
+from twin.record.rows import FrameRows
 
 PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames at 240 Hz
 MAX_AHEAD_S = 0.4  # simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
@@ -54,7 +54,8 @@ class RecorderProcess(Sink):
     (it sends its columns every 8192 frames) cannot hold the MCAP writer, nor the twin, up."""
 
     def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
-                 mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int) -> None:
+                 mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int,
+                 engine: dict[str, str] | None = None) -> None:
         self._rows = FrameRows(len(config.profile.joint_names), len(config.objects))
         self._publish_every = _frames(config, PUBLISH_S)
         mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
@@ -81,7 +82,7 @@ class RecorderProcess(Sink):
         try:
             for reader, (writer, path, ahead) in enumerate(writers):
                 self._children.append(_Child(writer, reader, ahead, self._children, (
-                    self._ring, config, run, urdf, meshes, path, rate)))
+                    self._ring, config, run, urdf, meshes, path, rate, engine)))
             for starting in self._children:  # they start side by side; each says when it is ready
                 starting.expect_ok("recording could not start")
         except BaseException:
@@ -229,7 +230,7 @@ class _Child:
 
 
 def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, run: dict, urdf: str,
-           meshes: list[Path], path: str | Path, rate: int) -> None:
+           meshes: list[Path], path: str | Path, rate: int, engine: dict[str, str] | None) -> None:
     """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes, finish
     on request.
 
@@ -244,7 +245,7 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
     sinks = []
     try:
         if writer == "mcap":
-            sinks.append(McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate))
+            sinks.append(McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine))
         else:
             from twin.record.rerun.writer import RerunRecorder
 

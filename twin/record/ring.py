@@ -1,6 +1,6 @@
 """A ring of packed Frame rows in memory shared with the recorder processes.
 
-The twin packs each Frame straight into the ring (model.rows) and, every few frames, publishes how
+The twin packs each Frame straight into the ring (record.rows) and, every few frames, publishes how
 many it has written; each recorder takes in the published rows when it wakes and says how far it has
 read. No system call and no wake-up of the other core per frame or per batch: the recorders wake on
 their own timer, and the twin wakes one only when it has to wait for it (see RecorderProcess).
@@ -15,7 +15,7 @@ import mmap
 import multiprocessing
 import struct
 
-from twin.model.rows import FrameRows
+from twin.record.rows import FrameRows
 
 _COUNTER = struct.Struct("<Q")
 

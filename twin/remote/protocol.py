@@ -8,7 +8,6 @@ turns bad input into a RequestError whose message names the problem, never a cra
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import cbor2
 
 from twin.errors import exception_text
+from twin.model.json_values import finite_number
 
 PROTOCOL_VERSION = 2
 # Limits on what a client may send (README, "Remote control"); over each, the client gets an error reply.
@@ -51,7 +51,7 @@ class Request:
 def decode(raw: bytes) -> Request:
     """Parse one raw request; raises RequestError naming what is wrong with it.
 
-    Error messages describe a client's values (describe()), never format them whole: a value can
+    Error messages show a client's values in brief (brief_value()), never format them whole: a value can
     be an integer of a million digits, which repr() refuses.
     """
     if len(raw) > MAX_REQUEST_BYTES:
@@ -76,7 +76,7 @@ def decode(raw: bytes) -> Request:
         )
     func = msg.get("func")
     if not isinstance(func, str) or not func:
-        raise RequestError(f"malformed request: 'func' must be a non-empty string, got {describe(func)}")
+        raise RequestError(f"malformed request: 'func' must be a non-empty string, got {brief_value(func)}")
     args = msg.get("args", [])
     if args is None:
         args = []
@@ -84,7 +84,7 @@ def decode(raw: bytes) -> Request:
         raise RequestError(f"malformed request to {brief(func)}: 'args' must be an array, got {type(args).__name__}")
     n = msg.get("argsL", len(args))
     if isinstance(n, bool) or not isinstance(n, int) or not len(args) <= n <= MAX_ARGS:
-        raise RequestError(f"malformed request to {brief(func)}: 'argsL' {describe(n)} must be an integer "
+        raise RequestError(f"malformed request to {brief(func)}: 'argsL' {brief_value(n)} must be an integer "
                            f"{len(args)}..{MAX_ARGS}")
     if n > len(args):
         args = args + [None] * (n - len(args))  # trailing nulls the encoder dropped
@@ -93,7 +93,7 @@ def decode(raw: bytes) -> Request:
         ver = msg["ver"]
         if isinstance(ver, bool) or ver != PROTOCOL_VERSION:
             raise VersionMismatch(
-                f"client version does not match: protocol version {describe(ver)}; this server speaks version "
+                f"client version does not match: protocol version {brief_value(ver)}; this server speaks version "
                 f"{PROTOCOL_VERSION}"
             )
         first = {"lang": msg.get("lang"), "timeout": msg.get("timeout")}
@@ -172,7 +172,7 @@ def brief(text: str) -> str:
     return printable(text, BRIEF_CHARS)
 
 
-def describe(value: Any) -> str:
+def brief_value(value: Any) -> str:
     """A short description of a client's value for an error message, in constant time."""
     if isinstance(value, str):
         more = f"... ({len(value)} characters)" if len(value) > BRIEF_CHARS else ""
@@ -217,13 +217,10 @@ def _int(v: Any) -> int:
 
 
 def _float(v: Any) -> float:
-    try:
-        ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-    except OverflowError:  # an int too large for a float
-        ok = False
-    if not ok:
+    number = finite_number(v)
+    if number is None:
         raise TypeError("a finite number")
-    return float(v)
+    return number
 
 
 def _str(v: Any) -> str:
@@ -310,6 +307,6 @@ def check_args(signature: Signature, args: list) -> list:
         try:
             out.append(KINDS[p.kind](args[i]))
         except TypeError as err:
-            raise RequestError(f"argument {i + 1} ({p.name}) is {describe(args[i])}; expected {err}") from None
+            raise RequestError(f"argument {i + 1} ({p.name}) is {brief_value(args[i])}; expected {err}") from None
     return out
 

@@ -50,9 +50,9 @@ from twin.remote.protocol import (
     RequestError,
     Signature,
     VersionMismatch,
+    brief_value,
     check_args,
     decode,
-    describe,
     encode_err,
     encode_ret,
     encode_version_mismatch,
@@ -423,7 +423,7 @@ def _source_fd(frame: zmq.Frame) -> int:
 
 def _check_module(name: str) -> None:
     if name != "sim":
-        raise RequestError(f"no such module {describe(name)}; this twin offers 'sim'")
+        raise RequestError(f"no such module {brief_value(name)}; this twin offers 'sim'")
 
 
 _STEPPING_PARAMS = Signature(Param("enable", "bool"))

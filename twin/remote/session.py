@@ -12,12 +12,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from twin.errors import ConfigError, TwinError
+from twin.errors import ConfigError, OutputError, TwinError
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.sim.twin import Twin
+from twin.sim.world import engine_versions
 
 SIMULATION_STOPPED = 0x00
 SIMULATION_PAUSED = 0x08
@@ -38,11 +39,15 @@ class _Relay(Sink):
         self.targets: list = []
         self.holding = True
 
-    def on_frame(self, frame: Frame) -> None:
+    def _pass(self, method: str, item: Any) -> None:
+        """Hold item while stopped; hand it to the recorders attached (none while stopped)."""
         if self.holding:
-            self.pending.append(("on_frame", frame))
+            self.pending.append((method, item))
         for s in self.targets:
-            s.on_frame(frame)
+            getattr(s, method)(item)
+
+    def on_frame(self, frame: Frame) -> None:
+        self._pass("on_frame", frame)
 
     def on_command(self, command: Command) -> None:
         if self.holding:
@@ -50,21 +55,13 @@ class _Relay(Sink):
                 raise ConfigError(f"the simulation is stopped and already holds {MAX_PENDING_COMMANDS} commands "
                                   "for its next run; start it (sim.startSimulation) or stop sending")
             self.pending_commands += 1
-            self.pending.append(("on_command", command))
-        for s in self.targets:
-            s.on_command(command)
+        self._pass("on_command", command)
 
     def on_event(self, event: Event) -> None:
-        if self.holding:
-            self.pending.append(("on_event", event))
-        for s in self.targets:
-            s.on_event(event)
+        self._pass("on_event", event)
 
     def on_image(self, image: CameraImage) -> None:
-        if self.holding:
-            self.pending.append(("on_image", image))
-        for s in self.targets:
-            s.on_image(image)
+        self._pass("on_image", image)
 
     def attach(self, sinks: list) -> None:
         for method, item in self.pending:
@@ -137,7 +134,8 @@ class Scene:
                "params": {"robot": self.config.profile.name, "mode": self.mode, "run": self.run_index}}
         stack = contextlib.ExitStack()
         try:
-            sinks = stack.enter_context(open_recorders(self.config, run, mcap_path=mcap, rrd_path=rrd, rate=self.rate))
+            sinks = stack.enter_context(open_recorders(self.config, run, mcap_path=mcap, rrd_path=rrd,
+                                                      rate=self.rate, engine=engine_versions()))
         except BaseException:
             stack.close()
             self.run_index -= 1
@@ -184,7 +182,7 @@ class Scene:
             except TwinError:
                 raise
             except Exception as err:
-                raise ConfigError(f"could not finalize the recording {self._files}: {err}") from err
+                raise OutputError(f"could not finalize the recording {self._files}: {err}") from err
 
     def advance(self, n: int) -> None:
         """Step the twin n physics steps if the simulation is running."""

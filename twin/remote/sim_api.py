@@ -14,7 +14,7 @@ from collections.abc import Callable
 from twin.errors import UnknownName
 from twin.model.profiles import PAD_ALIASES, ROBOT_ALIASES, ROLES
 from twin.model.quat import quat_mul, rotate, yaw_quat
-from twin.remote.protocol import MAX_SIGNALS, Param, RequestError, Signature, describe, printable
+from twin.remote.protocol import MAX_SIGNALS, Param, RequestError, Signature, brief_value, printable
 from twin.remote.session import (
     SIMULATION_ADVANCING_RUNNING,
     SIMULATION_PAUSED,
@@ -107,7 +107,7 @@ class SimApi:
             return HANDLE_JOINT0 + twin.profile.joint_index(name)
         except UnknownName:
             known = [ROBOT_ALIASES[0], *twin.profile.joint_names, PAD_ALIASES[0], *names]
-            raise UnknownName(f"object does not exist: {describe(path)}; this scene has {', '.join(known)}") from None
+            raise UnknownName(f"object does not exist: {brief_value(path)}; this scene has {', '.join(known)}") from None
 
     def name_of(self, handle: int) -> str:
         twin = self.scene.twin
@@ -184,7 +184,7 @@ class SimApi:
     # -- joints ------------------------------------------------------------------------------
     def set_joint_target_position(self, handle: int, q: float, motion: list) -> None:
         if motion:
-            raise RequestError(f"sim.setJointTargetPosition: motionParams ({describe(motion)}) are not supported; "
+            raise RequestError(f"sim.setJointTargetPosition: motionParams ({brief_value(motion)}) are not supported; "
                                "pass none (the joint moves at its maximum velocity)")
         self.scene.twin.set_joint_target(self._joint(handle), q)
 
@@ -208,11 +208,11 @@ class SimApi:
     # -- signals -----------------------------------------------------------------------------
     def set_int_signal(self, name: str, value: int) -> None:
         if not INT32[0] <= value <= INT32[1]:
-            raise RequestError(f"signal {describe(name)} value {describe(value)} is outside the int32 range "
+            raise RequestError(f"signal {brief_value(name)} value {brief_value(value)} is outside the int32 range "
                                f"{INT32[0]}..{INT32[1]}")
         signals = self.scene.twin.signals
         if name not in signals and len(signals) >= MAX_SIGNALS:
-            raise RequestError(f"signal {describe(name)}: the scene already holds {MAX_SIGNALS} signals (the limit); "
+            raise RequestError(f"signal {brief_value(name)}: the scene already holds {MAX_SIGNALS} signals (the limit); "
                                "clear one first")
         self.scene.twin.set_signal(name, value)
 

@@ -1,5 +1,6 @@
-"""Rendering the configuration's cameras: a sink that, at each camera's steps, draws the frame with
-PyBullet's CPU renderer (ER_TINY_RENDERER) and hands the picture to the other sinks (on_image).
+"""Rendering the configuration's cameras: at each camera's steps the twin's frame is drawn with
+PyBullet's CPU renderer (ER_TINY_RENDERER) and the picture handed back to the twin, which passes it
+to its sinks (on_image).
 
 The pictures are drawn in a world of their own (a DIRECT client holding the robot and the scene's
 objects, never stepped), posed from the frame's joint positions and object poses: rendering never
@@ -14,15 +15,16 @@ import collections
 import marshal
 import multiprocessing
 import os
+from collections.abc import Callable
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.errors import HelperError
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
-from twin.model.images import CameraImage, CameraSpec, camera_view, encode, optical_pose
-from twin.model.sink import Sink
+from twin.model.images import CameraImage, CameraSpec, camera_view, optical_pose
 from twin.model.types import Frame
+from twin.pictures import encode
 from twin.sim.world import World, pb
 
 
@@ -65,9 +67,9 @@ def render_frame(world: RenderWorld, cameras: tuple[CameraSpec, ...], frame: Fra
     return out
 
 
-class CameraRenderer(Sink):
-    """Renders every camera of config at its steps and passes the pictures to targets (a list the
-    twin owns: sinks added to it later get them too; the renderer skips itself).
+class CameraRenderer:
+    """Renders every camera of config at the frames it is shown (on_frame) and hands each picture to
+    hand_on (the twin's fan-out to its sinks).
 
     background (the default, unless this process is a daemon, which may not fork: a worker of a
     pool): the pictures are drawn in a render process of their own (forked, with its own render world),
@@ -75,9 +77,10 @@ class CameraRenderer(Sink):
     pictures of LAG_PICTURES later camera frames have been asked for (or at flush and close): always at
     the same point of the run, drawn here or there, so the files are byte-identical."""
 
-    def __init__(self, config: TwinConfig, targets: list[Sink], *, background: bool | None = None) -> None:
+    def __init__(self, config: TwinConfig, hand_on: Callable[[CameraImage], None], *,
+                 background: bool | None = None) -> None:
         self.cameras = config.cameras
-        self.targets = targets
+        self._hand_on = hand_on
         self._every = tuple(c.every_steps(config.dt_ns) for c in config.cameras)
         if background is None:
             background = not multiprocessing.current_process().daemon
@@ -108,16 +111,14 @@ class CameraRenderer(Sink):
     def _emit_next(self) -> None:
         images = self._process.receive() if self._process is not None else self._drawn.popleft()
         for image in images:
-            for sink in self.targets:
-                if sink is not self:
-                    sink.on_image(image)
+            self._hand_on(image)
 
     def flush(self) -> None:
         """Hand on the pictures not handed on yet (before the recorders close: a run's last pictures)."""
         while self.pending:
             self._emit_next()
 
-    def close(self, outcome: str = "ok", error: str = "") -> None:
+    def close(self) -> None:
         """Hand on the pictures not handed on yet, then end the render process (or world)."""
         try:
             self.flush()
@@ -146,17 +147,17 @@ class _RenderProcess:
         try:
             self._conn.send_bytes(marshal.dumps((tuple(c.name for c in cameras), tuple(frame))))
         except OSError as err:
-            raise ConfigError(f"the camera render process stopped: {err}") from err
+            raise HelperError(f"the camera render process stopped: {err}") from err
         self.pending += 1
 
     def receive(self) -> list[CameraImage]:
         try:
             reply = self._conn.recv_bytes()
         except (EOFError, OSError) as err:
-            raise ConfigError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
+            raise HelperError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
         self.pending -= 1
         if reply.startswith(_FAILED):
-            raise ConfigError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")
+            raise HelperError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")
         return [CameraImage(*item) for item in marshal.loads(reply)]
 
     def close(self) -> None:

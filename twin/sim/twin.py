@@ -7,13 +7,15 @@ produces a Frame; every discrete happening an Event. All three go to the sinks, 
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
 from twin.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.config import TwinConfig
+from twin.model.images import CameraImage
+from twin.model.json_values import finite_number
+from twin.model.keymaps import KeyPlayer
 from twin.model.sink import Sink
 from twin.model.types import COMMAND_ARGS, NO_BODY, Command, Event, Frame
 from twin.robot import kinematics
@@ -30,7 +32,10 @@ _new_frame = tuple.__new__
 class Twin:
     """A headless (or windowed) PyBullet twin of a SCARA robot, advanced in simulated time."""
 
-    def __init__(self, config: TwinConfig | None = None, *, gui: bool = False, sinks: list[Sink] = ()) -> None:
+    def __init__(self, config: TwinConfig | None = None, *, gui: bool = False, sinks: list[Sink] = (),
+                 camera_background: bool | None = None) -> None:
+        """camera_background: draw the cameras' pictures in a render process (None: unless this process
+        is a daemon, which may not fork), or False in the stepping thread (twin.sim.camera)."""
         self.config = config or TwinConfig()
         self.profile = self.config.profile
         self._world = World(self.config, gui=gui)
@@ -43,10 +48,11 @@ class Twin:
         self._max_velocities = list(self._world.max_velocities())
         self._limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
-        self._key_values: dict[int, float] = {}  # a key map's own joint variables ("add"), from 0 as in the reports
+        self._keys = KeyPlayer(self.config.keymap, self.profile)
+        self._key_hands = _KeyHands(self)
         self._said: Event | None = None  # the Event the last `event` Command emitted
         self._pad_pose = kinematics.pad_pose_function(self.profile)
-        self._camera_renderer = self._add_cameras()
+        self._camera_renderer = self._add_cameras(camera_background)
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
 
@@ -93,6 +99,7 @@ class Twin:
     def step(self, n: int = 1) -> Frame:
         """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
         sinks, pad_model, world_step, read_frame = self.sinks, self.suction_pad, self._world.step, self._read_frame
+        renderer = self._camera_renderer
         for _ in range(n):
             if self._suction_wanted is not pad_model.idle_on:  # an idle pad, or one holding on, has nothing to do
                 for ev in pad_model.update(self._suction_wanted, self.frame, self._heading):
@@ -102,6 +109,8 @@ class Twin:
             f = self.frame = read_frame()
             for s in sinks:
                 s.on_frame(f)
+            if renderer is not None:  # after every sink: a picture reaches them after the frame it shows
+                renderer.on_frame(f)
         return self.frame
 
     def wait(self, seconds: float) -> Frame:
@@ -125,6 +134,13 @@ class Twin:
     def _emit_frame(self, frame: Frame) -> None:
         for s in self.sinks:
             s.on_frame(frame)
+        if self._camera_renderer is not None:
+            self._camera_renderer.on_frame(frame)
+
+    def _send_image(self, image: CameraImage) -> None:
+        """A camera's picture, handed on by the renderer once its frame has reached every sink."""
+        for s in self.sinks:
+            s.on_image(image)
 
     def _body_name(self, index: int) -> str:
         return "" if index == NO_BODY else self.config.objects[index].name
@@ -179,9 +195,9 @@ class Twin:
         """Validate and apply one Command now; replay feeds recorded Commands through here."""
         if command.step != self.step_index:
             raise ConfigError(f"command for step {command.step} applied at step {self.step_index}")
-        handler = _HANDLERS.get(command.kind)
+        handler = self._COMMANDS.get(command.kind)
         if handler is None:
-            raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(_HANDLERS)}")
+            raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(self._COMMANDS)}")
         expected = COMMAND_ARGS[command.kind]
         if not isinstance(command.args, dict) or sorted(command.args) != sorted(expected):
             raise ConfigError(f"{command.kind} command at step {command.step} has arguments {command.args!r:.80}; "
@@ -294,16 +310,79 @@ class Twin:
         self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
         return False
 
-    def _add_cameras(self) -> Sink | None:
-        """The configuration's cameras render as the last sink: each picture reaches every other sink
-        after the frame it shows (twin.sim.camera)."""
+    # -- what each Command kind does: apply() looks the handler up in _COMMANDS -----------------
+    def _clamped(self, joint: int, q: float) -> float:
+        if self.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
+            now = self.frame.joint_q[joint]
+            return now + kinematics.wrap_rad(q - now)
+        lo, hi = self._limits[joint]
+        if lo <= q <= hi:
+            return q
+        clamped = min(hi, max(lo, q))
+        name = self.profile.joint_names[joint]
+        self._emit("joint_limit", message=f"{name} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; stopped at {clamped:.6g}",
+                   data={"joint": name, "requested": q, "limit": clamped})
+        return clamped
+
+    def _do_joint_target(self, args: dict) -> None:
+        j = self._joint(args["joint"])
+        q = self._clamped(j, float(args["q"]))
+        self._targets = _replaced(self._targets, j, q)
+        self._world.set_motor(j, q, self._max_velocities[j])
+
+    def _do_joint_position(self, args: dict) -> None:
+        j = self._joint(args["joint"])
+        q = self._clamped(j, float(args["q"]))
+        self._targets = _replaced(self._targets, j, q)
+        self._world.reset_joint(j, q)
+        self._world.set_motor(j, q, self._max_velocities[j])
+        self.frame = self._read_frame()  # the pad moved: later suction sensing must see it
+
+    def _do_joint_max_velocity(self, args: dict) -> None:
+        j = self._joint(args["joint"])
+        self._max_velocities[j] = float(args["v"])
+        self._world.set_motor(j, self._targets[j], self._max_velocities[j])
+
+    def _do_signal(self, args: dict) -> None:
+        if args["value"] is None:
+            self._signals.pop(args["name"], None)
+        else:
+            self._signals[args["name"]] = int(args["value"])
+        self._suction_wanted = any(self._signals.get(s, 0) for s in self.profile.suction_signals)
+
+    def _do_event(self, args: dict) -> None:
+        """What a task or client said (an `event` Command): emitted as the Event it describes."""
+        kind, body, message, data = args["kind"], args["body"], args["message"], args["data"]
+        if not isinstance(kind, str) or not kind or not isinstance(body, str) or not isinstance(message, str):
+            raise TypeError("kind, body and message must be strings (kind non-empty)")
+        if not isinstance(data, dict):
+            raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
+        # data is plain JSON already: made so by event(), or read from a recording
+        self._said = self._send(Event(self.step_index, self.t_ns, kind, body, message, data))
+
+    def _do_key(self, args: dict) -> None:
+        """A key, played through the configured key map (model.keymaps.KeyPlayer)."""
+        key = args["key"]
+        if not self._keys.press(key, self._key_hands):
+            self._emit("key_unknown", message=f"key {key!r} is not in the key map; ignored", data={"key": key})
+
+    _COMMANDS = MappingProxyType({  # one per COMMAND_ARGS kind
+        "joint_target": _do_joint_target,
+        "joint_position": _do_joint_position,
+        "joint_max_velocity": _do_joint_max_velocity,
+        "signal": _do_signal,
+        "key": _do_key,
+        "event": _do_event,
+    })
+
+    def _add_cameras(self, background: bool | None):
+        """The configuration's cameras' renderer (twin.sim.camera), or None: it sees each frame after
+        every sink, and the twin hands its pictures to the sinks (_send_image)."""
         if not self.config.cameras:
             return None
         from twin.sim.camera import CameraRenderer
 
-        renderer = CameraRenderer(self.config, self.sinks)
-        self.sinks.append(renderer)
-        return renderer
+        return CameraRenderer(self.config, self._send_image, background=background)
 
     def finish_pictures(self) -> None:
         """Hand the cameras' pictures still being drawn to the sinks now (close does it too): for a caller
@@ -338,128 +417,41 @@ def _json_data(kind: str, data: dict) -> dict:
 
 
 def _number(value: Any, what: str) -> float:
-    try:
-        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-    except OverflowError:  # an int too large for a float
-        ok = False
-    if not ok:
+    number = finite_number(value)
+    if number is None:
         raise ConfigError(f"{what} {value!r:.40} is invalid; expected a finite number")
-    return float(value)
-
-
-def _clamped(twin: Twin, joint: int, q: float) -> float:
-    if twin.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
-        now = twin.frame.joint_q[joint]
-        return now + kinematics.wrap_rad(q - now)
-    lo, hi = twin._limits[joint]
-    if lo <= q <= hi:
-        return q
-    clamped = min(hi, max(lo, q))
-    twin._emit("joint_limit", message=f"{twin.profile.joint_names[joint]} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; "
-               f"stopped at {clamped:.6g}", data={"joint": twin.profile.joint_names[joint], "requested": q, "limit": clamped})
-    return clamped
+    return number
 
 
 def _replaced(values: tuple, i: int, value) -> tuple:
     return values[:i] + (value,) + values[i + 1:]
 
 
-def _do_joint_target(twin: Twin, args: dict) -> None:
-    j = twin._joint(args["joint"])
-    q = _clamped(twin, j, float(args["q"]))
-    twin._targets = _replaced(twin._targets, j, q)
-    twin._world.set_motor(j, q, twin._max_velocities[j])
+class _KeyHands:
+    """What a key map's actions may do to the twin (model.keymaps.KeyPlayer plays them on it): the
+    same handlers its Commands run, inside the `key` Command that holds them."""
+
+    def __init__(self, twin: Twin) -> None:
+        self._twin = twin
+
+    def joint(self, name: str | int) -> int:
+        return self._twin._joint(name)
+
+    def target(self, joint: int) -> float:
+        return self._twin._targets[joint]
+
+    def limits(self, joint: int) -> tuple[float, float]:
+        return self._twin._limits[joint]
+
+    def drive(self, joint: int, q: float) -> None:
+        self._twin._do_joint_target({"joint": joint, "q": q})
+
+    def place(self, joint: int, q: float) -> None:
+        self._twin._do_joint_position({"joint": joint, "q": q})
+
+    def signal(self, name: str, value) -> None:
+        self._twin._do_signal({"name": name, "value": value})
 
 
-def _do_joint_position(twin: Twin, args: dict) -> None:
-    j = twin._joint(args["joint"])
-    q = _clamped(twin, j, float(args["q"]))
-    twin._targets = _replaced(twin._targets, j, q)
-    twin._world.reset_joint(j, q)
-    twin._world.set_motor(j, q, twin._max_velocities[j])
-    twin.frame = twin._read_frame()  # the pad moved: later suction sensing must see it
-
-
-def _do_joint_max_velocity(twin: Twin, args: dict) -> None:
-    j = twin._joint(args["joint"])
-    twin._max_velocities[j] = float(args["v"])
-    twin._world.set_motor(j, twin._targets[j], twin._max_velocities[j])
-
-
-def _do_signal(twin: Twin, args: dict) -> None:
-    if args["value"] is None:
-        twin._signals.pop(args["name"], None)
-    else:
-        twin._signals[args["name"]] = int(args["value"])
-    twin._suction_wanted = any(twin._signals.get(s, 0) for s in twin.profile.suction_signals)
-
-
-def _do_event(twin: Twin, args: dict) -> None:
-    """What a task or client said (an `event` Command): emitted as the Event it describes."""
-    kind, body, message, data = args["kind"], args["body"], args["message"], args["data"]
-    if not isinstance(kind, str) or not kind or not isinstance(body, str) or not isinstance(message, str):
-        raise TypeError("kind, body and message must be strings (kind non-empty)")
-    if not isinstance(data, dict):
-        raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
-    # data is plain JSON already: made so by event(), or read from a recording
-    twin._said = twin._send(Event(twin.step_index, twin.t_ns, kind, body, message, data))
-
-
-def _do_key(twin: Twin, args: dict) -> None:
-    """Interpret a key through the key map: a list of actions per key.
-
-    Actions: ["jog", joint, delta] (target += delta), ["jog_keep_heading", joint, delta] (and the
-    wrist turns back by delta so the pad keeps its heading), ["target", joint, value|"min"|"max"|"down"|"up"],
-    ["position", joint, value] (set at once, like sim.setJointPosition), ["add", joint, delta, "target"|"position"]
-    (the map's own variable for the joint, from 0, moves by delta; the joint is sent there),
-    ["diff", joint, a, b] (the joint's variable becomes a's minus b's; its target goes there),
-    ["signal", name, value], ["suction", 0|1].
-    """
-    key = args["key"]
-    actions = twin.config.keymap.get(key)
-    if actions is None:
-        twin._emit("key_unknown", message=f"key {key!r} is not in the key map; ignored", data={"key": key})
-        return
-    for action in actions:
-        op = action[0]
-        if op in ("jog", "jog_keep_heading"):
-            j = twin._joint(action[1])
-            before = twin._targets[j]
-            _do_joint_target(twin, {"joint": j, "q": before + float(action[2])})
-            if op == "jog_keep_heading" and twin._targets[j] != before:  # turn back by what the joint moved
-                _do_joint_target(twin, {"joint": WRIST, "q": twin._targets[WRIST] - (twin._targets[j] - before)})
-        elif op == "target":
-            j = twin._joint(action[1])
-            lo, hi = twin._limits[j]
-            value = {"min": lo, "max": hi, "down": twin.profile.z_down(), "up": twin.profile.z_up()}.get(action[2], action[2])
-            _do_joint_target(twin, {"joint": j, "q": float(value)})
-        elif op == "position":
-            _do_joint_position(twin, {"joint": twin._joint(action[1]), "q": float(action[2])})
-        elif op == "add":
-            j = twin._joint(action[1])
-            twin._key_values[j] = twin._key_values.get(j, 0.0) + float(action[2])
-            send = _do_joint_position if action[3] == "position" else _do_joint_target
-            send(twin, {"joint": j, "q": twin._key_values[j]})
-        elif op == "diff":
-            j, a, b = (twin._joint(name) for name in action[1:4])
-            twin._key_values[j] = twin._key_values.get(a, 0.0) - twin._key_values.get(b, 0.0)
-            _do_joint_target(twin, {"joint": j, "q": twin._key_values[j]})
-        elif op == "signal":
-            _do_signal(twin, {"name": action[1], "value": action[2]})
-        elif op == "suction":
-            _do_signal(twin, {"name": twin.profile.suction_signals[0], "value": int(action[1])})
-        else:
-            raise ConfigError(f"key {key!r}: unknown action {op!r}")
-
-
-_HANDLERS = {  # one per COMMAND_ARGS kind
-    "joint_target": _do_joint_target,
-    "joint_position": _do_joint_position,
-    "joint_max_velocity": _do_joint_max_velocity,
-    "signal": _do_signal,
-    "key": _do_key,
-    "event": _do_event,
-}
-
-if set(_HANDLERS) != set(COMMAND_ARGS):
+if set(Twin._COMMANDS) != set(COMMAND_ARGS):
     raise ImportError("twin.sim.twin: a Command kind without a handler, or a handler without a kind")

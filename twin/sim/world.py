@@ -13,7 +13,6 @@ import sys
 import tempfile
 
 from twin.errors import ConfigError
-from twin.model import versions
 from twin.model.config import TwinConfig
 from twin.model.types import NO_BODY
 from twin.robot.urdf import urdf_text
@@ -363,4 +362,6 @@ def pybullet_version() -> str:
     return str(pb.getAPIVersion())
 
 
-versions.ENGINE["pybullet_api"] = pybullet_version()  # for the recordings' twin.versions metadata
+def engine_versions() -> dict[str, str]:
+    """The engine's own version, for a recorder to name in its file (record/ never imports sim/)."""
+    return {"pybullet_api": pybullet_version()}

@@ -19,6 +19,7 @@ from pathlib import Path
 from twin.errors import RecordingError, TwinError, exception_text
 from twin.model.sink import Sink
 from twin.sim.twin import Twin
+from twin.sim.world import engine_versions
 from twin.sweep.keys import apply_values, task_values
 from twin.sweep.sampling import RandomSampler
 from twin.sweep.spec import Prepared, SweepSpec, prepare
@@ -179,7 +180,8 @@ def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) ->
             run = task_run(spec.task, params, mcap_path)
             if spec.timeout_s is not None:
                 run["timeout_s"] = spec.timeout_s
-            with open_recorders(config, run, mcap_path=mcap_path, background=False) as sinks:
+            with open_recorders(config, run, mcap_path=mcap_path, background=False,
+                                engine=engine_versions()) as sinks:
                 _task(config, prep.fn, params, tally, [*sinks, *limit])
     except RecordingError:  # a file that cannot be written ends the sweep (one line), not the scenario
         raise

@@ -24,6 +24,7 @@ from twin.model.sink import Sink
 from twin.model.types import Event
 from twin.robot.profile_files import get_profile
 from twin.sim.twin import Twin
+from twin.sim.world import engine_versions
 from twin.tasks.pick_place import POINT_B_M as PLACE_M  # where the seeds' loop places the box
 
 POLL_S = 0.01  # how long one poll of the keyboard may block
@@ -200,7 +201,7 @@ def run_teleop(options: TeleopOptions) -> Session:
 
     log = EventLog()
     with open_recorders(config, run, mcap_path=options.record_path, rrd_path=options.rrd_path,
-                        rate=options.record_rate) as sinks:
+                        rate=options.record_rate, engine=engine_versions()) as sinks:
         twin = Twin(config, gui=options.gui, sinks=[log, *sinks, *options.extra_sinks])
         session = Session(twin, log, mode=mode, record_path=options.record_path or "")
         try:

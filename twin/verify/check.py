@@ -21,11 +21,12 @@ from typing import TextIO
 from twin.compare.report import allowance_text, first_line, noise_summary, render_text
 from twin.compare.tolerances import Tolerances
 from twin.errors import ConfigError, TwinError
-from twin.model.collectors import ColumnCollector
 from twin.model.config import TwinConfig
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin
+from twin.sim.world import engine_versions
 from twin.tasks import TimeLimit, resolve, run_task, source_sha256
+from twin.verify.collectors import ColumnCollector
 from twin.verify.noise import judge
 from twin.verify.replay import collected, replay, replayed_event_kinds
 
@@ -119,7 +120,8 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
             run = dict(golden.run or {})
             if sha_now not in (None, "missing"):
                 run["task_sha256"] = sha_now  # the rewrite holds the task file's source as it is now
-            with open_recorders(golden.config, run, mcap_path=str(tmp), rate=golden.rate_steps) as sinks:
+            with open_recorders(golden.config, run, mcap_path=str(tmp), rate=golden.rate_steps,
+                                engine=engine_versions()) as sinks:
                 new, kinds = rerun(golden, sinks=sinks)
         else:
             new, kinds = rerun(golden)

@@ -17,11 +17,12 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from twin.errors import RecordingError
-from twin.model.collectors import ColumnCollector, FrameCollector
 from twin.model.config import TwinConfig
 from twin.model.images import recorded_images, tracks
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin
+from twin.sim.world import engine_versions
+from twin.verify.collectors import ColumnCollector, FrameCollector
 
 # Events the twin itself emits while applying commands and stepping (not the task's annotations).
 REPLAYED_EVENT_KINDS = frozenset({"attach", "release", "break", "suction_empty", "joint_limit", "key_unknown"})
@@ -134,5 +135,5 @@ def save(rec: Recording, path: str | os.PathLike, *, rate: int = 1) -> None:
     """Write an in-memory recording to an MCAP file (the same writer as `twin run --record`)."""
     from twin.record import open_recorders
 
-    with open_recorders(rec.config, rec.run, mcap_path=path, rate=rate) as sinks:
+    with open_recorders(rec.config, rec.run, mcap_path=path, rate=rate, engine=engine_versions()) as sinks:
         feed(rec, sinks)

@@ -93,3 +93,26 @@ def test_camera_options_refuse_bad_values_in_one_line(capsys, tmp_path):
         err = capsys.readouterr().err
         assert code == 2 and err.startswith("twin: error: ") and expected in err and err.count("\n") == 1, err
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_pictures_pose_is_read_from_the_files_tf_also_when_decimated(tmp_path):
+    """The pad camera's pose on /tf is where it was when the picture was taken; a decimated file (rate 3,
+    a picture every 16 steps) holds no frame at most picture steps, and load gives that pose exactly."""
+    from twin.model.images import camera, recorded_images
+    from twin.record import open_recorders
+    from twin.sim.world import engine_versions
+    from twin.verify.check import record_task
+    from twin.verify.collectors import FrameCollector
+
+    config = TwinConfig(cameras=(camera("wrist", (64, 48)),))
+    collector = FrameCollector()
+    run = {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
+    with open_recorders(config, run, mcap_path=tmp_path / "r3.mcap", rate=3, engine=engine_versions()) as sinks:
+        record_task(config, "pick_place", {"cycles": 1}, sinks=[collector, *sinks])
+    rec = twin.load(tmp_path / "r3.mcap")
+    track = rec.cameras["wrist"]
+    assert len(track) == len(collector.images) == PICTURES
+    assert np.array_equal(track.pose, np.array([im.pose for im in collector.images]))
+    assert any(int(s) % 3 for s in track.step)  # pictures between the file's frames
+    shown = recorded_images(rec.config.cameras, rec.cameras, rec.frames.step, rec.frames.pad_pose)
+    assert [im.pose for im in shown] == [im.pose for im in collector.images]

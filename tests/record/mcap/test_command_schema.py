@@ -7,7 +7,7 @@ import json
 
 from mcap.reader import make_reader
 
-from twin.sim.twin import _HANDLERS
+from twin.sim.twin import Twin
 
 
 def _schema_and_commands(path) -> tuple[dict, list[dict]]:
@@ -23,7 +23,7 @@ def _schema_and_commands(path) -> tuple[dict, list[dict]]:
 
 def test_the_command_schema_names_every_kind_the_twin_applies(pick_place_mcap):
     schema, _ = _schema_and_commands(pick_place_mcap[0])
-    assert set(schema["properties"]["kind"]["enum"]) == set(_HANDLERS)
+    assert set(schema["properties"]["kind"]["enum"]) == set(Twin._COMMANDS)
 
 
 def test_every_recorded_command_satisfies_the_files_own_schema(pick_place_mcap):

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 import twin
 from twin.cli import main
 from twin.record.mcap import schemas as S
-from twin.record.mcap.info import describe
+from twin.record.mcap.info import read_info
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,7 @@ def test_info_of_a_finalized_recording(whole, capsys):
     assert f"steps 0..{rec.frames.step[-1]}, {len(rec.frames):,} frames recorded" in out
     with open(whole, "rb") as f:
         stats = make_reader(f).get_summary().statistics
-    info = describe(whole)
+    info = read_info(whole)
     counts = {topic: n for topic, _, _, n in info.channels}
     assert sum(counts.values()) == stats.message_count
     assert counts[S.COMMANDS.topic] == len(rec.commands) == info.commands

@@ -20,7 +20,7 @@ import twin
 from twin.cli import main
 from twin.record.machine import FLOAT_FLAGS, differences, machine, machine_text
 from twin.record.mcap import schemas as S
-from twin.record.mcap.info import describe
+from twin.record.mcap.info import read_info
 
 KEYS = ["blas_core", "cpu", "cpu_flags", "libc", "libm_hwcaps", "numpy_simd"]
 SETTINGS = ("OPENBLAS_CORETYPE", "GLIBC_TUNABLES", "NPY_DISABLE_CPU_FEATURES")
@@ -152,7 +152,7 @@ def test_a_file_without_the_record_still_loads_everywhere(pick_place_mcap, tmp_p
     rec, new = twin.load(old), twin.load(path)
     assert S.META_MACHINE not in rec.meta and rec.machine == {}
     assert rec.frames.equals(new.frames) and rec.events == new.events and rec.urdf == new.urdf
-    assert describe(old).machine == {}
+    assert read_info(old).machine == {}
     assert main(["info", str(old)]) == 0
     assert "machine: not recorded" in capsys.readouterr().out.splitlines()
     assert main(["diff", str(old), str(path)]) == 0, capsys.readouterr().out

@@ -19,7 +19,6 @@ from support.runs import collect_pick_place
 import twin
 from twin.cli import main
 from twin.errors import RecordingError
-from twin.model.collectors import FrameCollector
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
 from twin.record.mcap import schemas as S
@@ -27,6 +26,7 @@ from twin.record.mcap import wire
 from twin.record.mcap.reader import decode_frames, scan
 from twin.robot import kinematics
 from twin.robot.urdf import urdf_text
+from twin.verify.collectors import FrameCollector
 
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
 
@@ -300,8 +300,8 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
     (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame writes.
     Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last frame is
     kept only from the last run (the buffer is garbage by then)."""
-    from twin.model.rows import FrameRows
     from twin.record.mcap.writer import McapRecorder
+    from twin.record.rows import FrameRows
 
     _, collector = recorded
     config = TwinConfig()
@@ -336,8 +336,8 @@ def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
     (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame count and
     in whatever order the counts come (the gather's index is kept for the last count)."""
     from twin.model import fields as F
-    from twin.model.rows import FrameRows
     from twin.record.mcap.blocks import BlockEncoder
+    from twin.record.rows import FrameRows
 
     _, collector = recorded
     rows = FrameRows(4, 1)

@@ -13,12 +13,12 @@ import pytest
 
 import twin
 from twin.cli import main
-from twin.model.collectors import FrameCollector
 from twin.model.config import TwinConfig
 from twin.record.mcap import schemas as S
 from twin.record.mcap.recover import recover
 from twin.sim.twin import Twin
 from twin.tasks import run_task
+from twin.verify.collectors import FrameCollector
 
 LOOP_TASK = '''"""Moves between three points forever, reporting simulated time (a crash-test task)."""
 import time

@@ -22,7 +22,7 @@ import twin
 from twin.cli import main
 from twin.errors import RecordingError
 from twin.record.mcap import schemas as S
-from twin.record.mcap.info import describe
+from twin.record.mcap.info import read_info
 
 READERS = ("info", "recover", "diff", "replay", "check", "view")
 
@@ -129,7 +129,7 @@ def test_info_counts_the_readable_events_and_lists_them(good, tmp_path, capsys):
         return data
 
     path = rewrite(good, tmp_path / "one_bad_event.mcap", edit=second_event_bad)
-    info = describe(path)
+    info = read_info(path)
     assert sum(info.events.values()) == n - 1 and len(info.event_list) == n - 1
     assert info.problems == [(f"1 of its {n} {S.EVENTS.topic} messages is unreadable (the first: malformed event "
                              '{"step": "x"}: step \'x\' is not a whole number 0..10000000000)')]
@@ -151,7 +151,7 @@ def test_a_foreign_mcap_is_described_then_exit_2(tmp_path, capsys):
 
 
 def test_a_good_file_still_has_no_problem(good, capsys):
-    assert describe(good).problems == []
+    assert read_info(good).problems == []
     assert _cli(capsys, "info", good)[0] == 0
 
 

@@ -11,7 +11,6 @@ import rerun as rr
 from rerun.chunk import RrdReader
 
 from twin.errors import RecordingError
-from twin.model.collectors import FrameCollector
 from twin.model.config import SceneObject, TwinConfig
 from twin.model.profiles import PROFILES
 from twin.model.recording import Recording
@@ -22,6 +21,7 @@ from twin.record.rerun.writer import RerunRecorder, write_rrd
 from twin.robot.urdf import urdf_joints, urdf_text
 from twin.sim.twin import Twin
 from twin.tasks import pick_place, run_task
+from twin.verify.collectors import FrameCollector
 
 BATCH_STEPS = 400  # three full batches plus a partial one in a ~1400-step run
 

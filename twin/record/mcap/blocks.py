@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 
 from twin.model import fields as F
-from twin.model.rows import FrameRows
 from twin.record.mcap.wire import LEN, tag, varint
+from twin.record.rows import FrameRows
 
 
 class BlockEncoder:
-    """Encodes runs of packed rows (model.rows) as the block messages, in model.fields' block order."""
+    """Encodes runs of packed rows (record.rows) as the block messages, in model.fields' block order."""
 
     def __init__(self, rows: FrameRows, names: dict[str, bytes]) -> None:
         """`names`: each block's encoded names field (joint names for JointBlock, object names else)."""

@@ -20,6 +20,7 @@ from twin.model.config import TwinConfig
 from twin.model.types import Event
 from twin.record.machine import machine_text
 from twin.record.mcap import schemas as S
+from twin.record.mcap.metadata import parse_config, parse_run
 from twin.record.mcap.reader import (
     Message,
     Scan,
@@ -29,7 +30,6 @@ from twin.record.mcap.reader import (
     parse_robot_description,
     scan,
 )
-from twin.record.metadata import parse_config, parse_run
 
 
 @dataclass
@@ -116,7 +116,7 @@ class _Reading:
         return out
 
 
-def describe(path: str | Path, *, keep_events: bool = True) -> Info:
+def read_info(path: str | Path, *, keep_events: bool = True) -> Info:
     """Read as much of the file as is readable and summarize it (RecordingError if it is not an MCAP
     file at all); what is unreadable or foreign is listed in `problems`. keep_events: keep every
     readable event in `event_list` (else only their counts by kind)."""

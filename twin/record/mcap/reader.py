@@ -25,14 +25,14 @@ from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
-from twin.model.images import CameraTrack
+from twin.model.images import CAMERA_FRAME_PREFIX, CameraTrack
 from twin.model.json_values import shown
 from twin.model.recording import Recording
 from twin.model.types import Command, Event
 from twin.record.mcap import scan as mcap_scan
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json, wire
-from twin.record.metadata import located_config, parse_config, parse_run
+from twin.record.mcap.metadata import located_config, parse_config, parse_run
 
 MAGIC = mcap_scan.MAGIC
 Message = mcap_scan.Message
@@ -194,6 +194,9 @@ def recording_from_scan(s: Scan) -> Recording:
     return builder.recording(s)
 
 
+_CAMERA_FRAME = CAMERA_FRAME_PREFIX.encode()
+
+
 def _is_image_topic(topic: str) -> bool:
     return topic.startswith("/camera/") and topic.endswith("/image")
 
@@ -212,9 +215,10 @@ class RecordingBuilder:
         self._config: TwinConfig | None = None
         self._pictures: dict[str, list[tuple[int, str, bytes]]] = {}  # image topic -> (t_ns, format, data)
         self._early: list[tuple[str, Message]] = []  # pictures read before the configuration (twin never writes)
+        self._camera_poses: dict[tuple[str, int], tuple[float, ...]] = {}  # (frame_id, t_ns) -> pose
 
     def wants(self, topic: str) -> bool:
-        return topic in self.FIXED or _is_image_topic(topic)
+        return topic in self.FIXED or _is_image_topic(topic) or topic == S.TF.topic
 
     def take(self, s: Scan, topic: str, m: Message) -> None:
         where = s.path
@@ -228,6 +232,11 @@ class RecordingBuilder:
         elif topic == S.ROBOT_DESCRIPTION.topic:
             if self.urdf is None:
                 self.urdf = parse_robot_description(m.data, where)
+        elif topic == S.TF.topic:
+            if self._without_cameras(s):
+                s.stop_keeping(topic)  # no camera: no picture's pose to read (the scene's /tf is the frames')
+            elif _CAMERA_FRAME in m.data:  # a picture's pose; the scene's own transforms are skipped
+                self._camera_pose(m.data, where)
         elif self._config is None and S.META_CONFIG not in s.metadata:
             self._early.append((topic, m))
         else:
@@ -237,6 +246,32 @@ class RecordingBuilder:
         if self._config is None:
             self._config = parse_config(s.metadata, repr(s.path))
         return self._config
+
+    def _without_cameras(self, s: Scan) -> bool:
+        """True once the configuration is read and has no camera (a bad one is reported by recording())."""
+        if S.META_CONFIG not in s.metadata:
+            return False
+        try:
+            return not self._configured(s).cameras
+        except RecordingError:
+            return False
+
+    def _camera_pose(self, data: bytes, where: str) -> None:
+        """The camera poses a /tf message holds, by camera frame and time (what the picture was taken from)."""
+        from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+        from google.protobuf.message import DecodeError
+
+        message = FrameTransforms()
+        try:
+            message.ParseFromString(data)
+        except DecodeError as err:
+            raise RecordingError(f"recording {where!r}: a {S.TF.topic} message is not a FrameTransforms: {err}") from err
+        for t in message.transforms:
+            if t.child_frame_id.startswith(CAMERA_FRAME_PREFIX):
+                t_ns = t.timestamp.seconds * 1_000_000_000 + t.timestamp.nanos
+                self._camera_poses[(t.child_frame_id, t_ns)] = (
+                    t.translation.x, t.translation.y, t.translation.z,
+                    t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w)
 
     def _picture(self, config: TwinConfig, topic: str, data: bytes, where: str) -> None:
         """A picture on a configured camera's channel, checked now (others are left out, as before)."""
@@ -268,8 +303,11 @@ class RecordingBuilder:
         for spec in config.cameras:
             pictures = self._pictures.get(S.image_channel(spec.name).topic, [])
             times = np.array([t for t, _, _ in pictures], dtype=np.int64)
+            poses = [self._camera_poses.get((spec.frame_id, t)) for t, _, _ in pictures]
+            pose = np.array(poses if all(p is not None for p in poses) else [], dtype=np.float64).reshape(-1, 7)
             tracks[spec.name] = CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
-                                            times // config.dt_ns, times, [d for _, _, d in pictures], source=s.path)
+                                            times // config.dt_ns, times, [d for _, _, d in pictures], source=s.path,
+                                            pose=pose)
         meta = {name: dict(record) for name, record in sorted(s.metadata.items())
                 if name not in (S.META_CONFIG, S.META_RUN)}
         return Recording(config=config, frames=frames, commands=self.commands, events=self.events,

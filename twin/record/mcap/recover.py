@@ -22,8 +22,16 @@ from mcap.writer import CompressionType, Writer
 
 from twin.errors import ConfigError, RecordingError
 from twin.record.mcap import schemas as S
-from twin.record.mcap.reader import Message, Scan, block_steps, load, parse_command, parse_event, scan
-from twin.record.metadata import parse_config
+from twin.record.mcap.metadata import parse_config
+from twin.record.mcap.reader import (
+    Message,
+    Scan,
+    block_steps,
+    load,
+    parse_command,
+    parse_event,
+    scan,
+)
 from twin.record.outputs import check_output, final_path, partial_path, publish
 
 BLOCK_TOPICS = tuple(S.BLOCK_TOPICS.values())

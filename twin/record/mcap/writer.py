@@ -25,15 +25,15 @@ from twin.model import fields as F
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
 from twin.model.json_values import finite_or_null
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire
 from twin.record.mcap.blocks import BlockEncoder
+from twin.record.mcap.metadata import check_run, portable_config, run_metadata
 from twin.record.mcap.scene_tf import WORLD, SceneTransforms
-from twin.record.metadata import check_run, portable_config, run_metadata
 from twin.record.outputs import partial_path, publish
+from twin.record.rows import FrameRows
 
 BLOCK_S = 0.25
 FLUSH_S = 0.5
@@ -61,7 +61,7 @@ class McapRecorder(Sink):
     """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized marker)."""
 
     def __init__(self, path: str | Path, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path] = (),
-                 rate: int = 1, compression: str = "zstd") -> None:
+                 rate: int = 1, compression: str = "zstd", engine: dict[str, str] | None = None) -> None:
         if isinstance(rate, bool) or not isinstance(rate, int) or rate < 1:
             raise RecordingError(f"recording rate {rate!r} is invalid; expected a whole number of steps >= 1")
         kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
@@ -73,6 +73,7 @@ class McapRecorder(Sink):
         self.partial = partial_path(self.path)  # written here, renamed to path once finalized
         self.config = config
         self.rate = rate
+        self.engine = dict(engine or {})  # the simulation's own versions, for twin.versions
         self.n_objects = len(config.objects)
         dt_ns = config.dt_ns
         self.block_frames = max(1, round(BLOCK_S * 1e9 / (dt_ns * rate)))
@@ -123,7 +124,7 @@ class McapRecorder(Sink):
         extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
                  "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
         # a user URDF by its path relative to the recording: no absolute path in the file
-        for name, record in run_metadata(portable_config(config, self.path), run, extra).items():
+        for name, record in run_metadata(portable_config(config, self.path), run, extra, self.engine).items():
             self._writer.add_metadata(name, record)
         self._writer.add_attachment(0, 0, "robot.urdf", "application/xml", urdf.encode())
         for name, media_type, data in mesh_files:

@@ -19,8 +19,17 @@ import numpy as np
 
 from twin.errors import RecordingError
 from twin.model.recording import Recording
+from twin.record.outputs import check_target
 from twin.record.rerun import scene
-from twin.record.rerun.process import LOOPBACK, ViewerError, last_log_line, loopback_ports, spawn, stop, wait_listening
+from twin.record.rerun.process import (
+    LOOPBACK,
+    ViewerError,
+    last_log_line,
+    loopback_ports,
+    spawn,
+    stop,
+    wait_listening,
+)
 from twin.record.rerun.rrd_file import file_kind, read_scalars, rerun_executable, verify_rrd
 from twin.record.rerun.writer import write_rrd
 
@@ -147,9 +156,8 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str
     """
     from rerun.experimental import ViewerClient
 
+    check_target(out_png, "screenshot", "a .png file path", error=ViewerError)
     out = Path(out_png).resolve()
-    if not out.parent.is_dir():
-        raise ViewerError(f"cannot write {str(out_png)!r}: directory {str(out.parent)!r} does not exist")
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
     (port,) = loopback_ports(("--grpc-port", grpc_port))
     env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))  # no notification toasts in the picture

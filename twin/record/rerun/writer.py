@@ -21,12 +21,12 @@ from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage, recorded_images
 from twin.model.recording import Recording
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
-from twin.record.outputs import partial_path, publish
+from twin.record.outputs import check_target, partial_path, publish
 from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
+from twin.record.rows import FrameRows
 from twin.robot.urdf import urdf_text as profile_urdf_text
 
 # Each send costs ~0.1 ms of the SDK's Python whatever its length, 16 sends a batch: the recorder
@@ -36,11 +36,7 @@ DEFAULT_BATCH_STEPS = 8192
 
 def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStream:
     """A recording stream of its own that saves to `path` (with the twin's default blueprint)."""
-    target = Path(path)
-    if not target.parent.is_dir():
-        raise RecordingError(f"cannot write {str(target)!r}: directory {str(target.parent)!r} does not exist")
-    if target.is_dir():
-        raise RecordingError(f"cannot write {str(target)!r}: it is a directory; expected a .rrd file path")
+    target = check_target(path, "recording", "a .rrd file path", error=RecordingError)
     stream = rr.RecordingStream(scene.APPLICATION_ID)
     stream.save(target, default_blueprint=scene.blueprint(config))
     return stream
@@ -74,11 +70,7 @@ class RerunRecorder(Sink):
     def __init__(self, path: str | os.PathLike, config: TwinConfig, urdf_text: str, *,
                  batch_steps: int = DEFAULT_BATCH_STEPS) -> None:
         tree = self._prepare(config, urdf_text, batch_steps)  # bad input fails before a file is created
-        target = Path(path)
-        if not target.parent.is_dir():
-            raise RecordingError(f"cannot write {str(target)!r}: directory {str(target.parent)!r} does not exist")
-        if target.is_dir():
-            raise RecordingError(f"cannot write {str(target)!r}: it is a directory; expected a .rrd file path")
+        target = check_target(path, "recording", "a .rrd file path", error=RecordingError)
         self.path = str(path)
         self._start(file_stream(partial_path(target), config), tree)
 

@@ -1,4 +1,4 @@
-"""model.rows: Frames packed as rows come back bit for bit, as Frames and as columns."""
+"""record.rows: Frames packed as rows come back bit for bit, as Frames and as columns."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from twin.model.collectors import FrameCollector
 from twin.model.columns import FrameColumns
-from twin.model.rows import FrameRows
 from twin.model.sink import Sink
 from twin.model.types import Frame
+from twin.record.rows import FrameRows
+from twin.verify.collectors import FrameCollector
 
 
 def _frame(step: int, n_objects: int) -> Frame:

@@ -16,7 +16,6 @@ from pathlib import Path
 from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
 from twin.model.json_values import MAX_DEPTH, nesting_depth, shown
-from twin.model.versions import ENGINE
 from twin.record.machine import machine
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json
@@ -35,9 +34,11 @@ def _version(dist: str) -> str:
         return "unknown"
 
 
-def versions() -> dict[str, str]:
+def versions(engine: dict[str, str] | None = None) -> dict[str, str]:
+    """The packages' versions; engine: what the simulation says of itself (sim.world.engine_versions)."""
+    api = (engine or {}).get("pybullet_api", "unknown")
     return {
-        "twin": _version("twin"), "pybullet": _version("pybullet"), "pybullet_api": ENGINE.get("pybullet_api", "unknown"),
+        "twin": _version("twin"), "pybullet": _version("pybullet"), "pybullet_api": api,
         "numpy": _version("numpy"), "mcap": _version("mcap"), "protobuf": _version("protobuf"),
         "python": platform.python_version(), "platform": f"{sys.platform} {platform.machine()}",
     }
@@ -87,8 +88,10 @@ def check_run(run: dict) -> dict:
     return out
 
 
-def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str]) -> dict[str, dict[str, str]]:
-    """Metadata records by name, in the order they are written."""
+def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str],
+                 engine_versions: dict[str, str] | None = None) -> dict[str, dict[str, str]]:
+    """Metadata records by name, in the order they are written; engine_versions as versions() takes
+    it."""
     run = check_run(run)
     engine = {k: _dumps(v) for k, v in sorted(config.to_dict()["engine"].items())}
     engine["dt_ns"] = str(config.dt_ns)
@@ -105,7 +108,7 @@ def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str]) -> di
                      **({"timeout_s": repr(run["timeout_s"])} if "timeout_s" in run else {})},
         "twin.engine": engine,
         S.META_RECORDING: dict(sorted(layout.items())),
-        S.META_VERSIONS: dict(sorted(versions().items())),
+        S.META_VERSIONS: dict(sorted(versions(engine_versions).items())),
         S.META_MACHINE: machine(),
     }
 

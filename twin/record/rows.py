@@ -47,7 +47,7 @@ class FrameRows:
         self.size = self._struct.size  # bytes per row
         self.dtype = np.dtype(dtype_fields)  # packed: numpy's offsets are the struct's
         if self.dtype.itemsize != self.size:
-            raise ImportError("twin.model.rows: the numpy row and the struct row disagree")
+            raise ImportError("twin.record.rows: the numpy row and the struct row disagree")
         # The pack and unpack expressions are written out from the field description once: as fast as
         # hand-written ones, which a loop over the fields is not (about 2.5 against 1.1 us a frame).
         scope = {"pack_into": self._struct.pack_into, "unpack": self._struct.unpack_from,

@@ -24,6 +24,7 @@ from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 
 from twin.errors import TwinError
+from twin.helpers import TWINS_SIGNALS
 from twin.sweep.worker import (
     Job,
     confirm_scenario,
@@ -48,14 +49,22 @@ class Child:
         parent_pid = os.getpid()
         sys.stdout.flush()
         sys.stderr.flush()
-        pid = os.fork()
+        # a Ctrl-C that lands during fork would be raised inside an at-fork hook, where Python
+        # drops it: held back until the fork is done, it stops the parent as any other
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, TWINS_SIGNALS)
+        pid = -1
+        try:
+            pid = os.fork()
+        finally:
+            if pid != 0:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         if pid == 0:  # the child: serve until the parent closes its end, never return into the parent's code
             code = 0
             try:
                 parent_end.close()
                 for fd in _PARENT_ENDS:
                     os.close(fd)
-                _serve(Connection(child_end.detach()), job, parent_pid)
+                _serve(Connection(child_end.detach()), job, parent_pid, mask)
             except BaseException:  # noqa: BLE001 - a child must end here, whatever happened
                 code = 70
             finally:
@@ -105,8 +114,9 @@ class Child:
         return f"worker died: signal {sig} ({name})"
 
 
-def _serve(conn: Connection, job: Job, parent_pid: int) -> None:
-    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop", error)."""
+def _serve(conn: Connection, job: Job, parent_pid: int, mask: set) -> None:
+    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop", error).
+    mask: the signal mask to restore once the child's own handlers are set."""
     libc = ctypes.CDLL(None, use_errno=True)
     prctl = getattr(libc, "prctl", None)
     if prctl is not None:
@@ -116,6 +126,7 @@ def _serve(conn: Connection, job: Job, parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle (it stops us)
     for signum in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     keep_freed_memory()
     while True:
         try:

@@ -34,7 +34,8 @@ def pick_place_cli(tmp_path_factory):
     {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing them."""
     tmp = tmp_path_factory.mktemp("pick_place_cli")
     mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
-    env = {**os.environ, "HOME": str(tmp)}  # the rerun SDK may write its analytics config under HOME
+    # the rerun SDK may write its analytics config under HOME
+    env = {**os.environ, "HOME": str(tmp)}
     done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "1", "--record",
                            str(mcap), "--rrd", str(rrd)], capture_output=True, text=True, env=env, timeout=300,
                           check=False)

@@ -39,9 +39,11 @@ class BenchContext:
     physics_steps_per_s: float  # median over repeats, idle scene
     physics_samples: tuple[float, ...]  # each repeat's steps/s
     repeats: int
-    motion_physics_steps_per_s: float = 0.0  # median over repeats, pick_place's motion (0: not measured)
+    # median over repeats, pick_place's motion (0: not measured)
+    motion_physics_steps_per_s: float = 0.0
     physics_step_us: float = field(init=False)
-    figures: dict[str, float] = field(default_factory=dict)  # named numbers for --json (sections add theirs)
+    # named numbers for --json (sections add theirs)
+    figures: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "physics_step_us", 1e6 / self.physics_steps_per_s)
@@ -87,7 +89,8 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
         world.close()
 
 
-@functools.cache  # the run is deterministic: every baseline sample of a bench run replays the same motion
+# the run is deterministic: every baseline sample of a bench run replays the same motion
+@functools.cache
 def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
     targets it set and the holds it made and ended (from one twin run; read it, do not change it)."""

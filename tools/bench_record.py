@@ -213,7 +213,8 @@ def bench(ctx) -> list[tuple[str, str]]:
     with tempfile.TemporaryDirectory(prefix="twin_bench_record_") as tmp:
         folder = Path(tmp)
         runs: dict[str, list[Timed]] = {name: [] for name in modes}
-        motion: list[float] = []  # each repeat's own physics-only baseline, taken just before its modes
+        # each repeat's own physics-only baseline, taken just before its modes
+        motion: list[float] = []
         reads: list[float] = []  # and the reads floor and the hand-written logger, beside it
         naive: list[float] = []
         for _ in range(repeats):  # the modes take turns

@@ -37,7 +37,8 @@ from twin.tasks import run_task
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFINITION = ROOT / "recordings" / "sweeps" / "pick_place_jitter.toml"
-SCENARIOS = 150  # the whole golden: a sweep's fixed costs (pool or task start, the last batches) amortized as in use
+# the whole golden: a sweep's fixed costs (pool or task start, the last batches) amortized as in use
+SCENARIOS = 150
 OVERHEAD_SCENARIOS = 48
 
 
@@ -102,7 +103,8 @@ def _bare_cpu_s(scenarios: int = OVERHEAD_SCENARIOS) -> float:
     for i in range(spec.scenarios):
         values = sampler.values(i)
         twin = Twin(apply_values(prep.config, values))
-        with contextlib.suppress(TwinError):  # a failing scenario is part of the work, as in the sweep
+        # a failing scenario is part of the work, as in the sweep
+        with contextlib.suppress(TwinError):
             run_task(twin, prep.fn, {**spec.params, **task_values(values)})
         twin.close()
     return (time.process_time() - t0) / spec.scenarios
@@ -147,7 +149,8 @@ def bench(ctx) -> list[tuple[str, str]]:
         speedups.append(two[-1] / one[-1])
         overheads.append(_in_child(_overhead_ms))
     starts, dask, local, vs_local = [], [], [_local_rate(2)], []
-    for _ in range(repeats):  # each Dask run between two of the local pool: the load's drift cancels
+    # each Dask run between two of the local pool: the load's drift cancels
+    for _ in range(repeats):
         starts.append(_dask_rate(dask))
         local.append(_local_rate(2))
         vs_local.append(dask[-1] / statistics.mean(local[-2:]))

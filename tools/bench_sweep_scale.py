@@ -42,7 +42,8 @@ def measure(scenarios: int, folder: Path) -> tuple[float, float, float]:
            "box.x_m=uniform(0.19,0.21)", "--param", "cycles=1", "--save", "none", "--quiet", "-j", "2",
            "--out", str(out)]
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,  # Ctrl-C as in a terminal
+    # Ctrl-C as in a terminal
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
     try:
         first_s = None

@@ -34,7 +34,8 @@ from twin.verify.check import record_task
 ROOT = Path(__file__).resolve().parent.parent
 RECORDINGS = ROOT / "recordings"
 CLIENTS = ROOT / "tests" / "fixtures" / "seed_clients"
-RATE_STEPS = 1  # every physics step: exact checks see every step (about 0.5 MB per 10 s of simulated time)
+# every physics step: exact checks see every step (about 0.5 MB per 10 s of simulated time)
+RATE_STEPS = 1
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,8 @@ class Golden:
     task: str
     params: dict
     how: str
-    rate: int = RATE_STEPS  # keep every Nth step (commands and events are kept at every step whatever it is)
+    # keep every Nth step (commands and events are kept at every step whatever it is)
+    rate: int = RATE_STEPS
 
 
 def goldens() -> list[Golden]:
@@ -102,7 +104,8 @@ def make_session(session: Session, out_dir: Path = RECORDINGS) -> Path:
         port = int(re.search(r"listening on tcp://127\.0\.0\.1:(\d+)", _line(server, "listening on")).group(1))
         env = dict(os.environ, TWIN_REMOTE_PORT=str(port), TWIN_REMOTE_HOST="127.0.0.1")
         subprocess.run([sys.executable, f"{session.robot}.py"], cwd=CLIENTS, env=env, capture_output=True,
-                       timeout=120, check=False)  # some programs end in their own NameError, as published
+                       # some programs end in their own NameError, as published
+                       timeout=120, check=False)
         RemoteAPIClient("127.0.0.1", port).require("sim").stopSimulation()
         _line(server, "recorded ")
     finally:

@@ -8,7 +8,8 @@ import signal
 import weakref
 from collections.abc import Callable, Sequence
 
-TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # the twin handles them, then closes its helpers
+# the twin handles them, then closes its helpers
+TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def start_helper(owner: object, target: Callable, args: tuple, *, name: str, other_ends: Sequence = ()):

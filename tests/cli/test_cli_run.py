@@ -81,7 +81,8 @@ def test_report_001s_loop_reports_an_empty_suction_and_leaves_the_box():
     end = twin.object_pose("box")
     assert abs(end[0] - start[0]) < 1e-3 and abs(end[1] - start[1]) < 1e-3
     assert all(f.held_body == -1 for f in sink.frames)
-    # wherever the pad went down, the nearest it came to the box is where the report's IK sent it: 13 cm off
+    # wherever the pad went down, the nearest it came to the box is where the report's IK sent it:
+    # 13 cm off
     z_low = min(f.pad_pose[2] for f in sink.frames) + 1e-3
     miss_m = min(((f.pad_pose[0] - 0.2) ** 2 + (f.pad_pose[1] - 0.7) ** 2) ** 0.5
                  for f in sink.frames if f.pad_pose[2] < z_low)
@@ -94,7 +95,8 @@ def test_report_001s_loop_from_the_command_line_exits_0(tmp_path):
     assert done.stderr == ""
     assert "suction_empty 2" in done.stdout and "attach" not in done.stdout
     final = re.search(r"box final pose: x ([-+\d.]+) y ([-+\d.]+)", done.stdout)
-    assert abs(float(final.group(1)) - 0.2) < 1e-3 and abs(float(final.group(2)) - 0.7) < 1e-3  # not moved
+    # not moved
+    assert abs(float(final.group(1)) - 0.2) < 1e-3 and abs(float(final.group(2)) - 0.7) < 1e-3
 
 
 def test_far_task_is_one_line_on_stderr_and_exit_code_1(tmp_path):
@@ -208,7 +210,8 @@ def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tm
     args = ["run", "pick_place", "--cycles", "1", "--camera", "overhead", "--camera-size", "64x48"]
     proc = subprocess.Popen([sys.executable, "-m", "twin.cli", *args, "--record", str(tmp_path / "piped.mcap")],
                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1"))  # each line written as printed
+                            # each line written as printed
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
     proc.stdout.close()  # as head does after its line
     assert proc.wait(timeout=120) == 141, proc.stderr.read()
     assert proc.stderr.read() == b""
@@ -217,8 +220,9 @@ def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tm
     assert (tmp_path / "piped.mcap").read_bytes() == (tmp_path / "plain.mcap").read_bytes()
 
 
-# A user task may say `placed` with no usable error figure: the summary used to crash on it (a KeyError or
-# TypeError traceback, exit 1, though the recording was finalized ok), and hid the task's own error.
+# A user task may say `placed` with no usable error figure: the summary used to crash on it (a
+# KeyError or TypeError traceback, exit 1, though the recording was finalized ok), and hid the
+# task's own error.
 PLACED_TASK = '''
 def run(twin, error: str = "missing", fail: bool = False):
     twin.wait(0.05)

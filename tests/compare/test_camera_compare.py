@@ -60,7 +60,8 @@ def test_a_missing_picture_differs(camera_run):
     first = compare(golden, candidate, Tolerances.from_preset("exact")).first
     assert first.element == f"overhead #{len(track.data)}" and first.actual == ["missing"]
     assert first.expected == ["picture"]
-    first = compare(candidate, golden, Tolerances.from_preset("exact")).first  # the picture only the candidate has
+    # the picture only the candidate has
+    first = compare(candidate, golden, Tolerances.from_preset("exact")).first
     assert first.expected == ["missing"] and first.actual == ["picture"]
 
 

@@ -109,7 +109,8 @@ def test_outcome_fails_when_the_box_lands_elsewhere(golden):
 
 def test_tolerance_decides_and_the_first_divergence_carries_the_numbers(golden):
     shifted = copy.deepcopy(golden)
-    shifted.frames.joint_q[100:, 1] += 2e-4  # elbow 0.2 mrad off from step 100 on (physical allows 0.25)
+    # elbow 0.2 mrad off from step 100 on (physical allows 0.25)
+    shifted.frames.joint_q[100:, 1] += 2e-4
     assert compare(golden, shifted, Tolerances.from_preset("physical")).match
     result = compare(golden, shifted, Tolerances.from_preset("physical").with_overrides(["joints.position=1e-4"]))
     first = result.first

@@ -36,7 +36,8 @@ from twin.pictures import png_bytes
 from twin.record.mcap import schemas as S
 from twin.verify.replay import save
 
-MAX_RSS_MB = 400  # a whole `twin export` process (about 45 MB when it refuses; 1.2 GB for the 9000x9000 PNG before)
+# a whole `twin export` process (about 45 MB when it refuses; 1.2 GB for the 9000x9000 PNG before)
+MAX_RSS_MB = 400
 PICTURE_INDEX = 2  # the overhead camera's third picture: step 32 (15 Hz at 240 Hz: every 16 steps)
 
 
@@ -49,7 +50,8 @@ class Run:
 
 
 # Peak RSS survives fork and exec: a child of pytest would report at least pytest's size. A small
-# launcher process starts the command and reports that child's own peak (as tests/record/mcap/test_bad_files.py).
+# launcher process starts the command and reports that child's own peak (as
+# tests/record/mcap/test_bad_files.py).
 _LAUNCHER = """
 import os, sys
 pid = os.posix_spawn(sys.argv[2], sys.argv[2:], os.environ)
@@ -86,7 +88,7 @@ def assert_nothing_written(folder: Path, *kept: str) -> None:
     assert sorted(p.name for p in folder.iterdir() if p.name not in (".out", ".err")) == sorted(kept)
 
 
-# -- damaged copies ------------------------------------------------------------------------------------
+# -- damaged copies --------------------------------------------------------------------------------
 
 def copy_with(src: Path, dst: Path, edit) -> Path:
     """A copy of an MCAP file with every message through edit(topic, data) -> data (mcap's own reader and
@@ -160,16 +162,18 @@ def bad_pictures(camera_run, tmp_path_factory) -> dict[str, tuple[Path, str]]:
     cases = {
         "garbage": (b"not a picture " * 20, "is not a PNG picture (280 bytes"),
         "png_20000x20000": (black_png(20000, 20000, pixels=False), "is 20000x20000 px"),
-        "png_9000x9000": (black_png(9000, 9000), "is 9000x9000 px"),  # 243 MB of pixels in a 1 MB picture
+        # 243 MB of pixels in a 1 MB picture
+        "png_9000x9000": (black_png(9000, 9000), "is 9000x9000 px"),
         "jpeg": (jpeg_320x240(), "is not a PNG picture"),
         "png_160x120": (png_bytes(np.zeros((120, 160, 3), dtype=np.uint8)), "is 160x120 px"),
-        "png_cut": (good[: len(good) // 2], "does not decode"),  # its header is right: found when decoded
+        # its header is right: found when decoded
+        "png_cut": (good[: len(good) // 2], "does not decode"),
     }
     return {name: (with_picture(camera_run["mcap"], folder / f"{name}.mcap", payload), why)
             for name, (payload, why) in cases.items()}
 
 
-# -- 1. camera pictures --------------------------------------------------------------------------------
+# -- 1. camera pictures ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", ["garbage", "png_20000x20000", "png_9000x9000", "jpeg", "png_160x120", "png_cut"])
 def test_a_bad_picture_is_one_line_exit_2_in_bounded_memory(bad_pictures, tmp_path, name):
@@ -209,7 +213,7 @@ def test_track_rgb_checks_the_header_first(bad_pictures):
         assert track.rgb(PICTURE_INDEX + 1).shape == (240, 320, 3)  # the others decode
 
 
-# -- 2. --fps ------------------------------------------------------------------------------------------
+# -- 2. --fps --------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("fps, expected", [
     ("241", "--fps 241 is above the physics rate of recording"),
@@ -255,7 +259,7 @@ def test_a_dataset_is_at_most_max_dataset_frames(pick_place_mcap, tmp_path, caps
     assert_nothing_written(tmp_path)
 
 
-# -- 3. malformed commands, NaN ------------------------------------------------------------------------
+# -- 3. malformed commands, NaN --------------------------------------------------------------------
 
 def _with_signal_args(src: Path, dst: Path, args: dict) -> Path:
     rec = twin_pkg.load(src)
@@ -303,7 +307,7 @@ def test_a_nan_joint_position_is_refused_for_a_dataset(pick_place_mcap, tmp_path
                 tmp_path / "ds")[0] == 0
 
 
-# -- 4. what killed exports leave ----------------------------------------------------------------------
+# -- 4. what killed exports leave ------------------------------------------------------------------
 
 def test_a_killed_exports_partial_folder_is_removed_by_the_next(camera_run, tmp_path, capsys):
     """A killed export leaves .ds.partial-PID; the next export of ds removes it (its process is gone),
@@ -321,12 +325,16 @@ def test_a_killed_exports_partial_folder_is_removed_by_the_next(camera_run, tmp_
 
     running = [subprocess.Popen(["sleep", "60"]) for _ in range(2)]
     try:
-        live = tmp_path / f".ds.partial-{running[0].pid}"  # a running export's, as far as we can tell
+        # a running export's, as far as we can tell
+        live = tmp_path / f".ds.partial-{running[0].pid}"
         (live / "meta").mkdir(parents=True)
-        reused = tmp_path / f".ds.partial-{running[1].pid}"  # last changed an hour before its process started:
-        (reused / "data").mkdir(parents=True)  # a dead export's folder, whose id a later process reuses
+        # last changed an hour before its process started:
+        reused = tmp_path / f".ds.partial-{running[1].pid}"
+        # a dead export's folder, whose id a later process reuses
+        (reused / "data").mkdir(parents=True)
         os.utime(reused, (time.time() - 3600,) * 2)
-        other = tmp_path / f".other.partial-{proc.pid}"  # another dataset's: not this export's to remove
+        # another dataset's: not this export's to remove
+        other = tmp_path / f".other.partial-{proc.pid}"
         other.mkdir()
         assert twin(capsys, "export", camera_run["mcap"], "--format", "lerobot", "--fps", "10", "-o", out)[0] == 0
         assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["ds", live.name, other.name])

@@ -74,7 +74,8 @@ def test_layout_and_info(dataset):
                                  "task_index"]
     assert str(data.schema.field("observation.state").type) == "fixed_size_list<element: float>[6]"
     assert str(data.schema.field("timestamp").type) == "float"
-    assert pq.ParquetFile(dataset / "data/chunk-000/file-000.parquet").num_row_groups == 2  # one per episode
+    # one per episode
+    assert pq.ParquetFile(dataset / "data/chunk-000/file-000.parquet").num_row_groups == 2
     tasks = pd.read_parquet(dataset / "meta/tasks.parquet")
     assert tasks.index.name == "task" and tasks.iloc[0].name == "pick the box and place it"
     assert tasks.loc["pick the box and place it", "task_index"] == 0
@@ -99,9 +100,11 @@ def test_timestamps_are_exact_and_indices_contiguous(dataset):
         assert np.array_equal(frame_index, np.arange(ep["length"]))
         ts = rows["timestamp"].to_numpy()
         assert ts.dtype == np.float32
-        assert np.array_equal(ts, (frame_index / FPS).astype(np.float32))  # as LeRobot computes and stores it
+        # as LeRobot computes and stores it
+        assert np.array_equal(ts, (frame_index / FPS).astype(np.float32))
         assert np.all(np.abs(ts.astype(np.float64) - frame_index / FPS) <= np.spacing(np.float32(ts.max())))
-        assert np.all(np.abs(np.diff(ts) - 1 / FPS) < 1e-4)  # LeRobot's timestamp sync check (tolerance_s 1e-4)
+        # LeRobot's timestamp sync check (tolerance_s 1e-4)
+        assert np.all(np.abs(np.diff(ts) - 1 / FPS) < 1e-4)
         assert list(ep["tasks"]) == ["pick the box and place it"]
     assert episodes["dataset_to_index"].iloc[-1] == len(data)
     assert list(episodes["dataset_from_index"].iloc[1:]) == list(episodes["dataset_to_index"].iloc[:-1])
@@ -129,7 +132,8 @@ def test_state_and_action_are_recorded_values(dataset, camera_run):
         assert np.array_equal(state[:, 5], (rec.frames.held_body[steps] >= 0).astype(np.float32))
         assert np.array_equal(action[:, :4], rec.frames.joint_target[steps].astype(np.float32))
         assert np.array_equal(action[:, 4], command[steps].astype(np.float32))
-        assert action[:, 4].any() and state[:, 5].any()  # each cycle switches suction on and holds the box
+        # each cycle switches suction on and holds the box
+        assert action[:, 4].any() and state[:, 5].any()
 
 
 def test_video_decodes_one_frame_per_dataset_frame(dataset, camera_run):
@@ -152,7 +156,8 @@ def test_video_decodes_one_frame_per_dataset_frame(dataset, camera_run):
     track = rec.cameras["overhead"]
     shown = track.rgb(int(np.argmin(np.abs(track.step - step)))).astype(np.float64)
     assert np.abs(frames[first][1].astype(np.float64) - shown).mean() < 4.0
-    assert np.abs(frames[first][1].astype(np.float64) - track.rgb(0).astype(np.float64)).mean() > 0  # not a stale one
+    # not a stale one
+    assert np.abs(frames[first][1].astype(np.float64) - track.rgb(0).astype(np.float64)).mean() > 0
 
 
 def test_same_input_gives_the_same_bytes(camera_run, tmp_path, capsys):
@@ -183,7 +188,8 @@ def test_decimated_run_and_a_golden_at_an_uneven_rate(tmp_path, capsys):
     nearest = np.argmin(off, axis=1)
     state = np.stack(rows["observation.state"].to_numpy())
     assert np.array_equal(state[:, :4], rec.frames.joint_q[nearest].astype(np.float32))
-    assert len(set(np.diff(rec.frames.step[nearest]).tolist())) > 1  # 240/4 Hz to 7 fps: uneven strides
+    # 240/4 Hz to 7 fps: uneven strides
+    assert len(set(np.diff(rec.frames.step[nearest]).tolist())) > 1
 
 
 def _tampered_copy(src: Path, dst: Path) -> None:

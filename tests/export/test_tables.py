@@ -115,7 +115,8 @@ def test_export_parquet_and_csv_of_a_golden(tmp_path, capsys):
     assert len(rows) == len(rec.frames)
     table = rec.to_arrow()
     assert list(rows[0]) == table.column_names
-    for name in table.column_names:  # every CSV value reads back to the same value (floats: the same doubles)
+    # every CSV value reads back to the same value (floats: the same doubles)
+    for name in table.column_names:
         want = table.column(name).to_pylist()
         got = [r[name] == "true" if isinstance(w, bool) else type(w)(r[name]) for r, w in zip(rows, want, strict=True)]
         assert got == want, name

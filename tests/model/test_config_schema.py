@@ -63,7 +63,7 @@ def test_objects_7_names_the_field_and_what_it_should_be():
                               "objects")
 
 
-# -- nesting ------------------------------------------------------------------------------------------
+# -- nesting ---------------------------------------------------------------------------------------
 
 def test_nesting_depth_and_all_finite_walk_without_recursion():
     deep = json.loads("[" * 900 + "1.5" + "]" * 900)
@@ -109,7 +109,8 @@ DEEP_FILES = {
     "robot.json": '{"urdf": "r.urdf", "x": ' + "[" * 5000 + "]" * 5000 + "}",
     "keys.toml": "[keys]\na = " + "[" * 5000 + "]" * 5000 + "\n",
     "keys.json": '{"keys": {"a": ' + "[" * 5000 + "]" * 5000 + "}}",
-    "keys_900.json": '{"keys": {"a": ' + "[" * 900 + "]" * 900 + "}}",  # parses: refused by the limit
+    # parses: refused by the limit
+    "keys_900.json": '{"keys": {"a": ' + "[" * 900 + "]" * 900 + "}}",
 }
 
 
@@ -126,7 +127,7 @@ def test_deeply_nested_profile_and_key_map_files_are_one_line_exit_2(tmp_path, c
     assert len(err) < 300
 
 
-# -- cameras ----------------------------------------------------------------------------------------------
+# -- cameras ---------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize(("change", "said"), [
     ({"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 1.0)}, "are 0 m apart"),

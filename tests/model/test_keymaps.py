@@ -54,7 +54,8 @@ def _positions_after(profile: str, keys: list[str]) -> tuple[tuple[float, ...], 
 def test_seed000_keys_do_what_report_000_s_lua_does():
     """Its sysCall_actuation: angle1/angle2/d from 0, joints set at once (sim.setJointPosition)."""
     q, t = _positions_after("seed000", ["d", "d", "a"])
-    assert q[0] == pytest.approx(DEG) and t[0] == pytest.approx(DEG) and q[1] == 0.0  # a jump, no motion
+    # a jump, no motion
+    assert q[0] == pytest.approx(DEG) and t[0] == pytest.approx(DEG) and q[1] == 0.0
     q, _ = _positions_after("seed000", ["e", "q", "q"])
     assert q[1] == pytest.approx(-DEG) and q[0] == 0.0
     q, _ = _positions_after("seed000", ["5"])
@@ -105,7 +106,8 @@ def test_seed000_keys_take_hold_when_the_stop_sets_the_pad_into_the_box():
             assert twin.suction_pad.held == held, keys
             box = twin.object_pose("box")
             assert math.dist(box[:2], (0.2, 0.7)) < 0.002
-            assert (box[2] > 0.1) if held == 0 else abs(box[2] - 0.025) < 1e-3  # lifted with the pad, or left
+            # lifted with the pad, or left
+            assert (box[2] > 0.1) if held == 0 else abs(box[2] - 0.025) < 1e-3
         finally:
             twin.close()
 

@@ -103,7 +103,8 @@ def test_urdf_loads_with_its_real_masses_and_inertias(profile_name):
         assert world.urdf_text == urdf_from_profile(profile)
         expected = _urdf_links(world.urdf_text)
         loaded = _loaded_links(world)
-        assert sorted(loaded) == sorted(n for n in expected if n != "MTB_base")  # the fixed base is not simulated
+        # the fixed base is not simulated
+        assert sorted(loaded) == sorted(n for n in expected if n != "MTB_base")
         for link, info in loaded.items():
             mass, inertia, origin = info[0], info[2], info[3]
             assert mass == pytest.approx(expected[link]["mass"], rel=1e-12), link
@@ -194,7 +195,8 @@ def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
 def test_a_profiles_own_joint_names_win_over_other_variants_aliases():
     from dataclasses import replace
 
-    # a user robot whose Z joint is called joint4 and its wrist joint3 (seed000's names for wrist and Z)
+    # a user robot whose Z joint is called joint4 and its wrist joint3 (seed000's names for wrist
+    # and Z)
     swapped = replace(PROFILES["mtb"], name="user", joint_names=("s", "e", "joint4", "joint3"))
     assert swapped.joint_index("joint3") == 3 and swapped.joint_index("/joint4") == 2
     assert swapped.joint_index("MTB_axis1") == 0  # other variants' aliases still resolve

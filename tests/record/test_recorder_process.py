@@ -77,7 +77,8 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == -signal.SIGKILL, done.stderr
     partial = partial_path(path)  # the file is renamed to path only when finalized
-    _wait_until_settled(partial)  # the orphaned recorder writes what it got once it sees the pipe close
+    # the orphaned recorder writes what it got once it sees the pipe close
+    _wait_until_settled(partial)
     assert not path.exists()
     kept = scan(partial, strict=False)
     assert not kept.complete and S.META_FINALIZED not in kept.metadata

@@ -26,7 +26,8 @@ def test_rows_come_back_in_order_across_the_rings_end():
     twin.close()
     assert ring.publish(8) == [0]
     runs = ring.runs(3, 8)
-    assert [rows.count(run) for run in runs] == [2, 3]  # rows 3-4 at the ring's end, 5-7 from its start
+    # rows 3-4 at the ring's end, 5-7 from its start
+    assert [rows.count(run) for run in runs] == [2, 3]
     steps = np.concatenate([rows.records(run)["step"] for run in runs])
     assert steps.tolist() == [f.step for f in frames[3:8]]
     assert rows.frame(runs[1], 2) == frames[7]

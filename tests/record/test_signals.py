@@ -109,7 +109,8 @@ def test_timeout_bounds_an_endless_task_in_simulated_time(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("twin: error:") and "--timeout 3 s" in lines[0]
     rec = twin.load(path)
     assert rec.meta[S.META_FINALIZED]["outcome"] == "error"
-    assert 3.0 < rec.frames.t_ns[-1] * 1e-9 <= 3.0 + rec.config.dt_s + 1e-9  # the first step past the bound
+    # the first step past the bound
+    assert 3.0 < rec.frames.t_ns[-1] * 1e-9 <= 3.0 + rec.config.dt_s + 1e-9
     bad = subprocess.run([*TWIN, "run", "pick_place", "--timeout", "0"], capture_output=True, text=True,
                          timeout=60, check=False)
     assert bad.returncode == 2 and "--timeout '0'" in bad.stderr

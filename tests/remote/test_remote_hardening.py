@@ -81,7 +81,8 @@ def shared_reference_bomb(depth: int) -> bytes:
     (tags 28/29): 2**depth leaves from a few bytes per level."""
     value = b"\xd8\x1c\x80"  # 28([]): shareable number `depth` (numbered outermost first)
     for level in range(1, depth + 1):
-        value = b"\xd8\x1c\x82" + value + b"\xd8\x1d" + cbor2.dumps(depth - level + 1)  # 28([inner, 29(inner)])
+        # 28([inner, 29(inner)])
+        value = b"\xd8\x1c\x82" + value + b"\xd8\x1d" + cbor2.dumps(depth - level + 1)
     head = cbor2.dumps({"func": "sim.getJointPosition", "argsL": 1, "uuid": "bomb"})
     return bytes([head[0] + 1]) + head[1:] + cbor2.dumps("args") + b"\x81" + value
 
@@ -103,16 +104,18 @@ def test_what_is_decoded_is_bounded_in_depth_and_items(server, raw):
     many = request(raw, "sim.getJointPosition", [[0] * (MAX_ITEMS + 1)])
     assert len(many) < MAX_REQUEST_BYTES
     assert f"more than {MAX_ITEMS} data items" in raw.raw(many)["err"]
-    strings = request(raw, "sim.getJointPosition", [["ab"] * (MAX_ITEMS // 2)])  # under the limit: decoded
+    # under the limit: decoded
+    strings = request(raw, "sim.getJointPosition", [["ab"] * (MAX_ITEMS // 2)])
     assert "argument 1 (handle) is an array of 50000 items" in raw.raw(strings)["err"]
     keyed = cbor2.dumps({"func": "sim.getObject", "args": ["/box", {1: True}], "uuid": raw.uuid})
     assert "map key must be a text string or byte string" in raw.raw(keyed)["err"]
     assert_serving(server)
 
 
-# ZMTP 2.0 greeting (signature, revision 1, socket type DEALER, empty identity), then a message of two
-# frames without the empty delimiter a REQ puts first: 21 bytes. Sent by a peer that closes at once,
-# it left the old REP socket's envelope state half-written and the next reply to another client lost.
+# ZMTP 2.0 greeting (signature, revision 1, socket type DEALER, empty identity), then a message of
+# two frames without the empty delimiter a REQ puts first: 21 bytes. Sent by a peer that closes at
+# once, it left the old REP socket's envelope state half-written and the next reply to another
+# client lost.
 ZMTP2_NO_DELIMITER = b"\xff" + b"\x00" * 8 + b"\x7f" + b"\x01\x05\x00\x00" + b"\x01\x01X" + b"\x00\x02YZ"
 BROKEN_PEERS = {
     "zmtp2 frames without delimiter": ZMTP2_NO_DELIMITER,
@@ -229,17 +232,22 @@ def test_the_number_of_clients_is_bounded_per_connection_and_in_all():
         first = server.client().require("sim")
         one = RawClient(server.port)
         many: list[RawClient] = []
-        try:  # closed whatever happens: a failed test's unclosed zmq contexts hang the session when collected
-            for i in range(1000):  # each new uuid over one connection would be a client (old: 40,000 of them)
+        # closed whatever happens: a failed test's unclosed zmq contexts hang the session when
+        # collected
+        try:
+            # each new uuid over one connection would be a client (old: 40,000 of them)
+            for i in range(1000):
                 reply = one.raw(cbor2.dumps({"func": "sim.getSimulationState", "args": [], "uuid": f"u{i}"}))
                 if i < MAX_CLIENTS_PER_CONNECTION:
                     assert reply == {"ret": [0]}
                 else:
                     assert "too many clients on one connection" in reply["err"]
-            for _ in range(MAX_CLIENTS - MAX_CLIENTS_PER_CONNECTION - 1):  # the official client holds one slot
+            # the official client holds one slot
+            for _ in range(MAX_CLIENTS - MAX_CLIENTS_PER_CONNECTION - 1):
                 many.append(RawClient(server.port))
                 assert many[-1].call("sim.getSimulationState", []) == {"ret": [0]}
-            # every slot now held by a client seen less than EVICT_IDLE_S ago: none gives its slot up
+            # every slot now held by a client seen less than EVICT_IDLE_S ago: none gives its slot
+            # up
             assert first.getSimulationState() == 0
             for i in range(MAX_CLIENTS_PER_CONNECTION):
                 request = {"func": "sim.getSimulationState", "args": [], "uuid": f"u{i}"}
@@ -257,7 +265,8 @@ def test_the_number_of_clients_is_bounded_per_connection_and_in_all():
             for c in [*many, one]:
                 c.close()
         server.wait_for(rf"client {MAX_CLIENTS} disconnected")
-        assert server.client().require("sim").getSimulationState() == 0  # their slots are free again
+        # their slots are free again
+        assert server.client().require("sim").getSimulationState() == 0
 
 
 def test_idle_clients_cannot_lock_the_official_client_out():
@@ -283,12 +292,13 @@ def test_idle_clients_cannot_lock_the_official_client_out():
             assert sim.getJointPosition(h) == pytest.approx(0.25)
             served_s = time.monotonic() - t0
             server.wait_for(rf"client \d+ forgotten: silent for \d+\.\d s while all {MAX_CLIENTS} client slots were taken")
-            # the rule is in the refusal's text; the official client got in at once, not after a timeout
+            # the rule is in the refusal's text; the official client got in at once, not after a
+            # timeout
             assert (f"when all slots are taken, a new client takes the slot of the least recently seen one silent "
                     f"for {EVICT_IDLE_S:g} s or more") in str(refused.value)
             assert served_s < 5.0
-            # the idle ones, their connections still open, are served again when they call (as new clients,
-            # taking idle slots in turn)
+            # the idle ones, their connections still open, are served again when they call (as new
+            # clients, taking idle slots in turn)
             request = {"func": "sim.getSimulationState", "args": [], "uuid": "idle-0-0"}
             assert idle[0].raw(cbor2.dumps(request)) == {"ret": [0]}
             assert sim.getSimulationState() == 0
@@ -357,8 +367,10 @@ def test_a_multipart_flood_is_cut_off_after_one_frames_worth():
             with PeakRss(server.proc.pid) as rss:
                 caller = keep_calling(sim, stop, errors)
                 t0 = time.monotonic()
-                dealer.send_multipart([b"", *[part] * FLOOD_PARTS], copy=False)  # a REQ's framing, 6 parts
-                while True:  # the old server answered once all of it was in; now the connection closes
+                # a REQ's framing, 6 parts
+                dealer.send_multipart([b"", *[part] * FLOOD_PARTS], copy=False)
+                # the old server answered once all of it was in; now the connection closes
+                while True:
                     if dealer.poll(0):
                         reply = cbor2.loads(dealer.recv_multipart()[-1])
                         break
@@ -413,7 +425,8 @@ def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
                     sent += len(chunk)
             elapsed_s = time.monotonic() - t0
         print(f"raw flood: {sent >> 20} MiB sent in {elapsed_s:.2f} s, peak RSS +{rss.growth_mb():.0f} MB")
-        assert sent < MAX_UNREAD_BYTES + (32 << 20)  # what the kernels' buffers took after the close, at most
+        # what the kernels' buffers took after the close, at most
+        assert sent < MAX_UNREAD_BYTES + (32 << 20)
         assert rss.growth_mb() < (MAX_UNREAD_BYTES + (24 << 20)) / 1e6
         server.wait_for(r"closed the connection from 127\.0\.0\.1:\d+: it sent \d+ bytes without completing")
         assert_serving(server)
@@ -431,8 +444,8 @@ def test_requests_over_the_limit_get_an_error_reply_up_to_the_hard_cap(server, r
         reply = raw.raw(b"\x00" * size)
         assert reply["err"] == f"request of {size} bytes exceeds the limit of {MAX_REQUEST_BYTES} bytes (1 MiB)"
     assert raw.call("sim.getSimulationState", []) == {"ret": [0]}
-    # above the hard cap ZMQ closes the connection when the frame's head announces its size: nothing of
-    # it is read or kept, and the server goes on (a REQ client would wait forever: README)
+    # above the hard cap ZMQ closes the connection when the frame's head announces its size: nothing
+    # of it is read or kept, and the server goes on (a REQ client would wait forever: README)
     rss_before = rss_kib(server)
     for size in (MAX_FRAME_BYTES + 1, 1 << 40):
         with socket.create_connection(("127.0.0.1", server.port)) as peer:
@@ -520,28 +533,36 @@ def test_the_eviction_rule_in_detail():
     try:
         for i in range(MAX_CLIENTS):  # client c<i> seen at i ms, 4 per connection
             assert call(f"c{i}", i / 1000, f"p{i // MAX_CLIENTS_PER_CONNECTION}".encode()) == {"ret": [0]}
-        assert call("c0", 0.5, b"p0", "sim.setStepping", [True]) == {"ret": [0]}  # c0 steps, seen at 0.5 s
-        assert "none silent long enough" in call("n1", EVICT_IDLE_S - 0.1, b"q")["err"]  # nobody idle 2 s yet
-        assert call("n1", EVICT_IDLE_S + 0.0015, b"q") == {"ret": [0]}  # c1 (2.0005 s idle) gives way, c2 not yet
+        # c0 steps, seen at 0.5 s
+        assert call("c0", 0.5, b"p0", "sim.setStepping", [True]) == {"ret": [0]}
+        # nobody idle 2 s yet
+        assert "none silent long enough" in call("n1", EVICT_IDLE_S - 0.1, b"q")["err"]
+        # c1 (2.0005 s idle) gives way, c2 not yet
+        assert call("n1", EVICT_IDLE_S + 0.0015, b"q") == {"ret": [0]}
         assert "c1" not in server.clients and "c2" in server.clients
         assert lines[-2].endswith(f"client 2 forgotten: silent for 2.0 s while all {MAX_CLIENTS} client slots "
                                   "were taken (a new client takes its slot)")
         assert call("n2", EVICT_IDLE_S + 0.0025, b"q") == {"ret": [0]}  # then c2
-        assert call("n3", 3.0, b"q") == {"ret": [0]} and call("n4", 3.0, b"q") == {"ret": [0]}  # c3, c4
+        # c3, c4
+        assert call("n3", 3.0, b"q") == {"ret": [0]} and call("n4", 3.0, b"q") == {"ret": [0]}
         assert not {"c1", "c2", "c3", "c4"} & set(server.clients) and "c5" in server.clients
         # the per-connection cap comes first: no one is evicted for a fifth uuid over one connection
         assert "too many clients on one connection" in call("n5", 100.0, b"q")["err"]
         assert len(server.clients) == MAX_CLIENTS and "c5" in server.clients
-        for i in range(5, MAX_CLIENTS):  # at 5 s: the plain clients seen at 0.005..0.063 s go, oldest first
+        # at 5 s: the plain clients seen at 0.005..0.063 s go, oldest first
+        for i in range(5, MAX_CLIENTS):
             assert call(f"late{i}", 5.0, f"r{i}".encode()) == {"ret": [0]}
             assert f"c{i}" not in server.clients and "n1" in server.clients
-        # c0 is now the least recently seen (0.5 s), but in stepping mode it keeps its slot for --step-grace
+        # c0 is now the least recently seen (0.5 s), but in stepping mode it keeps its slot for
+        # --step-grace
         assert call("x1", 10.4, b"s") == {"ret": [0]}
         assert "c0" in server.clients and "n1" not in server.clients
         assert call("x2", 10.6, b"s") == {"ret": [0]}
         assert "c0" not in server.clients  # silent 10.1 s: it gave way
-        assert call("n2", 10.7, b"q") == {"ret": [0]}  # a known client is served as ever, nobody evicted
-        assert call("c0", 10.8, b"p0", "sim.setStepping", [False]) == {"ret": [0]}  # back: a new client, not stepping
+        # a known client is served as ever, nobody evicted
+        assert call("n2", 10.7, b"q") == {"ret": [0]}
+        # back: a new client, not stepping
+        assert call("c0", 10.8, b"p0", "sim.setStepping", [False]) == {"ret": [0]}
         assert len(server.clients) == MAX_CLIENTS
     finally:
         server.close()

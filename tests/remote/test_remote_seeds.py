@@ -114,7 +114,8 @@ def test_the_fixtures_are_the_reports_programs_but_for_the_import_and_the_loop_b
 
 def test_report000_program_carries_the_box_to_b_and_back(seed_runs, capsys):
     rec, box, program, folder = _result(seed_runs, "seed000")
-    assert "NameError: name 'end' is not defined" in program.stderr  # the stray Lua `end` after its loop
+    # the stray Lua `end` after its loop
+    assert "NameError: name 'end' is not defined" in program.stderr
     attaches, releases = _kinds(rec, "attach"), _kinds(rec, "release")
     assert len(attaches) == 2 and len(releases) == 2
     assert math.dist(_box_xy(rec, releases[0].step + 240), B_M) < 0.005  # placed at B
@@ -141,7 +142,8 @@ def test_report001_program_misses_the_box_and_the_recording_shows_it(seed, miss_
 
 def test_report002_program_stops_at_its_first_move_and_never_reaches_the_box(seed_runs, capsys):
     rec, box, program, folder = _result(seed_runs, "seed002")
-    assert "NameError: name 'joint1' is not defined" in program.stderr  # its IK sends to joint1..joint3
+    # its IK sends to joint1..joint3
+    assert "NameError: name 'joint1' is not defined" in program.stderr
     assert not _kinds(rec, "attach")
     far = min(math.dist(_pad_xy(rec, s), A_M) for s in range(len(rec.frames)))
     assert far > 0.25  # the pad stayed at home, (0, 1.0), lowered there with suction on
@@ -156,6 +158,7 @@ def test_report003_pad_only_follows_the_link_and_the_box_stays(seed_runs, capsys
     assert not _kinds(rec, "attach")
     lowest_tip_m = float(min(p[2] for p in rec.frames.pad_pose))
     assert lowest_tip_m > rec.config.profile.tip_z0_m - 0.0021  # never more than 2 mm down
-    assert [e.data["requested"] for e in _kinds(rec, "joint_limit")] == [-0.001, -0.001]  # MTB_axis3 stops at 0
+    # MTB_axis3 stops at 0
+    assert [e.data["requested"] for e in _kinds(rec, "joint_limit")] == [-0.001, -0.001]
     assert math.dist(box[:2], A_M) < 0.001
     _replays_exactly(str(folder / "seed003.mcap"), capsys)

@@ -86,7 +86,8 @@ def test_a_speed_the_machine_cannot_keep_lets_time_slip_and_keeps_answering():
         times = []
         for _ in range(10):
             time.sleep(0.05)
-            times.append(sim.getSimulationTime())  # each answered: no catch-up that grows without end
+            # each answered: no catch-up that grows without end
+            times.append(sim.getSimulationTime())
         server.wait_for(r"cannot keep up with 1000x real time here; simulated time slips")
         assert times == sorted(times) and times[-1] > times[0]
         # 0.5 s of wall time at 1000x would be 500 simulated s; capped catch-ups give far less

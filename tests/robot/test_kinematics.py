@@ -121,7 +121,8 @@ def test_out_of_reach_message_for_the_far_point_is_one_clear_line():
         "target (2.0000, 0.0000) m is outside the reach annulus: reach annulus 0.2335..0.8675 m,"
         " shoulder -160..160 deg, elbow -150..150 deg"
     )
-    assert err.value.exit_code == 1  # a task that asks for it fails; 3 is only "runs not comparable"
+    # a task that asks for it fails; 3 is only "runs not comparable"
+    assert err.value.exit_code == 1
 
 
 @pytest.mark.parametrize("x, y", [(-0.85, 0.0), (-0.86, 0.01), (-0.86, -0.01)])
@@ -163,7 +164,7 @@ def test_choose_prefers_the_branch_nearest_the_current_pose():
         assert k.choose(sols, (s.shoulder_rad, s.elbow_rad)) == s
 
 
-# -- each report's own joint conventions (docs/seed-conventions.md) ----------------------------------
+# -- each report's own joint conventions (docs/seed-conventions.md) --------------------------------
 
 def _report000_ik(x, y):
     """Report 000's ik(x, y) (links 0.8/0.8): degrees, q2 = -acos(...), q1 = atan2(y, x) + atan2(...)."""
@@ -199,7 +200,8 @@ def test_heron_ik_misses_the_box_in_its_own_frame_and_keeps_the_heading(name, li
     deg1, deg2, deg3 = _heron(0.2, 0.7, *links)
     pose = k.fk(profile, (deg1, -deg2, profile.z_down(), deg3))
     assert math.hypot(pose.x_m - 0.2, pose.y_m - 0.7) == pytest.approx(miss_m, abs=1e-4)
-    assert k.wrap_rad(pose.heading_rad - math.pi / 2) == pytest.approx(0.0, abs=1e-12)  # wrist = deg2 - deg1
+    # wrist = deg2 - deg1
+    assert k.wrap_rad(pose.heading_rad - math.pi / 2) == pytest.approx(0.0, abs=1e-12)
     straight = k.fk(profile, (0.0, 0.0, 0.0, 0.0))  # moving(0, 0.868): the arm along +y
     assert (straight.x_m, straight.y_m) == pytest.approx((0.0, sum(links)))
 

@@ -60,7 +60,8 @@ def test_the_stl_meshes_are_loaded_and_scaled_from_millimetres(user_robot):
         w = twin._world  # the engine, looked at directly (white-box)
         arm1 = w.joints[0]
         lo, hi = pb.getAABB(w.robot, arm1, physicsClientId=w.client)
-        assert hi[0] - lo[0] == pytest.approx(0.547, abs=0.01)  # 507 + 40 mm: the mesh, not a default shape
+        # 507 + 40 mm: the mesh, not a default shape
+        assert hi[0] - lo[0] == pytest.approx(0.547, abs=0.01)
         assert hi[2] - lo[2] == pytest.approx(0.05, abs=0.01)
         assert pb.getDynamicsInfo(w.robot, arm1, physicsClientId=w.client)[0] == 1.5
     finally:
@@ -87,7 +88,8 @@ def test_twin_moves_the_users_pad_to_the_point(user_robot, x_m, y_m):
 
 def test_twin_run_pick_place_works_with_the_user_robot(user_robot, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    code = main(["run", "pick_place", "--robot", str(user_robot), "--cycles", "2"])  # records by default
+    # records by default
+    code = main(["run", "pick_place", "--robot", str(user_robot), "--cycles", "2"])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert err == ""

@@ -88,10 +88,12 @@ def test_overhead_sees_the_box_where_it_stands():
     collector = _run((spec,), steps=1)
     first = collector.images[0]
     pixels = decode_rgb(first.data)
-    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (0.2, 0.7, 0.05))  # the box's top
+    # the box's top
+    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (0.2, 0.7, 0.05))
     r, g, b = (int(v) for v in pixels[row, col])
     assert b > r + 80 and b > 150, (col, row, (r, g, b))  # the box is blue (0.2, 0.5, 0.9)
-    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (-0.3, -0.55, 0.0))  # the empty place point
+    # the empty place point
+    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (-0.3, -0.55, 0.0))
     assert np.array_equal(pixels[row, col], pixels[0, 0])  # nothing there yet: the background
 
 

@@ -41,10 +41,12 @@ def test_the_pad_is_idle_only_off_or_holding_on_with_infinite_strength(infinite)
         twin.move_to(0.5, 0.0, heading_rad=0.0)
         twin.suction(True)
         twin.step()
-        assert (pad.on, pad.held, pad.idle_on) == (True, NO_BODY, None)  # on and empty: the sensor looks every step
+        # on and empty: the sensor looks every step
+        assert (pad.on, pad.held, pad.idle_on) == (True, NO_BODY, None)
         twin.lower()
         assert pad.held == 0 and pad.sensed == 0
-        assert pad.idle_on is (True if infinite else None)  # a finite hold is checked for breaking every step
+        # a finite hold is checked for breaking every step
+        assert pad.idle_on is (True if infinite else None)
         twin.raise_()
         assert twin.frame.held_body == 0 and twin.frame.sensed_body == 0
         twin.suction(False)

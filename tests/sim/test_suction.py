@@ -64,7 +64,8 @@ def test_a_box_hanging_still_pulls_with_its_weight(mass_kg):
     twin.wait(1.0)
     f = twin.frame
     fx, fy, fz = f.hold_force_n
-    assert fz == pytest.approx(mass_kg * G_M_S2, rel=0.01)  # the pad holds the box up: +z on the box
+    # the pad holds the box up: +z on the box
+    assert fz == pytest.approx(mass_kg * G_M_S2, rel=0.01)
     assert math.hypot(fx, fy) < 1e-3 * mass_kg * G_M_S2
     assert max(abs(t) for t in f.hold_torque_nm) < 1e-4
 

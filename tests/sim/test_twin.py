@@ -87,7 +87,8 @@ def test_any_variants_shoulder_name_drives_the_shoulder(name):
     twin.set_joint_target(name, 0.5)
     twin.settle()
     assert twin.joint_position(0) == pytest.approx(0.5, abs=1e-3)
-    assert sink.commands[0].args == {"joint": "MTB_axis1", "q": 0.5}  # recorded under the profile's name
+    # recorded under the profile's name
+    assert sink.commands[0].args == {"joint": "MTB_axis1", "q": 0.5}
 
 
 def test_a_target_beyond_the_limit_is_clamped_with_an_event():

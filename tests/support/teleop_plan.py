@@ -9,8 +9,9 @@ from twin.model.profiles import PROFILES
 from twin.robot.kinematics import fk, ik
 from twin.tasks.pick_place import POINT_A_M, POINT_B_M
 
-# Per seed map: the keys for shoulder +1/-1 deg, elbow +1/-1 deg, and the pick/place key sequences (with
-# `wait` intervals for the Z stroke, 0.2 m at 0.5 m/s, when keys come every 0.1 s, the teleop tests' interval).
+# Per seed map: the keys for shoulder +1/-1 deg, elbow +1/-1 deg, and the pick/place key sequences
+# (with `wait` intervals for the Z stroke, 0.2 m at 0.5 m/s, when keys come every 0.1 s, the teleop
+# tests' interval).
 Z_WAIT = ["wait"] * 6
 MAPS = {
     # report 000's Lua: joints set at once; 8 = suction on and Z up to its count, 5 = Z to the stop
@@ -67,7 +68,8 @@ def plan(profile_name, keeps_heading=None, pick_tolerance_m=0.005):
         pad_a, h_a = _pad_xy_heading(profile, pick, wrist_a)
         if math.dist(pad_a, POINT_A_M) > pick_tolerance_m:
             continue
-        offset = _rot((POINT_A_M[0] - pad_a[0], POINT_A_M[1] - pad_a[1]), 0.0 if keeps else -h_a)  # pad frame
+        # pad frame
+        offset = _rot((POINT_A_M[0] - pad_a[0], POINT_A_M[1] - pad_a[1]), 0.0 if keeps else -h_a)
         for place in _grid_points(profile, POINT_B_M):
             pad_b, h_b = _pad_xy_heading(profile, place, _wrist_deg(profile_name, pick, place, wrist_a))
             off = _rot(offset, 0.0 if keeps else h_b)

@@ -44,7 +44,8 @@ def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
     proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "sweep", *SWEEP, "--executor", "dask", "--jobs", "2",
                              "--out", str(tmp_path / "dask")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        first = proc.stderr.readline()  # the first batches are back: both workers are busy with the rest
+        # the first batches are back: both workers are busy with the rest
+        first = proc.stderr.readline()
         assert first.startswith("sweep: "), first + proc.stderr.read()
         workers = _workers(proc.pid)
         assert len(workers) == 2
@@ -56,7 +57,8 @@ def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
                 if conn.status == psutil.CONN_LISTEN:
                     assert conn.laddr.ip == "127.0.0.1"
         victim = workers[0]
-        victim.kill()  # SIGKILL mid-batch: its tasks go to the other worker (and the nanny's new one)
+        # SIGKILL mid-batch: its tasks go to the other worker (and the nanny's new one)
+        victim.kill()
         victim.wait(10)
         stdout, stderr = proc.communicate(timeout=120)
     finally:

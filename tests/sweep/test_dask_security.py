@@ -29,7 +29,8 @@ from distributed.security import Security
 from twin.errors import ConfigError
 from twin.sweep.cluster import connect, start_local
 
-DASHBOARD_PORT = 8787  # Dask's default HTTP port: its scheduler served /metrics, /health, /info there
+# Dask's default HTTP port: its scheduler served /metrics, /health, /info there
+DASHBOARD_PORT = 8787
 
 
 def _listening(pid: int) -> set[int]:
@@ -74,20 +75,23 @@ def test_only_the_clusters_own_client_gets_in(local):
     address = cluster.scheduler_address
     assert address.startswith("tls://127.0.0.1:")
     assert cluster.security.require_encryption
-    assert client.submit(lambda x: x * 2, 21).result(timeout=30) == 42  # the cluster's own client runs a task
+    # the cluster's own client runs a task
+    assert client.submit(lambda x: x * 2, 21).result(timeout=30) == 42
 
     plain = "tcp://" + address.removeprefix("tls://")
     stranger = Security.temporary()  # a certificate of its own: a different CA
     for label, target, kwargs in (("plain tcp", plain, {}), ("own Security.temporary()", address, {"security": stranger})):
         start = time.monotonic()
-        with pytest.raises(OSError):  # CommClosedError (reset by the TLS server), FatalCommClosedError (certificate)
+        # CommClosedError (reset by the TLS server), FatalCommClosedError (certificate)
+        with pytest.raises(OSError):
             Client(target, timeout=3, set_as_default=False, **kwargs)
         assert time.monotonic() - start < 5, label
 
     nannies = [w.address for w in cluster.workers.values()]
     workers = list(client.scheduler_info()["workers"])
     assert len(nannies) == len(workers) == 2
-    for target in [address, *nannies, *workers]:  # not one of the cluster's servers answers a stranger
+    # not one of the cluster's servers answers a stranger
+    for target in [address, *nannies, *workers]:
         assert target.startswith("tls://127.0.0.1:")
         _refused("tcp://" + target.removeprefix("tls://"))
         assert "TLS" in _refused(target, **stranger.get_connection_args("client"))
@@ -341,18 +345,21 @@ def test_a_cluster_with_the_users_certificates(tmp_path):
                 break
         assert done.stdout.split() == ["42", "1"], done.stdout + done.stderr
 
-        # without the certificates: connect() says what to configure, and the scheduler refuses them anyway
+        # without the certificates: connect() says what to configure, and the scheduler refuses them
+        # anyway
         bare = {k: v for k, v in env.items() if not k.startswith("DASK_DISTRIBUTED__COMM__TLS__")}
         done = subprocess.run([sys.executable, "-c", CLIENT, address], capture_output=True, text=True, env=bare,
                               timeout=60, check=False)
         assert done.returncode == 3 and "must name the cluster's CA" in done.stdout, done.stdout + done.stderr
         host, port = address.removeprefix("tls://").rsplit(":", 1)
-        anonymous = ssl.create_default_context(cafile=pki["ca"])  # trusts the CA, shows no certificate of its own
+        # trusts the CA, shows no certificate of its own
+        anonymous = ssl.create_default_context(cafile=pki["ca"])
         anonymous.check_hostname = False
         with pytest.raises(ssl.SSLError), socket.create_connection((host, int(port)), timeout=5) as raw, \
                 anonymous.wrap_socket(raw) as tls:
             tls.sendall(b"\0" * 8)
-            tls.recv(1)  # TLS 1.3: the server's refusal of the missing client certificate arrives here
+            # TLS 1.3: the server's refusal of the missing client certificate arrives here
+            tls.recv(1)
         assert "TLS" in _refused(address, **Security.temporary().get_connection_args("client"))
         _refused("tcp://" + address.removeprefix("tls://"))
     finally:

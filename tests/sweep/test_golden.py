@@ -60,7 +60,8 @@ def test_update_writes_the_summary_and_check_matches_it(golden, tmp_path, capsys
 def test_a_moved_statistic_is_exit_1_naming_it_and_by_how_much(golden, tmp_path, capsys):
     shutil.copy(golden / "small.toml", tmp_path / "moved.toml")
     summary = json.loads((golden / "small.summary.json").read_text())
-    ok = 0 if summary["ok"] > 6 else 12  # a golden's rate lies in its own interval (the summary is validated)
+    # a golden's rate lies in its own interval (the summary is validated)
+    ok = 0 if summary["ok"] > 6 else 12
     summary.update(ok=ok, failed=12 - ok, success_rate=ok / 12, wilson95=list(wilson(ok, 12)),
                    failures_by_reason={"suction on at (#, #), nothing sensed": 12 - ok} if ok < 12 else {})
     summary["placement_error_mm"]["p95"] -= 0.4
@@ -134,7 +135,8 @@ def test_a_tolerance_that_is_not_a_finite_number_ge_0_is_exit_2(golden, tmp_path
 
 
 def test_a_nan_in_the_golden_statistics_is_exit_2_not_within_tolerance(golden, tmp_path):
-    def moved_far(data):  # the case measured: p95 976 mm away and NaN in the golden read "within tolerance"
+    # the case measured: p95 976 mm away and NaN in the golden read "within tolerance"
+    def moved_far(data):
         data["placement_error_mm"].update(p50=math.nan, p95=math.nan, max=math.nan)
 
     definition = _copy(golden, tmp_path, summary=moved_far)
@@ -162,7 +164,8 @@ def test_a_nan_in_the_golden_statistics_is_exit_2_not_within_tolerance(golden, t
     (lambda d: d.update(failed=d["failed"] + 1), "ok + failed 13 is invalid; expected scenarios (12)"),
     (lambda d: d.update(placement_error_mm=[1, 2]), "placement_error_mm [1, 2] is invalid; expected an object"),
     (lambda d: d["placement_error_mm"].update(count=-1), "placement_error_mm.count -1 is invalid; expected a whole"),
-    (lambda d: d["placement_error_mm"].update(count=0), "placement_error_mm.p50 "),  # numbers with count 0
+    # numbers with count 0
+    (lambda d: d["placement_error_mm"].update(count=0), "placement_error_mm.p50 "),
     (lambda d: d["placement_error_mm"].update(p95=math.inf), "placement_error_mm.p95 Infinity is invalid"),
     (lambda d: d["placement_error_mm"].update(max="2"), "placement_error_mm.max '2' is invalid; expected a finite"),
     (lambda d: d["placement_error_mm"].update(p50=1e6), "expected p50 <= p95 <= max"),
@@ -171,7 +174,8 @@ def test_a_nan_in_the_golden_statistics_is_exit_2_not_within_tolerance(golden, t
 ])
 def test_a_malformed_golden_summary_is_one_line_naming_field_value_and_expectation(golden, edit, message):
     data = json.loads((golden / "small.summary.json").read_text())
-    assert check_summary(json.loads(json.dumps(data)), "g.summary.json") == data  # the real one is valid
+    # the real one is valid
+    assert check_summary(json.loads(json.dumps(data)), "g.summary.json") == data
     edit(data)
     with pytest.raises(ConfigError) as err:
         check_summary(json.loads(json.dumps(data)), "g.summary.json")
@@ -186,10 +190,12 @@ def test_a_malformed_golden_summary_is_exit_2_through_the_cli(golden, tmp_path, 
         if edit is None:
             (tmp_path / "listed.summary.json").write_text("[1, 2]")
         capsys.readouterr()
-        assert main(["check", str(definition)]) == 2  # tracebacks before (TypeError, ValueError, AttributeError)
+        # tracebacks before (TypeError, ValueError, AttributeError)
+        assert main(["check", str(definition)]) == 2
         out = capsys.readouterr().out
         assert f"{name}.summary.json': " in out and "is invalid; expected" in out
-    empty = json.loads((golden / "small.summary.json").read_text())  # no placements at all: count 0, nulls
+    # no placements at all: count 0, nulls
+    empty = json.loads((golden / "small.summary.json").read_text())
     empty["placement_error_mm"] = {"count": 0, "p50": None, "p95": None, "max": None}
     assert check_summary(empty, "e.summary.json") is empty
 
@@ -204,7 +210,8 @@ def test_a_datetime_in_params_is_one_line_exit_2(golden, tmp_path, capsys):
         assert str(err.value) == (f"sweep definition {str(definition)!r}: params.box holds {shown}; expected a finite "
                                   "number, an int64 whole number, true/false, text, or a list or table of them")
         capsys.readouterr()
-        assert main(["check", str(definition), "--update"]) == 2  # a TypeError traceback from json.dumps before
+        # a TypeError traceback from json.dumps before
+        assert main(["check", str(definition), "--update"]) == 2
         assert "params.box holds" in capsys.readouterr().out
     definition = _copy(golden, tmp_path, toml=lambda t: t.replace("seed = 3", "seed = 3\nrate_hz = true"))
     with pytest.raises(ConfigError, match="rate_hz = True is invalid; expected a number"):
@@ -222,7 +229,8 @@ def test_a_fifo_is_refused_not_waited_on(golden, tmp_path):
     os.mkfifo(tmp_path / "pipe.toml")
     with pytest.raises(ConfigError, match="'.*pipe.toml' is not a regular file"):
         split_paths([str(tmp_path / "pipe.toml")])
-    assert split_paths([str(tmp_path)]) == ([], [str(definition)])  # a folder's FIFO is no definition: skipped
+    # a folder's FIFO is no definition: skipped
+    assert split_paths([str(tmp_path)]) == ([], [str(definition)])
 
 
 def test_an_oversized_summary_is_refused(golden, tmp_path, capsys, monkeypatch):
@@ -242,7 +250,8 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     renames = []
     real_replace = os.replace
 
-    def replace(src, dst):  # the new summary is complete before it takes the golden's name; the old one intact
+    # the new summary is complete before it takes the golden's name; the old one intact
+    def replace(src, dst):
         if str(dst).endswith(".json"):  # the summary (the results beside it are Parquet)
             renames.append((os.path.basename(src), os.path.basename(dst), Path(src).read_text(),
                             Path(dst).read_text()))
@@ -255,7 +264,8 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     [(src, _, new_text, old_text)] = [r for r in renames if r[1] == "g.summary.json"]
     assert src.startswith("g.summary.json.") and src.endswith(".partial") and new_text == after and old_text == before
     assert oct((tmp_path / "g.summary.json").stat().st_mode & 0o777) == oct(0o640)
-    # nothing left beside it; the per-scenario results were written too (a paired golden from now on)
+    # nothing left beside it; the per-scenario results were written too (a paired golden from now
+    # on)
     assert sorted(f.name for f in tmp_path.iterdir()) == ["g.results.parquet", "g.summary.json", "g.toml"]
 
     def fail(src, dst):
@@ -266,7 +276,8 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     capsys.readouterr()
     assert main(["check", str(definition), "--update"]) == 2
     assert "g.summary.json': No space left on device" in capsys.readouterr().out
-    assert (tmp_path / "g.summary.json").read_text() == before  # untouched, and no partial file left
+    # untouched, and no partial file left
+    assert (tmp_path / "g.summary.json").read_text() == before
     assert sorted(f.name for f in tmp_path.iterdir()) == ["g.results.parquet", "g.summary.json", "g.toml"]
 
 
@@ -284,9 +295,11 @@ def test_a_folder_takes_only_its_sweep_definitions(golden, tmp_path, capsys):
     shutil.copytree(ROOT / "recordings" / "sweeps", tmp_path / "sweeps")
     (tmp_path / "sweeps" / "arm.toml").write_text(PROFILE)
     shipped = str(tmp_path / "sweeps" / "pick_place_jitter.toml")
-    assert split_paths([str(tmp_path / "sweeps")]) == ([], [shipped])  # the profile: skipped, silently
+    # the profile: skipped, silently
+    assert split_paths([str(tmp_path / "sweeps")]) == ([], [shipped])
     (tmp_path / "recs").mkdir()
-    (tmp_path / "recs" / "arm.toml").write_text(PROFILE)  # beside .mcap goldens: `twin check recordings`
+    # beside .mcap goldens: `twin check recordings`
+    (tmp_path / "recs" / "arm.toml").write_text(PROFILE)
     (tmp_path / "recs" / "a.mcap").write_bytes(b"")
     assert split_paths([str(tmp_path / "recs")]) == ([str(tmp_path / "recs")], [])
     with pytest.raises(ConfigError, match=r"^sweep definition '.*arm.toml' lacks task, scenarios, seed; expected a "
@@ -295,14 +308,16 @@ def test_a_folder_takes_only_its_sweep_definitions(golden, tmp_path, capsys):
     (tmp_path / "sweeps" / "old.toml").write_text('task = "pick_place"\nscenarios = 3\n')
     (tmp_path / "sweeps" / "old.summary.json").write_text("{}")
     with pytest.raises(ConfigError, match=r"old.toml' \(beside old.summary.json\) lacks seed; expected"):
-        split_paths([str(tmp_path / "sweeps")])  # a golden (its summary beside it) that is no definition: never skipped
+        # a golden (its summary beside it) that is no definition: never skipped
+        split_paths([str(tmp_path / "sweeps")])
     (tmp_path / "sweeps" / "old.toml").write_text("task = \n")
     with pytest.raises(ConfigError, match="old.toml' .* is not valid TOML"):
         split_paths([str(tmp_path / "sweeps")])
     (tmp_path / "sweeps" / "old.summary.json").unlink()
     assert split_paths([str(tmp_path / "sweeps")]) == ([], [shipped])
 
-    folder = tmp_path / "mixed"  # what the CLI does with it: the profile is not a golden, exit 0 (2 before)
+    # what the CLI does with it: the profile is not a golden, exit 0 (2 before)
+    folder = tmp_path / "mixed"
     folder.mkdir()
     _copy(golden, folder, "small")
     (folder / "arm.toml").write_text(PROFILE)

@@ -65,7 +65,8 @@ def test_bad_keys_and_distributions_are_refused_before_anything_runs(vary, messa
 
 def test_wilson_interval_matches_the_formula_and_stays_in_0_1():
     lo, hi = wilson(90, 100)
-    assert math.isclose(lo, 0.8256, abs_tol=1e-4) and math.isclose(hi, 0.9448, abs_tol=1e-4)  # textbook values
+    # textbook values
+    assert math.isclose(lo, 0.8256, abs_tol=1e-4) and math.isclose(hi, 0.9448, abs_tol=1e-4)
     assert wilson(0, 10)[0] == 0.0 and wilson(10, 10)[1] == 1.0 and wilson(0, 0) == (0.0, 1.0)
     assert 0 < wilson(0, 10)[1] < 0.35 and 0.65 < wilson(10, 10)[0] < 1
 

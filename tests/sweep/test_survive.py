@@ -164,7 +164,8 @@ def test_ctrl_c_stops_a_10m_scenario_sweep_with_its_results(tmp_path):
                    "cycles=1", "--save", "none", "--quiet"], out)
     _wait_rows(out / "journal.jsonl", 4, proc)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)  # a deadlock fails here (bench: sweep_scale times the stop)
+    # a deadlock fails here (bench: sweep_scale times the stop)
+    _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] and summary["planned"] == 10_000_000 and summary["scenarios"] >= 4

@@ -51,7 +51,8 @@ def test_one_or_two_jobs_give_the_same_results_and_failures_replay(tmp_path, cap
     assert main(["sweep", str(tmp_path / "one" / "sweep.toml"), "--only", str(i), "--out", str(tmp_path / "again")]) == 0
     assert f"scenario {i}: error: " in capsys.readouterr().out
     assert (tmp_path / "again" / "failures" / f"scenario-{i}.mcap").read_bytes() == golden
-    assert not (tmp_path / "again" / "results.parquet").exists()  # --only leaves a sweep's results alone
+    # --only leaves a sweep's results alone
+    assert not (tmp_path / "again" / "results.parquet").exists()
     assert main(["replay", str(tmp_path / "one" / "failures" / f"scenario-{i}.mcap")]) == 0
     assert main(["check", str(tmp_path / "one" / "failures" / f"scenario-{i}.mcap")]) == 0
 

@@ -27,10 +27,12 @@ from twin.tasks.pick_place import POINT_A_M
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
 MAX_ERROR_M = 0.002
-# What the twin gives now (README): at most 0.1 um of placement drift and 0.0002 deg of yaw per cycle.
+# What the twin gives now (README): at most 0.1 um of placement drift and 0.0002 deg of yaw per
+# cycle.
 DRIFT_LIMIT_M_PER_CYCLE = 1e-6  # ten times the measured drift
 YAW_LIMIT_RAD_PER_CYCLE = math.radians(0.002)
-# A task file that first carries the box off pick_place's pick point, so its first pick finds nothing.
+# A task file that first carries the box off pick_place's pick point, so its first pick finds
+# nothing.
 MOVED_BOX_TASK = """
 from twin.tasks import pick_place
 

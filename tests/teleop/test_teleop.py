@@ -75,18 +75,21 @@ def test_scripted_pick_and_place_on_the_key_grid_replays_exactly(robot, tmp_path
     kinds = [e.kind for e in rec.events]
     assert kinds.count("attach") == 1 and kinds.count("release") == 1 and "key_unknown" not in kinds
     box = session.twin.frame.object_poses[0]
-    # The box lands where the grid puts it (within 2 mm of the prediction: suction sensing and the drop)
-    # and within 5 mm of the place point.
+    # The box lands where the grid puts it (within 2 mm of the prediction: suction sensing and the
+    # drop) and within 5 mm of the place point.
     assert math.dist(box[:2], predicted_m) < 0.002
     assert math.dist(box[:2], POINT_B_M) < 0.005
     assert abs(box[2] - 0.025) < 1e-3 and rec.frames.held_body[-1] == -1
-    # every key press is one "key" Command stamped with the step it took effect at, one interval apart
+    # every key press is one "key" Command stamped with the step it took effect at, one interval
+    # apart
     tokens = script.split()
     keys = [c for c in rec.commands if c.kind == "key"]
     assert [c.args["key"] for c in keys] == [t for t in tokens if t != "wait"]
     assert [c.step for c in keys] == [STEPS_PER_KEY * i for i, t in enumerate(tokens) if t != "wait"]
-    assert len(rec.frames) == STEPS_PER_KEY * len(tokens) + 1  # the interval runs once more after the last key
-    # the file holds the session (config with the key map, every frame and command) and `twin replay` matches it
+    # the interval runs once more after the last key
+    assert len(rec.frames) == STEPS_PER_KEY * len(tokens) + 1
+    # the file holds the session (config with the key map, every frame and command) and `twin
+    # replay` matches it
     loaded = load(path)
     assert loaded.finalized and loaded.run["source"] == "teleop" and loaded.config.keymap == rec.config.keymap
     assert loaded.frames.equals(rec.frames) and loaded.commands == rec.commands
@@ -98,7 +101,8 @@ def test_unknown_key_is_ignored_shown_and_replayed():
     session, rec = _scripted("seed001", "left z 3")
     unknown = [e for e in rec.events if e.kind == "key_unknown"]
     assert len(unknown) == 1 and unknown[0].step == 120 and unknown[0].data == {"key": "z"}
-    assert rec.frames.joint_target[240].tolist() == rec.frames.joint_target[239].tolist()  # nothing moved for z
+    # nothing moved for z
+    assert rec.frames.joint_target[240].tolist() == rec.frames.joint_target[239].tolist()
     screen = "\n".join(status_lines(session))
     assert "last keys left z(unknown) 3" in screen and "key_unknown" in screen and "'z' is not in the key map" in screen
     assert "1 not in the key map" in summary_lines(session)[0]
@@ -200,7 +204,8 @@ def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
 def test_a_keys_run_prints_how_far_the_box_ended_from_the_place_point_as_the_readme_says(robot):
     readme = (Path(__file__).resolve().parents[2] / "docs/how-to/teleop.md").read_text()
     keys = next(x for x in readme.splitlines() if x.startswith(f"twin teleop --robot {robot} --keys")).split('"')[1]
-    said = re.search(rf"{robot}'s .*?(\d+\.\d) mm", readme, re.DOTALL).group(1)  # the README's figure for it
+    # the README's figure for it
+    said = re.search(rf"{robot}'s .*?(\d+\.\d) mm", readme, re.DOTALL).group(1)
     out = _cli("--robot", robot, "--keys", keys)
     assert out.returncode == 0, out.stderr
     assert f", {said} mm from the place point (-0.3, -0.55) in x and y" in out.stdout

@@ -167,7 +167,8 @@ def test_seed000_screen_ctrl_c_ends_and_keeps_the_recording(terminal, tmp_path):
     cmd = f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot seed000 --record {shlex.quote(str(record))}"
     term = terminal(cmd)
     text = term.wait_for("the start screen", lambda s: "last keys (none yet)" in s)
-    assert "quit: Esc, Ctrl-C, Ctrl-D" in text and "q  elbow -1 deg" in text  # q is the elbow here, not quit
+    # q is the elbow here, not quit
+    assert "quit: Esc, Ctrl-C, Ctrl-D" in text and "q  elbow -1 deg" in text
     term.send("q", "q", "e", "Up", "d")
     text = term.wait_for("the keys", lambda s: "last keys q q e up(unknown) d" in s and arrived(s))
     assert _joints(text)[1][:2] == (1.0, -1.0)

@@ -122,12 +122,14 @@ def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_pa
     keyboard = XKeyboard(xvfb)
     try:
         deadline = time.monotonic() + 30
-        # the window is up and the session is stepping (written to NAME.partial until it is finalized)
+        # the window is up and the session is stepping (written to NAME.partial until it is
+        # finalized)
         while keyboard.windows() == 0 or not _grown(partial_path(record)):
             assert time.monotonic() < deadline and twin.poll() is None, "no PyBullet window or no steps"
             time.sleep(0.05)
         keyboard.point_at(300, 300)  # no window manager: keys go to the window under the pointer
-        # distinct keys in key-code order: even if some wait in PyBullet's queue, their order is kept
+        # distinct keys in key-code order: even if some wait in PyBullet's queue, their order is
+        # kept
         for keysym, shift in (("a", True), ("k", False), ("z", False), ("Left", False)):
             keyboard.tap(keysym, shift=shift, hold_s=0.3 if shift else 0.1)
             time.sleep(0.4)
@@ -141,7 +143,8 @@ def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_pa
     assert twin.returncode == 0, err[-2000:]
     summary = next(line for line in out.splitlines() if line.startswith("teleop (gui)"))
     assert summary.startswith("teleop (gui) robot mtb: 4 key presses (2 not in the key map)"), summary
-    assert summary.endswith(("ended by esc", "ended by window closed")), summary  # whoever saw Esc first
+    # whoever saw Esc first
+    assert summary.endswith(("ended by esc", "ended by window closed")), summary
     rec = load(record)
     assert rec.finalized and rec.run["params"]["mode"] == "gui"
     assert [c.args["key"] for c in rec.commands] == ["A", "k", "z", "left"]
@@ -183,4 +186,5 @@ def test_the_window_opens_on_the_arm_with_the_debug_panels_hidden(xvfb, tmp_path
     rgb = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
     arm = (r > 180) & (g < 150) & (b > 15) & (b < 100)  # the links' orange, not the floor's ochre
-    assert arm.mean() > 0.003, f"the arm covers {arm.mean():.2%} of the window"  # 0.02 % on the default view
+    # 0.02 % on the default view
+    assert arm.mean() > 0.003, f"the arm covers {arm.mean():.2%} of the window"

@@ -20,8 +20,9 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_only_twin_prints_the_baseline_and_the_twins_ratio():
-    # medians of 3: one 2000-step sample each of the idle and the moving scene could be spoiled by a busy
-    # moment of the shared machine (the idle one measured slower than the moving one in 1 of 6 runs)
+    # medians of 3: one 2000-step sample each of the idle and the moving scene could be spoiled by a
+    # busy moment of the shared machine (the idle one measured slower than the moving one in 1 of 6
+    # runs)
     done = _bench("--only", "twin", "--repeats", "3", "--physics-steps", "2000")
     assert done.returncode == 0, done.stderr
     rows = {tuple(c.strip() for c in line.split("|")[:2]): line.split("|")[2].strip()
@@ -30,11 +31,13 @@ def test_only_twin_prints_the_baseline_and_the_twins_ratio():
     assert physics > 0
     rate, ratio = re.match(r"([\d,]+) \(([\d.]+)x idle",
                            rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")]).groups()
-    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006  # measured against that baseline
+    # measured against that baseline
+    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006
     motion = float(rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")].split()[0]
                    .replace(",", ""))
     assert physics > motion > 0  # a moving arm with contacts costs more than an idle one
-    assert not any(section in ("record", "diff", "remote") for section, _ in rows)  # --only selected
+    # --only selected
+    assert not any(section in ("record", "diff", "remote") for section, _ in rows)
 
 
 def test_list_names_every_section_and_unknown_sections_are_refused():
@@ -57,7 +60,8 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
                 "record_mcap_writer_cpu_us_per_frame", "record_rrd_writer_cpu_us_per_frame",
                 "record_both_vs_reads", "record_both_vs_naive", "record_reads_vs_motion"):
         assert isinstance(data[key], float) and data[key] > 0, key
-    # the record section pairs each repeat with its own sample of the same motion's baseline (one repeat: that one)
+    # the record section pairs each repeat with its own sample of the same motion's baseline (one
+    # repeat: that one)
     assert abs(data["record_both_vs_motion"] - data["record_both_steps_per_s"] / data["record_motion_steps_per_s"]) < 1e-5
     assert abs(data["twin_vs_motion"] - data["twin_steps_per_s"] / data["motion_physics_steps_per_s"]) < 1e-5
     # the two user baselines are paired with twin + MCAP + Rerun the same way

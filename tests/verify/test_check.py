@@ -60,7 +60,8 @@ def test_rerunning_the_same_task_matches_exactly(files, capsys):
     d, _ = files
     code, out, err = twin(capsys, "diff", d / "golden.mcap", d / "again.mcap")
     assert (code, err) == (0, "")
-    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out  # the default, on one machine
+    # the default, on one machine
+    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out
     assert (d / "golden.mcap").read_bytes() == (d / "again.mcap").read_bytes()
 
 

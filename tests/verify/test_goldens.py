@@ -98,7 +98,8 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     assert "step 400" in failed.stdout.str()
     assert (goldens / "one_cycle.obtained.mcap").exists() and (goldens / "one_cycle.report.md").exists()
     monkeypatch.setenv("TWIN_TOL", "outcome")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)  # lands within 5 mm
+    # lands within 5 mm
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
     monkeypatch.delenv("TWIN_TOL")
 
     pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
@@ -126,9 +127,11 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
     first.assert_outcomes(failed=1)
     assert "this run cannot become it: its task ended error" in first.stdout.str() and not golden.exists()
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)  # still not written
+    # still not written
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     monkeypatch.delenv("TWIN_FAIL")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)  # written from the ok run
+    # written from the ok run
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     assert golden.exists()
     monkeypatch.setenv("TWIN_FAIL", "1")
     update = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens")

@@ -67,7 +67,8 @@ def recs(tmp_path_factory):
 def test_replay_matches_exactly_for_every_source(recs, capsys, tmp_path, kind):
     code, out, err = twin(capsys, "replay", recs / f"{kind}.mcap", "--record", tmp_path / "new.mcap")
     assert (code, err) == (0, ""), out
-    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out  # the default, on one machine
+    # the default, on one machine
+    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out
     original, new = load(recs / f"{kind}.mcap"), load(tmp_path / "new.mcap")
     # the replay's run is the original's, and says which file it replays
     assert new.run == {**original.run, "replay_of": {"file": f"{kind}.mcap", "sha256": new.run["replay_of"]["sha256"]}}

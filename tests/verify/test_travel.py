@@ -68,7 +68,7 @@ def test_the_committed_goldens_pass_the_default_check_on_other_machines(machine)
     assert f"{len(GOLDENS)} match" in done.stdout
 
 
-# -- sensitivity: a user's task file, recorded on one machine, changed, checked on another -------------------------
+# -- sensitivity: a user's task file, recorded on one machine, changed, checked on another ---------
 
 TASK = """
 def run(twin, target_x_m=0.2, late_steps=0, pause_s=0.5):
@@ -113,7 +113,8 @@ def test_a_changed_user_task_fails_the_default_check_at_its_onset(user_golden, t
     name, value = CHANGES[change].split("=")
     source = (d / "my_task.py").read_text()
     (d / "my_task.py").write_text(re.sub(rf"{name}=[0-9.]+", f"{name}={value}", source, count=1))
-    changed = twin_cli("run", d / "my_task.py", "--record", d / "changed.mcap")  # here, for the onset
+    # here, for the onset
+    changed = twin_cli("run", d / "my_task.py", "--record", d / "changed.mcap")
     assert changed.returncode == 0, changed.stderr
     onset = _first_change(load(d / "golden.mcap"), load(d / "changed.mcap"))
     done = twin_cli("check", "-v", d / "golden.mcap", env=MACHINES[machine])
@@ -135,12 +136,13 @@ def _first_change(a, b, above: float = 0.0) -> int:
         rows = np.flatnonzero(moved.reshape(n, -1).any(axis=1))
         if len(rows):
             steps.append(int(a.frames.step[rows[0]]))
-    acting_a, acting_b = ([c for c in r.commands if c.kind != "event"] for r in (a, b))  # annotations apart
+    # annotations apart
+    acting_a, acting_b = ([c for c in r.commands if c.kind != "event"] for r in (a, b))
     diff = [x.step for x, y in zip(acting_a, acting_b, strict=False) if x != y]
     return min(steps + diff[:1])
 
 
-# -- sensitivity: a configuration change, run on another machine, diffed against a golden made here ---------------
+# -- sensitivity: a configuration change, run on another machine, diffed against a golden here ---
 
 CONFIG_CHANGES = {
     "1 mm link": "replace(BASE, profile=replace(BASE.profile, link1_m=BASE.profile.link1_m + 0.001))",
@@ -174,7 +176,8 @@ def config_golden(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("machine", ["no-fma libm"])  # BLAS kernels give the same bits (the exact checks above)
+# BLAS kernels give the same bits (the exact checks above)
+@pytest.mark.parametrize("machine", ["no-fma libm"])
 @pytest.mark.parametrize("change", list(CONFIG_CHANGES))
 def test_a_changed_configuration_run_elsewhere_fails_the_default_diff(config_golden, tmp_path, machine, change):
     env = MACHINES[machine]
@@ -185,7 +188,8 @@ def test_a_changed_configuration_run_elsewhere_fails_the_default_diff(config_gol
         return
     assert done.returncode == 1, done.stdout + done.stderr
     _record(CONFIG_CHANGES[change], tmp_path / "here.mcap", {})
-    # a change that starts below tight's 1e-9 (1 % mass moves the resting box by 1e-17 m) shows where it passes it
+    # a change that starts below tight's 1e-9 (1 % mass moves the resting box by 1e-17 m) shows
+    # where it passes it
     onset = _first_change(load(config_golden), load(tmp_path / "here.mcap"), above=1e-9)
     step = int(re.search(r"^first divergence: step (\d+)", done.stdout, re.MULTILINE).group(1))
     assert step <= onset, done.stdout

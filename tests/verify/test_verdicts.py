@@ -119,7 +119,8 @@ def test_a_one_step_late_signal_is_a_mismatch_whichever_side_is_decimated(late_r
 def test_the_report_names_the_first_command_difference_and_the_likely_cause(late_runs, capsys, tmp_path):
     d = late_runs
     signal = next(c for c in load(d / "on_time_r1.mcap").commands if c.kind == "signal")
-    # decimated and with the command check switched off, the late pad is invisible: what the issue found
+    # decimated and with the command check switched off, the late pad is invisible: what the issue
+    # found
     for golden, candidate in (("on_time_r4", "late_r1"), ("on_time_r1", "late_r7")):
         assert twin(capsys, "diff", d / f"{golden}.mcap", d / f"{candidate}.mcap", "--tol", "commands=inf")[0] == 0
     # every frame kept, commands off: the frames diverge one step later; the report names the cause
@@ -132,7 +133,8 @@ def test_the_report_names_the_first_command_difference_and_the_likely_cause(late
     # commands on: the command sequence is the first divergence, and the frames' follows it
     code, out, _ = twin(capsys, "diff", d / "on_time_r4.mcap", d / "late_r4.mcap")
     assert code == 1 and f"first divergence: step {signal.step} " in out and "commands.sequence" in out
-    acting = [c for c in load(d / "on_time_r4.mcap").commands if c.kind != "event"]  # annotations apart
+    # annotations apart
+    acting = [c for c in load(d / "on_time_r4.mcap").commands if c.kind != "event"]
     assert f"the golden's command #{acting.index(signal)} is {cause}; the candidate's is step {signal.step + 1} " \
         "signal(" in out
 
@@ -184,7 +186,7 @@ def test_outcome_fails_a_task_that_now_raises_with_the_same_poses(tmp_path, caps
     assert "expected 'ok', actual 'error'" in out
 
 
-# -- 5. check --update never blesses a crash --------------------------------------------------------
+# -- 5. check --update never blesses a crash -------------------------------------------------------
 def test_check_update_leaves_a_golden_untouched_when_its_task_now_raises(tmp_path, capsys):
     task = tmp_path / "my_task.py"
     task.write_text(QUIET_TASK)
@@ -215,7 +217,8 @@ def test_a_run_whose_task_raised_is_finalized_as_error_even_when_the_caller_goes
     (tmp_path / "crash.py").write_text(CRASHING_TASK)
     path = tmp_path / "x.mcap"
     run = {"source": "task", "task": "crash.py", "params": {"cycles": 1}}
-    with open_recorders(TwinConfig(), run, mcap_path=path) as sinks:  # record_task records, not raises
+    # record_task records, not raises
+    with open_recorders(TwinConfig(), run, mcap_path=path) as sinks:
         record_task(TwinConfig(), str(tmp_path / "crash.py"), {"cycles": 1}, sinks=sinks)
     assert load(path).meta["twin.finalized"]["outcome"] == "error"
 
@@ -231,7 +234,8 @@ def test_a_user_task_golden_checks_from_root_and_from_a_copy_of_the_project(tmp_
     assert done.returncode == 0, done.stderr
     rec = load(project / "recordings" / "mine.mcap")
     assert rec.run["task"] == "../tasks/my_task.py" and len(rec.run["task_sha256"]) == 64
-    assert str(tmp_path).encode() not in (project / "recordings" / "mine.mcap").read_bytes()  # no absolute path
+    # no absolute path
+    assert str(tmp_path).encode() not in (project / "recordings" / "mine.mcap").read_bytes()
     done = cli("check", project / "recordings" / "mine.mcap", cwd="/")
     assert done.returncode == 0 and "1 match" in done.stdout, done.stdout + done.stderr
     copy = tmp_path / "clone"
@@ -256,7 +260,8 @@ def test_a_user_robot_golden_checks_from_another_folder_and_stores_no_absolute_p
     data = (project / "recordings" / "user.mcap").read_bytes()
     assert str(tmp_path).encode() not in data
     urdf = Path(load(project / "recordings" / "user.mcap").config.profile.urdf_path)
-    assert urdf.parent == project / "robot" and urdf.is_file()  # resolved from the recording's folder
+    # resolved from the recording's folder
+    assert urdf.parent == project / "robot" and urdf.is_file()
     shutil.copytree(project, tmp_path / "clone")
     done = cli("check", tmp_path / "clone" / "recordings", cwd="/")
     assert done.returncode == 0 and "1 match" in done.stdout, done.stdout + done.stderr

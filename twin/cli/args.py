@@ -103,7 +103,8 @@ def whole_number(minimum: int = 1) -> Callable[[str], int]:
 
     def parse(text: str) -> int:
         try:
-            value = int(text) if len(text) <= 24 else INT64_MAX + 1  # no int() of thousands of digits
+            # no int() of thousands of digits
+            value = int(text) if len(text) <= 24 else INT64_MAX + 1
         except ValueError:
             value = minimum - 1
         if value < minimum:

@@ -126,10 +126,12 @@ def cmd_check(args: argparse.Namespace) -> int:
         run_many = executor.map_unordered if args.executor == "dask" else None
         outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=progress,
                              allow_error=args.allow_error, run_many=run_many) if paths else []
-        for definition in sweeps:  # statistical goldens: each sweep spread over the executor's workers
+        # statistical goldens: each sweep spread over the executor's workers
+        for definition in sweeps:
             outcomes.append(check_sweep(definition, executor, update=args.update))
             progress(outcomes[-1])
-        for definition in searches:  # a failure found by `twin search`: does it still fail that way?
+        # a failure found by `twin search`: does it still fail that way?
+        for definition in searches:
             outcomes.append(check_search(definition, update=args.update))
             progress(outcomes[-1])
     finally:

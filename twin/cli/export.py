@@ -73,7 +73,8 @@ def _export_table(args: argparse.Namespace) -> int:
     out = check_output(args.output, SUFFIXES[args.format], inputs=args.files, option="output")
     table = args.table or "frames"
     rec = load(args.files[0])
-    check_commands(rec)  # the frames table reads them (suction.command); a malformed one is exit 2 as in replay
+    # the frames table reads them (suction.command); a malformed one is exit 2 as in replay
+    check_commands(rec)
     rows = write_table(rec, out, args.format, table)
     print(f"wrote {out}: {rows} rows ({table})")
     return 0
@@ -85,7 +86,8 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     _refuse(args, ("--table",), "--format parquet and csv")
     if args.fps is None:
         raise ConfigError("--format lerobot needs --fps N (a whole number of frames per second)")
-    if args.fps > MAX_FPS:  # before loading anything; each recording's own physics rate is checked once loaded
+    # before loading anything; each recording's own physics rate is checked once loaded
+    if args.fps > MAX_FPS:
         raise ConfigError(f"--fps {args.fps} is above {MAX_FPS}, the fastest physics rate a recording has; expected "
                           "at most the recordings' physics rate (240 by default)")
     written, sources = export_lerobot(args.files, Path(args.output), args.fps, mode=args.episodes or "recording",

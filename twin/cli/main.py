@@ -45,7 +45,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     config = twin_config(args)
     params = run_params(fn, args)
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
-    run = task_run(args.task, params, mcap_path)  # a task file by its path relative to the recording
+    # a task file by its path relative to the recording
+    run = task_run(args.task, params, mcap_path)
     if args.timeout is not None:
         run["timeout_s"] = args.timeout  # twin check re-runs the task with the same bound
     summary = _Summary()
@@ -57,7 +58,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate,
                             engine=engine_versions()) as sinks:
-            twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])  # the limit last: recorders see its frame
+            # the limit last: recorders see its frame
+            twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])
             wall0 = time.perf_counter()
             try:
                 run_task(twin, fn, params)
@@ -201,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as done:  # --help (0) or a usage error (2), already printed
         return done.code if isinstance(done.code, int) else 2
     try:
-        with stop_signals_raise():  # SIGTERM and SIGHUP unwind like Ctrl-C: recordings are finalized
+        # SIGTERM and SIGHUP unwind like Ctrl-C: recordings are finalized
+        with stop_signals_raise():
             return args.func(args)
     except TwinError as err:
         print(f"twin: error: {err}", file=sys.stderr)
@@ -213,7 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"twin: stopped by {stop.name}", file=sys.stderr)
         return stop.exit_code
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading: what the shell
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # reports for a program SIGPIPE ended
+        # reports for a program SIGPIPE ended
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return BROKEN_PIPE_EXIT
 
 

@@ -12,7 +12,8 @@ from pathlib import Path
 from twin.cli.args import add_param_option, params_dict, whole_number
 from twin.errors import ConfigError, TwinError
 
-NO_RESULT = ("worker died", "killed: ", "timed out: ")  # a scenario that gave no result (twin.sweep.guard)
+# a scenario that gave no result (twin.sweep.guard)
+NO_RESULT = ("worker died", "killed: ", "timed out: ")
 
 
 class BelowThreshold(TwinError):
@@ -305,7 +306,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if done.stopped_by is not None:
         print(f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` runs the rest",
               file=sys.stderr)
-        raise done.stopped_by  # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
+        # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
+        raise done.stopped_by
     if args.fail_under is not None and args.only is None and summary["success_rate"] < args.fail_under:
         raise BelowThreshold(f"success rate {summary['success_rate']:.4f} is under --fail-under {args.fail_under:g}")
     return 0
@@ -369,7 +371,8 @@ def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> 
                 lines.append(f"failures recorded in {out / 'failures'}/ (e.g. twin replay "
                              f"{out / 'failures' / f'scenario-{recorded[0]}.mcap'})")
         lost = [r for r in done.rows if r["outcome"] != "ok" and r["error"].startswith(NO_RESULT)]
-        for r in lost[:5]:  # the scenarios that killed their process or hung: named, with their recording
+        # the scenarios that killed their process or hung: named, with their recording
+        for r in lost[:5]:
             cut = out / "failures" / f"scenario-{r['scenario']}.mcap.partial"
             hint = f"; twin recover {cut.with_suffix('')} restores its recording" if cut.exists() else ""
             lines.append(f"scenario {r['scenario']}: {r['error']}{hint}")

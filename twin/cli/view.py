@@ -36,7 +36,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         frames = viewer.mcap_to_rrd(args.file, args.rrd)
         print(f"wrote {args.rrd}: {frames} frames")
         return 0
-    # Ctrl-C, SIGTERM and SIGHUP unwind through here (twin.signals): the viewer is stopped, the folder removed.
+    # Ctrl-C, SIGTERM and SIGHUP unwind through here (twin.signals): the viewer is stopped, the
+    # folder removed.
     with tempfile.TemporaryDirectory(prefix="twin-view-") as tmp:
         rrd = viewer.as_rrd(args.file, tmp)  # a bad file is reported before a missing display
         if args.screenshot:

@@ -56,7 +56,8 @@ class Divergence:
     difference: float
     tolerance: float
     unit: str
-    floor: float = 0.0  # the measured noise floor there (times its margin); 0 when none was measured
+    # the measured noise floor there (times its margin); 0 when none was measured
+    floor: float = 0.0
 
     @property
     def name(self) -> str:
@@ -74,7 +75,8 @@ class FieldStat:
     rms: float
     steps_over: int  # steps where some element is over tolerance
     first: Divergence | None = None
-    floor: float = 0.0  # the largest noise floor allowed (times its margin); 0 when none was measured
+    # the largest noise floor allowed (times its margin); 0 when none was measured
+    floor: float = 0.0
     identical: bool = False  # every value bit for bit the same
 
     @property
@@ -108,9 +110,12 @@ class DiffResult:
     notes: list[str] = field(default_factory=list)
     first: Divergence | None = None
     first_command: Divergence | None = None  # the first difference in the command sequences
-    first_annotation: Divergence | None = None  # the first difference in what the tasks said (event Commands)
-    likely_cause: str = ""  # the golden's last command at or before the first divergence acting on its field
-    events_compared: bool = True  # False: the tolerances pair no events (outcome); counts still compare
+    # the first difference in what the tasks said (event Commands)
+    first_annotation: Divergence | None = None
+    # the golden's last command at or before the first divergence acting on its field
+    likely_cause: str = ""
+    # False: the tolerances pair no events (outcome); counts still compare
+    events_compared: bool = True
     floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
 
     @property
@@ -492,7 +497,8 @@ def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns
     if tolerance == INF:
         return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
     names = list(dict.fromkeys([c.name for c in golden.config.cameras] + [c.name for c in candidate.config.cameras]))
-    rows: list[tuple[int, str, float, str, str]] = []  # (step, "camera #index", error, golden's, candidate's)
+    # (step, "camera #index", error, golden's, candidate's)
+    rows: list[tuple[int, str, float, str, str]] = []
     for name in names:
         g, c = golden.cameras.get(name), candidate.cameras.get(name)
         g_steps = g.step if g is not None else np.zeros(0, dtype=np.int64)

@@ -9,7 +9,8 @@ from twin.model.types import Event
 
 @dataclass
 class EventDiff:
-    kind: str  # "missing" (in golden only), "extra" (in candidate only), "moved" (outside the window)
+    # "missing" (in golden only), "extra" (in candidate only), "moved" (outside the window)
+    kind: str
     event_kind: str
     body: str
     expected_step: int | None

@@ -33,7 +33,8 @@ class NoiseFloor:
     margin: float
     steps: np.ndarray
     envelopes: dict[str, np.ndarray]
-    scalars: dict[str, float] = field(default_factory=dict)  # final.*, run.length, counts.* (pictures: tolerance only)
+    # final.*, run.length, counts.* (pictures: tolerance only)
+    scalars: dict[str, float] = field(default_factory=dict)
     commands: float = 0.0
     commands_split_step: int | None = None
     event_shift_steps: int = 0

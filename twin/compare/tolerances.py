@@ -43,7 +43,8 @@ DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.
                       "outcome.task"})
 COUNTED_EVENTS = ("attach", "release", "break", "cycle_failed")
 _ALWAYS = {"outcome.task": 0.0, **{f"counts.{kind}": 0.0 for kind in COUNTED_EVENTS}}
-IMAGE_TIGHT_LEVELS = 0.5  # tight: a picture may differ by half a level on average (another CPU's rounding)
+# tight: a picture may differ by half a level on average (another CPU's rounding)
+IMAGE_TIGHT_LEVELS = 0.5
 POSITION_M = 2.5e-4  # physical: a clear margin below 1 mm, so a 1 mm change always shows
 
 _ALL_ZERO = {name: 0.0 for name in FIELDS}
@@ -64,14 +65,17 @@ _PHYSICAL = _ALWAYS | {
     "final.position": POSITION_M,
     "final.orientation": 1e-3,
     "run.length": 0.0,
-    "commands.sequence": INF,  # physically equal runs may be driven by other but equivalent commands
+    # physically equal runs may be driven by other but equivalent commands
+    "commands.sequence": INF,
     "commands.annotations": INF,
-    "images.pixels": INF,  # pictures of physically equal runs differ where the robot differs by a pixel
+    # pictures of physically equal runs differ where the robot differs by a pixel
+    "images.pixels": INF,
 }
 # outcome: where the objects ended, whether the task ended ok, how often the pad took and let go
 _OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
 
-# tight: 1e-9 on every number (frames of another libm stayed within it over 44k steps), commands' numbers too
+# tight: 1e-9 on every number (frames of another libm stayed within it over 44k steps), commands'
+# numbers too
 _TIGHT = {name: 0.0 if name in DISCRETE - {"commands.sequence", "commands.annotations"} or name == "run.length" or name in _ALWAYS else 1e-9
           for name in FIELDS} | {"images.pixels": IMAGE_TIGHT_LEVELS}
 # preset -> (field tolerances, event window in steps; None: events are not paired)
@@ -96,7 +100,8 @@ class Tolerances:
     values: dict[str, float] = field(default_factory=lambda: dict(_ALL_ZERO))
     event_window_steps: int | None = 0
     overrides: tuple[str, ...] = ()
-    noise_margin: float | None = None  # judge against the measured noise floor times this (None: do not)
+    # judge against the measured noise floor times this (None: do not)
+    noise_margin: float | None = None
 
     @staticmethod
     def from_preset(name: str) -> Tolerances:

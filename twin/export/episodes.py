@@ -26,8 +26,10 @@ from twin.model.recording import Recording
 
 _CYCLE_PHASE = re.compile(r"cycle (\d+):")
 NS_PER_S = 1_000_000_000
-MAX_FPS = 10_000  # the fastest physics rate a twin runs at (model.config: time steps of 1e5..1e8 ns)
-MAX_DATASET_FRAMES = 2_000_000  # one export: 2.3 h at 240 fps, 18.5 h at 30 fps (about 400 MB while written)
+# the fastest physics rate a twin runs at (model.config: time steps of 1e5..1e8 ns)
+MAX_FPS = 10_000
+# one export: 2.3 h at 240 fps, 18.5 h at 30 fps (about 400 MB while written)
+MAX_DATASET_FRAMES = 2_000_000
 
 
 @dataclass(frozen=True)

@@ -94,7 +94,8 @@ def check_finite(episodes: list[Episode]) -> None:
         f, rows = ep.rec.frames, ep.rows
         state_of, action_of = state_names(ep.rec)
         for values, names in ((f.joint_q[rows], state_of), (f.joint_target[rows], action_of)):
-            with np.errstate(over="ignore"):  # 1e300 is finite, but not as the float32 the dataset holds
+            # 1e300 is finite, but not as the float32 the dataset holds
+            with np.errstate(over="ignore"):
                 bad = np.argwhere(~np.isfinite(values.astype(np.float32)))
             if bad.size:
                 k, j = (int(v) for v in bad[0])
@@ -197,7 +198,8 @@ def _start_time(pid: int) -> float | None:
             fields = f.read().rsplit(b")", 1)[1].split()
         with open("/proc/stat", "rb") as f:
             boot = next(int(line.split()[1]) for line in f if line.startswith(b"btime "))
-        return boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22, starttime, in clock ticks
+        # field 22, starttime, in clock ticks
+        return boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")
     except (OSError, ValueError, IndexError, StopIteration):
         return None
 
@@ -235,7 +237,8 @@ def _write_data(root: Path, episodes: list[Episode], tasks: list[str], task_inde
 
     path = root / DATA_PATH.format(chunk_index=0, file_index=0)
     path.parent.mkdir(parents=True)
-    commands = {id(ep.rec): suction_command(ep.rec) for ep in episodes}  # once per recording, not per cycle
+    # once per recording, not per cycle
+    commands = {id(ep.rec): suction_command(ep.rec) for ep in episodes}
     ep_rows, ep_stats, parts, writer, start = [], [], [], None, 0
     for e, (ep, task) in enumerate(zip(episodes, tasks, strict=True)):
         n = len(ep)
@@ -306,9 +309,11 @@ def _camera_images(episodes: list[Episode], name: str, fps: int, shape: tuple[in
         thumbs, shown, image = [], -1, None
         for k, i in enumerate(picks):
             if i != shown:
-                image, shown = track.rgb(i), i  # (height, width, 3) as configured, or a RecordingError
+                # (height, width, 3) as configured, or a RecordingError
+                image, shown = track.rgb(i), i
             if k in sampled:
-                thumbs.append(image[::stride, ::stride].copy())  # a copy: the picture itself is not kept
+                # a copy: the picture itself is not kept
+                thumbs.append(image[::stride, ::stride].copy())
             yield image
         stats_out.append(sampled_image_stats(thumbs))
 
@@ -396,7 +401,8 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
         os.replace(out, old / out.name)
         os.replace(tmp, out)
         shutil.rmtree(old, ignore_errors=True)
-    elif out.exists():  # an empty folder (perhaps the current one): filled in place, meta/ (info.json) last
+    # an empty folder (perhaps the current one): filled in place, meta/ (info.json) last
+    elif out.exists():
         for name in sorted(p.name for p in tmp.iterdir() if p.name != "meta") + ["meta"]:
             os.replace(tmp / name, out / name)
         tmp.rmdir()

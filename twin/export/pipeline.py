@@ -38,7 +38,8 @@ def export_lerobot(paths: list[str], out: Path, fps: int, *, mode: str = "record
     when --verify left every recording out: then nothing is written) and every source, verified or not."""
     check_folder(out, paths, overwrite)
     sources = [load_source(path) for path in paths]
-    for source in sources:  # a damaged file is exit 2 before any work, also before --verify's replay
+    # a damaged file is exit 2 before any work, also before --verify's replay
+    for source in sources:
         check_recording(source.rec, fps)
     if verify_first:
         for source in sources:

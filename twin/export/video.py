@@ -40,12 +40,15 @@ def check_size(name: str, width_px: int, height_px: int) -> None:
 def encode_mp4(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int) -> int:
     """Encode (H, W, 3) uint8 RGB frames into an MP4 file at fps; returns the number of frames."""
     av = require_av()
-    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 prints its configuration to stderr unless told not to
+    # SVT-AV1 prints its configuration to stderr unless told not to
+    os.environ.setdefault("SVT_LOG", "1")
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
         return _encode(av, path, frames, fps, width_px, height_px)
-    finally:  # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
-        os.sched_setscheduler(0, policy, param)  # later would inherit it (a spinning one starved the machine)
+    # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
+    finally:
+        # later would inherit it (a spinning one starved the machine)
+        os.sched_setscheduler(0, policy, param)
 
 
 def _encode(av, path, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int) -> int:
@@ -61,7 +64,8 @@ def _encode(av, path, frames: Iterable[np.ndarray], fps: int, width_px: int, hei
                     out.mux(packet)
                 count += 1
         except BaseException:  # a bad picture, Ctrl-C: end the stream first, else SVT-AV1 prints
-            _end_quietly(stream)  # "Svt[error]: deinit called without sending EOS!" under the error line
+            # "Svt[error]: deinit called without sending EOS!" under the error line
+            _end_quietly(stream)
             raise
         for packet in stream.encode():
             out.mux(packet)

@@ -37,8 +37,8 @@ class EngineParams:
     deterministic_overlapping_pairs: int = 1
     position_gain: float = 0.3
     velocity_gain: float = 1.0
-    # PyBullet's default 1e-7 lets the solver stop early: a box at rest creeps 0.5 mm / 0.27 deg in 40 s
-    # (the yaw creep of long pick-and-place runs); 1e-12 leaves 1.6 um / 0.004 deg
+    # PyBullet's default 1e-7 lets the solver stop early: a box at rest creeps 0.5 mm / 0.27 deg in
+    # 40 s (the yaw creep of long pick-and-place runs); 1e-12 leaves 1.6 um / 0.004 deg
     solver_residual_threshold: float = 1e-12
 
 
@@ -65,7 +65,8 @@ class TwinConfig:
     engine: EngineParams = field(default_factory=EngineParams)
     suction: SuctionParams = field(default_factory=SuctionParams)
     keymap: dict = field(default_factory=dict)  # key -> list of actions (teleop); empty: no keys
-    cameras: tuple[CameraSpec, ...] = ()  # rendered into every recording of the run (model/images.py)
+    # rendered into every recording of the run (model/images.py)
+    cameras: tuple[CameraSpec, ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.dt_ns, int) or not 100_000 <= self.dt_ns <= 100_000_000:
@@ -97,7 +98,8 @@ class TwinConfig:
         data = _record(data, CONFIG_SCHEMA, "")
         profile = RobotProfile.from_dict(data["profile"])
         if data["keymap"]:
-            validate_keymap(data["keymap"], profile, "twin.config keymap")  # checked; kept as recorded
+            # checked; kept as recorded
+            validate_keymap(data["keymap"], profile, "twin.config keymap")
         return TwinConfig(profile=profile, objects=tuple(SceneObject(**o) for o in data["objects"]),
                           dt_ns=data["dt_ns"], engine=EngineParams(**data["engine"]),
                           suction=SuctionParams(**data["suction"]), keymap=data["keymap"],
@@ -105,7 +107,8 @@ class TwinConfig:
 
 
 MIN_VIEW_M = 1e-6  # a camera's eye and target are at least this far apart
-MIN_UP_SINE = 1e-6  # its up direction leans at least this much (sine of the angle) off the view direction
+# its up direction leans at least this much (sine of the angle) off the view direction
+MIN_UP_SINE = 1e-6
 
 
 def check_camera_view(camera: CameraSpec) -> None:

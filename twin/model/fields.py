@@ -41,7 +41,8 @@ class FrameField:
     name: str  # the Frame attribute and the FrameColumns column
     dtype: type
     shape: str  # a key of SHAPES
-    block: str  # "JointBlock" | "SuctionBlock" | "PoseBlock"; "*" for step and t_ns, which every block has
+    # "JointBlock" | "SuctionBlock" | "PoseBlock"; "*" for step and t_ns, which every block has
+    block: str
     proto_name: str
     number: int  # protobuf field number (3 is each block's names field)
     wire: str  # packed encoding: "<f8", "<i8", "<i4", "|u1"

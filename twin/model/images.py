@@ -21,7 +21,8 @@ from twin.model.quat import quat_from_axes, rotate
 from twin.pictures import checked_header, decode_rgb
 
 FORMATS = ("png", "jpeg")
-MOUNTS = ("world", "pad")  # eye and target in world axes, or in the pad tip's frame (x along its heading, z up)
+# eye and target in world axes, or in the pad tip's frame (x along its heading, z up)
+MOUNTS = ("world", "pad")
 DEFAULT_SIZE_PX = (320, 240)
 DEFAULT_RATE_HZ = 15.0
 MAX_SIDE_PX = 4096

@@ -50,10 +50,10 @@ def _jog_kh(role: str, delta: float) -> list:
     return ["jog_keep_heading", role, delta]
 
 
-# seed000, as report 000's Lua does it: its variables angle1, angle2, d start at 0; a/d: angle1 -/+1 deg,
-# q/e: angle2 -/+1 deg, each set at once (sim.setJointPosition); 8: d = d - 0.05, joint3 set to d and
-# suction on (its first press sets -0.05, wherever Z is); 5: joint3 set to 0.084 (the lower stop; d
-# unchanged); s: suction off.
+# seed000, as report 000's Lua does it: its variables angle1, angle2, d start at 0; a/d: angle1 -/+1
+# deg, q/e: angle2 -/+1 deg, each set at once (sim.setJointPosition); 8: d = d - 0.05, joint3 set to
+# d and suction on (its first press sets -0.05, wherever Z is); 5: joint3 set to 0.084 (the lower
+# stop; d unchanged); s: suction off.
 SEED000 = {
     "a": [["add", "shoulder", -_deg(1), "position"]],
     "d": [["add", "shoulder", _deg(1), "position"]],
@@ -233,7 +233,8 @@ def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(f"key map {src} cannot be read: {(str(err).splitlines() or [type(err).__name__])[0]}") from err
-    what = f"key map {src} cannot be read"  # malformed or nested too deep: one line, never a RecursionError
+    # malformed or nested too deep: one line, never a RecursionError
+    what = f"key map {src} cannot be read"
     data = load_toml_text(text, what) if p.suffix == ".toml" else load_json_text(text, what)
     if not isinstance(data, dict) or not isinstance(data.get("keys"), dict):
         raise ConfigError(f"key map {src}: expected a table `keys` (key = list of actions)")
@@ -290,7 +291,8 @@ class KeyPlayer:
             j = hands.joint(action[1])
             before = hands.target(j)
             hands.drive(j, before + float(action[2]))
-            if op == "jog_keep_heading" and hands.target(j) != before:  # turn back by what the joint moved
+            # turn back by what the joint moved
+            if op == "jog_keep_heading" and hands.target(j) != before:
                 wrist = _WRIST
                 hands.drive(wrist, hands.target(wrist) - (hands.target(j) - before))
         elif op == "target":

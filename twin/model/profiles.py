@@ -59,13 +59,17 @@ class RobotProfile:
     pad_link: str = ""  # the user URDF's link whose origin is the pad root
     description: str = ""
     extra: dict = field(default_factory=dict, compare=False)
-    # The scene's own joint conventions (docs/seed-conventions.md derives each seed's from its report):
+    # The scene's own joint conventions (docs/seed-conventions.md derives each seed's from its
+    # report):
     shoulder_zero_rad: float = 0.0  # direction of link 1 at shoulder 0, counter-clockwise from +x
-    axis_signs: tuple[int, int, int, int] = (1, 1, 1, 1)  # +1: revolute turns counter-clockwise seen from
-    #                                   above (axis +z); Z lowers the pad with positive values (axis -z)
-    revolute_cyclic: bool = False  # CoppeliaSim's default revolute joint: no limits, turns the short way
+    # +1: revolute turns counter-clockwise seen from
+    axis_signs: tuple[int, int, int, int] = (1, 1, 1, 1)
+    # above (axis +z); Z lowers the pad with positive values (axis -z)
+    # CoppeliaSim's default revolute joint: no limits, turns the short way
+    revolute_cyclic: bool = False
     z_lower_m: float = 0.0  # the Z joint's lower limit; its upper limit is z_lower_m + z_stroke_m
-    z_down_m: float | None = None  # the Z value that puts the pad on a 50 mm box (None: the stroke's low end)
+    # the Z value that puts the pad on a 50 mm box (None: the stroke's low end)
+    z_down_m: float | None = None
     z_up_m: float | None = None  # the Z value the scene travels at (None: the stroke's high end)
 
     def __post_init__(self) -> None:
@@ -109,7 +113,8 @@ class RobotProfile:
     def joint_index(self, name: str) -> int:
         """Resolve any variant's joint name (with or without a leading '/') to a role index."""
         bare = name.lstrip("/")
-        if bare in self.joint_names:  # the profile's own names first: a user's "joint3" may be its wrist
+        # the profile's own names first: a user's "joint3" may be its wrist
+        if bare in self.joint_names:
             return self.joint_names.index(bare)
         for index, role in enumerate(ROLES):
             if bare in JOINT_ALIASES[role]:
@@ -140,8 +145,9 @@ PROFILES: dict[str, RobotProfile] = {
         suction_signals=(DEFAULT_SUCTION_SIGNAL, "suctionPad"),
         description="CoppeliaSim's MTB (Machine Type B) SCARA",
     ),
-    # Reports 000-002 built their own joints: CoppeliaSim's default revolute joint (cyclic, 360 deg/s).
-    # Their zero directions, turning senses and Z values come from their code (docs/seed-conventions.md).
+    # Reports 000-002 built their own joints: CoppeliaSim's default revolute joint (cyclic, 360
+    # deg/s). Their zero directions, turning senses and Z values come from their code
+    # (docs/seed-conventions.md).
     "seed000": RobotProfile(
         name="seed000", link1_m=0.8, link2_m=0.8,
         joint_names=("joint1", "joint2", "joint3", "joint4"),

@@ -11,7 +11,8 @@ from twin.model.config import TwinConfig
 from twin.model.images import CameraTrack
 from twin.model.types import Command, Event
 
-META_FINALIZED = "twin.finalized"  # the metadata record a cleanly closed file ends with (outcome, error)
+# the metadata record a cleanly closed file ends with (outcome, error)
+META_FINALIZED = "twin.finalized"
 META_RECORDING = "twin.recording"  # the recording's layout: rate_steps, block_frames, ...
 META_MACHINE = "twin.machine"  # where it was made: cpu, blas_core, ...; older files have none
 
@@ -33,8 +34,10 @@ class Recording:
     finalized: bool = False
     urdf: str = ""
     path: str = ""
-    assets: dict[str, bytes] = field(default_factory=dict)  # attachments: robot.urdf and meshes, by name
-    cameras: dict[str, CameraTrack] = field(default_factory=dict)  # each camera's pictures, by camera name
+    # attachments: robot.urdf and meshes, by name
+    assets: dict[str, bytes] = field(default_factory=dict)
+    # each camera's pictures, by camera name
+    cameras: dict[str, CameraTrack] = field(default_factory=dict)
 
     @property
     def outcome(self) -> str:

@@ -38,7 +38,8 @@ if tuple(_STEMS) != tuple(f.name for f in FRAME_FIELDS):
 _POSE = ("x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
 _XYZ = ("x", "y", "z")
 _PRISMATIC = ROLES.index("z")
-_RESERVED = {"step", "t_ns", "joint", "suction", "hold", "pad"}  # an object so named is `object.<name>`
+# an object so named is `object.<name>`
+_RESERVED = {"step", "t_ns", "joint", "suction", "hold", "pad"}
 
 
 def _unit(field, *, prismatic: bool = False) -> str:
@@ -139,7 +140,8 @@ def suction_command(rec) -> np.ndarray:
     steps = rec.frames.step
     if not changes_steps:
         return np.zeros(len(steps), dtype=np.bool_)
-    # the last change stamped before each frame's step (commands at s act on the step that makes frame s+1)
+    # the last change stamped before each frame's step (commands at s act on the step that makes
+    # frame s+1)
     at = np.searchsorted(np.asarray(changes_steps, dtype=np.int64), steps, side="left") - 1
     on = np.asarray(changes_on, dtype=np.bool_)
     return np.where(at >= 0, on[np.maximum(at, 0)], False)

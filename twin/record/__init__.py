@@ -56,7 +56,8 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
     except BaseException as err:
         _note(err, close_all(sinks, "error", _error_text(err)))
         raise
-    failure = close_all(sinks, "ok", "")  # a task error the caller suppressed: the MCAP writer says error
+    # a task error the caller suppressed: the MCAP writer says error
+    failure = close_all(sinks, "ok", "")
     if failure is not None:
         raise failure
 

@@ -33,15 +33,18 @@ from twin.record.ring import FrameRing
 from twin.record.rows import FrameRows
 
 PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames at 240 Hz
-MAX_AHEAD_S = 0.4  # simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
-RING_S = 4096 / 240  # simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
+# simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
+MAX_AHEAD_S = 0.4
+# simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
+RING_S = 4096 / 240
 POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
 IDLE_POLL_S = 0.016
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
 _OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
-_HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}  # item kind -> the sinks' method
+# item kind -> the sinks' method
+_HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}
 
 
 def _frames(config: TwinConfig, seconds: float) -> int:
@@ -65,13 +68,15 @@ class RecorderProcess(Sink):
         self._ring = FrameRing(self._rows, capacity, len(writers))
         # what on_frame needs, bound once: it runs every step
         self._pack, self._row_size, self._memory = self._rows.pack_into, self._rows.size, self._ring.memory
-        self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)  # the ring's first and last rows
+        # the ring's first and last rows
+        self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
         self._written = 0
         self._next_publish = self._publish_every
         self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
         self._closed = False
-        self.waits = 0  # how often the twin waited for a recorder (tools/bench_record.py reports it)
+        # how often the twin waited for a recorder (tools/bench_record.py reports it)
+        self.waits = 0
         # Load the writers here, once: every forked recorder inherits them instead of importing anew
         # (rerun alone takes ~0.3 s to import).
         import twin.record.mcap.writer
@@ -86,7 +91,8 @@ class RecorderProcess(Sink):
             for starting in self._children:  # they start side by side; each says when it is ready
                 starting.expect_ok("recording could not start")
         except BaseException:
-            for child in self._children:  # as one process with both writers did: the others end as error
+            # as one process with both writers did: the others end as error
+            for child in self._children:
                 if child is starting:
                     child.stop()
                     continue
@@ -239,7 +245,8 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
     answers it with the failure, so the twin reports it as one line instead of losing the run's
     remaining output."""
     if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
-        sys.meta_path.insert(0, _NoPandas())  # whether arrays are pandas objects: they never are here
+        # whether arrays are pandas objects: they never are here
+        sys.meta_path.insert(0, _NoPandas())
     from twin.record.mcap.writer import McapRecorder  # already loaded by the parent
 
     sinks = []
@@ -260,9 +267,11 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
     while True:
         conn.poll(timeout)  # a message, or the timer
         written = ring.written()
-        end = _take_messages(conn, feed)  # all the twin sent before publishing `written`, and maybe more
+        # all the twin sent before publishing `written`, and maybe more
+        end = _take_messages(conn, feed)
         if end is not None:
-            written = ring.written()  # the twin publishes its last rows before it closes (or has died)
+            # the twin publishes its last rows before it closes (or has died)
+            written = ring.written()
         came = written > feed.read
         feed.take(written, final=end is not None)
         ring.release(reader, feed.read)
@@ -300,7 +309,8 @@ class _Feed:
     def __init__(self, ring: FrameRing, sinks: list) -> None:
         self.ring, self.sinks = ring, sinks
         self.read = 0  # rows taken in (or, after a failure, passed over)
-        self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()  # (frames before it, kind, pickle)
+        # (frames before it, kind, pickle)
+        self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
         self.failure = ""
 
     def take(self, written: int, *, final: bool) -> None:

@@ -31,7 +31,8 @@ class FrameRing:
         self.capacity = capacity
         self.readers = readers
         self._header = _COUNTER.size * (1 + readers)  # written, then each reader's read
-        self.memory = mmap.mmap(-1, self._header + capacity * rows.size)  # anonymous, shared with forks
+        # anonymous, shared with forks
+        self.memory = mmap.mmap(-1, self._header + capacity * rows.size)
         self._lock = multiprocessing.get_context("fork").Lock()
 
     def offset(self, frame: int) -> int:
@@ -66,7 +67,8 @@ class FrameRing:
         `release` passes them."""
         view, runs = memoryview(self.memory), []
         while start < end:
-            stop = min(end, start - start % self.capacity + self.capacity)  # the ring's end, or `end`
+            # the ring's end, or `end`
+            stop = min(end, start - start % self.capacity + self.capacity)
             runs.append(view[self.offset(start):self.offset(start) + (stop - start) * self.rows.size])
             start = stop
         return runs

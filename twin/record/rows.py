@@ -48,8 +48,9 @@ class FrameRows:
         self.dtype = np.dtype(dtype_fields)  # packed: numpy's offsets are the struct's
         if self.dtype.itemsize != self.size:
             raise ImportError("twin.record.rows: the numpy row and the struct row disagree")
-        # The pack and unpack expressions are written out from the field description once: as fast as
-        # hand-written ones, which a loop over the fields is not (about 2.5 against 1.1 us a frame).
+        # The pack and unpack expressions are written out from the field description once: as fast
+        # as hand-written ones, which a loop over the fields is not (about 2.5 against 1.1 us a
+        # frame).
         scope = {"pack_into": self._struct.pack_into, "unpack": self._struct.unpack_from,
                  "chain": itertools.chain.from_iterable, "Frame": Frame}
         self.pack_into = eval(f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope)

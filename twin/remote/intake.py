@@ -29,7 +29,8 @@ import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-_BYTES_RECEIVED_AT = 128  # offset of the u64 tcpi_bytes_received in Linux's struct tcp_info (kernel >= 4.1)
+# offset of the u64 tcpi_bytes_received in Linux's struct tcp_info (kernel >= 4.1)
+_BYTES_RECEIVED_AT = 128
 _TCP_INFO_LEN = _BYTES_RECEIVED_AT + 8
 
 
@@ -40,7 +41,8 @@ def wire_bytes(frames: Iterable) -> int:
 
 @dataclass(slots=True)
 class _Connection:
-    peer: tuple  # getpeername(): tells this connection from a later one given the same descriptor number
+    # getpeername(): tells this connection from a later one given the same descriptor number
+    peer: tuple
     family: int
     taken: int = 0  # wire bytes of the whole messages the server received from it
     cut: bool = False
@@ -92,7 +94,8 @@ class Intake:
                 return  # closed already (its DISCONNECTED follows), or no measure here
             peer, family, _ = probe
             conn = self._conns.get(fd)
-            if conn is None or conn.peer != peer:  # the same connection (reported twice) keeps its count
+            # the same connection (reported twice) keeps its count
+            if conn is None or conn.peer != peer:
                 self._conns[fd] = _Connection(peer, family)
             try:
                 self._epoll.register(fd, select.EPOLLIN | select.EPOLLET)
@@ -152,9 +155,11 @@ class Intake:
             return
         probe = self._probe(fd, conn.family)
         if probe is None or probe[0] != conn.peer:
-            return  # that connection is gone; the monitor reports it (and any new one on this number)
+            # that connection is gone; the monitor reports it (and any new one on this number)
+            return
         received = probe[2]
-        conn.taken = min(conn.taken, received)  # a message counted against the wrong connection gives no credit
+        # a message counted against the wrong connection gives no credit
+        conn.taken = min(conn.taken, received)
         unread = received - conn.taken
         if unread <= self.limit:
             return
@@ -165,7 +170,8 @@ class Intake:
         try:
             if s.getpeername() != conn.peer:
                 return
-            s.shutdown(socket.SHUT_RDWR)  # ZMQ reads end of file, drops the unfinished message, closes
+            # ZMQ reads end of file, drops the unfinished message, closes
+            s.shutdown(socket.SHUT_RDWR)
         except OSError:
             return
         finally:
@@ -183,7 +189,8 @@ class Intake:
         except OSError:
             return None  # closed, or not a socket
         try:
-            if s.type != socket.SOCK_STREAM:  # (given a family, the type is ours; then TCP_INFO tells)
+            # (given a family, the type is ours; then TCP_INFO tells)
+            if s.type != socket.SOCK_STREAM:
                 return None
             peer = s.getpeername()
             info = s.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, _TCP_INFO_LEN)

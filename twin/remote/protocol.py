@@ -18,18 +18,22 @@ from twin.errors import exception_text
 from twin.model.json_values import finite_number
 
 PROTOCOL_VERSION = 2
-# Limits on what a client may send (README, "Remote control"); over each, the client gets an error reply.
+# Limits on what a client may send (README, "Remote control"); over each, the client gets an error
+# reply.
 MAX_REQUEST_BYTES = 1 << 20  # a real request is a few hundred bytes; 1 MiB is generous
 MAX_FRAME_BYTES = 256 << 20  # hard cap: ZMQ closes a connection announcing a bigger frame, unread
-MAX_UNREAD_BYTES = MAX_FRAME_BYTES + (64 << 10)  # per connection: sent, not yet a whole message the server
-# took (one frame at the hard cap, its framing and the handshake); above, the connection is closed (intake.py)
+# per connection: sent, not yet a whole message the server
+MAX_UNREAD_BYTES = MAX_FRAME_BYTES + (64 << 10)
+# took (one frame at the hard cap, its framing and the handshake); above, the connection is closed
+# (intake.py)
 MAX_DEPTH = 32  # nested arrays/maps (a request map holding args is 2 deep)
 MAX_ITEMS = 100_000  # CBOR data items in one request (a request of n bytes holds at most n)
 MAX_ARGS = 64
 MAX_NAME_CHARS = 256  # signal names: a name is kept in the scene for the whole run
 MAX_SIGNALS = 1024  # signals set at once in a scene
 MAX_TEXT_CHARS = 4096  # log messages: printed and recorded
-INT64 = (-(1 << 63), (1 << 63) - 1)  # integer arguments (handles, levels, signal values) are at most 64-bit
+# integer arguments (handles, levels, signal values) are at most 64-bit
+INT64 = (-(1 << 63), (1 << 63) - 1)
 BRIEF_CHARS = 60  # how much of a client's string an error message quotes
 
 WAIT_REPLY = cbor2.dumps({"func": "_*wait*_", "args": []})

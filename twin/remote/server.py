@@ -64,13 +64,17 @@ from twin.remote.sim_api import SimApi
 
 MODES = ("realtime", "stepped")
 IDLE_POLL_S = 0.1
-MAX_LAG_S = 0.25  # simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
+# simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
+MAX_LAG_S = 0.25
 DEFAULT_CLIENT_TIMEOUT_S = 600.0
 WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
-MAX_CLIENTS = 64  # uuids served at once; a client is forgotten when its connection closes or it times out
+# uuids served at once; a client is forgotten when its connection closes or it times out
+MAX_CLIENTS = 64
 MAX_CLIENTS_PER_CONNECTION = 4  # the official client sends one uuid per connection
-EVICT_IDLE_S = 2.0  # all slots taken: a new client takes the slot of the least recently seen one silent this long
-RCVHWM = 4  # requests queued per connection (a REQ client has one at a time): bounds what a peer can park
+# all slots taken: a new client takes the slot of the least recently seen one silent this long
+EVICT_IDLE_S = 2.0
+# requests queued per connection (a REQ client has one at a time): bounds what a peer can park
+RCVHWM = 4
 
 
 @dataclass(slots=True)
@@ -110,9 +114,11 @@ class Server:
         self.log = log
         self.api = SimApi(scene)
         self.clients: dict[str, _Client] = {}
-        self._peer_fds: dict[bytes, int] = {}  # connections seen: routing id -> file descriptor (ZMQ_SRCFD)
+        # connections seen: routing id -> file descriptor (ZMQ_SRCFD)
+        self._peer_fds: dict[bytes, int] = {}
         self._n_clients = 0
-        self._anchor: tuple[float, int] | None = None  # (wall s, step) where realtime pacing started
+        # (wall s, step) where realtime pacing started
+        self._anchor: tuple[float, int] | None = None
         self._slipping = False  # said once: the machine cannot step at --speed
         self._stop = False
         self._next_reap_s = 0.0
@@ -120,9 +126,11 @@ class Server:
         self.context = zmq.Context()
         self.socket = self.context.socket(zmq.ROUTER)
         self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)  # above: ZMQ closes the connection, unread
+        # above: ZMQ closes the connection, unread
+        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)
         self.socket.setsockopt(zmq.RCVHWM, RCVHWM)
-        self._intake = Intake(MAX_UNREAD_BYTES)  # what a connection sent beyond one frame: shut down
+        # what a connection sent beyond one frame: shut down
+        self._intake = Intake(MAX_UNREAD_BYTES)
         try:
             if port == 0:
                 port = self.socket.bind_to_random_port(f"tcp://{host}")
@@ -159,8 +167,10 @@ class Server:
                 if now >= self._next_reap_s:
                     self._reap(now)
                 continue
-            self._drain_monitor()  # the connections accepted and closed before it, in order: then count it
-            intake.took(_source_fd(parts[-1]), wire_bytes(parts[1:]))  # parts[0], the routing id, is ZMQ's
+            # the connections accepted and closed before it, in order: then count it
+            self._drain_monitor()
+            # parts[0], the routing id, is ZMQ's
+            intake.took(_source_fd(parts[-1]), wire_bytes(parts[1:]))
             now = time.monotonic()
             self._pace(now)
             if now >= self._next_reap_s:
@@ -222,7 +232,8 @@ class Server:
         wall0, step0 = self._anchor
         due = step0 + int((now - wall0) * self.speed * 1e9 / scene.config.dt_ns) - scene.twin.step_index
         max_due = max(1, round(MAX_LAG_S * 1e9 / scene.config.dt_ns))
-        if due > max_due:  # the machine cannot step that fast: let simulated time slip, keep serving
+        # the machine cannot step that fast: let simulated time slip, keep serving
+        if due > max_due:
             if not self._slipping:
                 self.log(f"the twin cannot keep up with {self.speed:g}x real time here; simulated time slips")
                 self._slipping = True

@@ -28,7 +28,8 @@ HANDLE_ROBOT = 10
 HANDLE_JOINT0 = 11  # 11..14: shoulder, elbow, z, wrist
 HANDLE_PAD = 15
 HANDLE_OBJECT0 = 20  # 20, 21, ...: the scene's objects in scene order
-BOX_ALIASES = ("Cuboid", "box", "Box", "cuboid")  # CoppeliaSim's default primitive name, for the first object
+# CoppeliaSim's default primitive name, for the first object
+BOX_ALIASES = ("Cuboid", "box", "Box", "cuboid")
 INT32 = (-(1 << 31), (1 << 31) - 1)
 
 CONSTANTS = {
@@ -164,7 +165,8 @@ class SimApi:
         if j == 0:
             return (0.0, 0.0, p.shoulder_height_m, *yaw_quat(q1))
         if j == 1:
-            # math, not numpy: numpy's cos/sin take SIMD paths that differ by CPU, and a client acts on this
+            # math, not numpy: numpy's cos/sin take SIMD paths that differ by CPU, and a client acts
+            # on this
             return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *yaw_quat(q2))
         if j == 2:
             return (pad.x_m, pad.y_m, p.elbow_height_m, *yaw_quat(q2))

@@ -95,8 +95,8 @@ def ik_branches(profile: RobotProfile, x_m: float, y_m: float) -> list[ArmSoluti
     s1, s2 = profile.axis_signs[0], profile.axis_signs[1]
     r = math.hypot(x_m, y_m)
     c2 = (r * r - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)  # cosine of the elbow's bend
-    # 1 + c2 and 1 - c2 as products, not from c2: near a folded or straight arm c2 rounds to -1 or 1 and
-    # its sine would vanish (a target 2 nm from the base of equal links came back 2 nm off)
+    # 1 + c2 and 1 - c2 as products, not from c2: near a folded or straight arm c2 rounds to -1 or 1
+    # and its sine would vanish (a target 2 nm from the base of equal links came back 2 nm off)
     one_plus = (r - abs(l1 - l2)) * (r + abs(l1 - l2)) / (2.0 * l1 * l2)
     one_minus = (l1 + l2 - r) * (l1 + l2 + r) / (2.0 * l1 * l2)
     if one_minus < -1e-12 or one_plus < -1e-12:

@@ -75,7 +75,8 @@ def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, 
             for j in range(3):
                 tensor[i][j] -= m * d[i] * d[j]
     values, axes = _jacobi_eigen(tensor)
-    order = [max(range(3), key=lambda j, k=k: abs(axes[k][j])) for k in range(3)]  # keep each axis near the link's own
+    # keep each axis near the link's own
+    order = [max(range(3), key=lambda j, k=k: abs(axes[k][j])) for k in range(3)]
     values = [values[j] for j in order]
     axes = [[axes[i][j] for j in order] for i in range(3)]
     for j in range(3):
@@ -89,7 +90,9 @@ def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, 
             tuple(_rounded(a) for a in (roll, pitch, yaw)))  # type: ignore[return-value]
 
 
-URDF_DIGITS = 12  # significant digits of computed inertias and inertial angles: far above the last bits a libm may change
+# significant digits of computed inertias and inertial angles: far above the last bits a libm may
+# change
+URDF_DIGITS = 12
 
 
 def _rounded(x: float) -> float:
@@ -161,7 +164,8 @@ def urdf_from_profile(profile: RobotProfile) -> str:
     limits = p.joint_limits()
     n1, n2, n3, n4 = p.joint_names
     m_base = 8.0
-    m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25  # hollow section: 25 % fill
+    # hollow section: 25 % fill
+    m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25
     m2 = ALUMINIUM_KG_M3 * (l2 + LINK_WIDTH_M) * LINK_WIDTH_M * h2 * 0.25
     hub_r = LINK_WIDTH_M / 2
     m_hub = ALUMINIUM_KG_M3 * math.pi * hub_r**2 * LINK2_RISE_M * 0.25

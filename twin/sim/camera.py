@@ -86,7 +86,8 @@ class CameraRenderer:
             background = not multiprocessing.current_process().daemon
         self._world: RenderWorld | None = None
         self._process: _RenderProcess | None = None
-        self._drawn: collections.deque[list[CameraImage]] = collections.deque()  # drawn here, not yet handed on
+        # drawn here, not yet handed on
+        self._drawn: collections.deque[list[CameraImage]] = collections.deque()
         if background:
             self._process = _RenderProcess(config)
         else:
@@ -131,7 +132,8 @@ class CameraRenderer:
                 self._world = None
 
 
-LAG_PICTURES = 4  # camera frames in flight: enough to keep the render process busy while the twin steps
+# camera frames in flight: enough to keep the render process busy while the twin steps
+LAG_PICTURES = 4
 _CLOSE = b"C"
 _FAILED = b"!"
 

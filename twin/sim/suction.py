@@ -45,7 +45,8 @@ class Suction:
         The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter).
         heading_of(frame): the pad's heading (rad), asked for only when an object is attached."""
         p = self.params
-        if on and self.on and self.held != NO_BODY and p.infinite_strength:  # holding on: nothing changes
+        # holding on: nothing changes
+        if on and self.on and self.held != NO_BODY and p.infinite_strength:
             self.sensed = self.held
             return []
         if not on and not self.on:
@@ -111,7 +112,8 @@ class Suction:
         from the cup (the pad's upward force on it; pressing the object down is not pull), shear the
         sideways force, peel the torque about x and y taken at the cup's face (the pad tip)."""
         p = self.params
-        (fx, fy, fz), (tx, ty, _tz) = frame.hold_force_n, frame.hold_torque_nm  # nothing stepped since
+        # nothing stepped since
+        (fx, fy, fz), (tx, ty, _tz) = frame.hold_force_n, frame.hold_torque_nm
         cx, cy, cz = frame.object_poses[self.held][:3]
         tip = frame.pad_pose
         rx, ry, rz = cx - tip[0], cy - tip[1], cz - tip[2]  # tip -> object's centre of mass

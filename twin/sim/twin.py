@@ -44,7 +44,8 @@ class Twin:
         self.sinks: list[Sink] = list(sinks)
         self.step_index = 0
         self._signals: dict[str, int] = {}
-        self._targets = (0.0, 0.0, 0.0, 0.0)  # a tuple, replaced on a command: every Frame shares it
+        # a tuple, replaced on a command: every Frame shares it
+        self._targets = (0.0, 0.0, 0.0, 0.0)
         self._max_velocities = list(self._world.max_velocities())
         self._limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
@@ -56,7 +57,8 @@ class Twin:
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
 
-    # -- read-only views: the twin changes only through Commands (apply), so every input is recorded --
+    # -- read-only views: the twin changes only through Commands (apply), so every input is recorded
+    # --
     @property
     def targets(self) -> tuple[float, ...]:
         """Each joint's motor target (rad | m), in profile joint order."""
@@ -101,7 +103,8 @@ class Twin:
         sinks, pad_model, world_step, read_frame = self.sinks, self.suction_pad, self._world.step, self._read_frame
         renderer = self._camera_renderer
         for _ in range(n):
-            if self._suction_wanted is not pad_model.idle_on:  # an idle pad, or one holding on, has nothing to do
+            # an idle pad, or one holding on, has nothing to do
+            if self._suction_wanted is not pad_model.idle_on:
                 for ev in pad_model.update(self._suction_wanted, self.frame, self._heading):
                     self._emit(ev.kind, self._body_name(ev.body), ev.message)
             world_step()
@@ -109,7 +112,8 @@ class Twin:
             f = self.frame = read_frame()
             for s in sinks:
                 s.on_frame(f)
-            if renderer is not None:  # after every sink: a picture reaches them after the frame it shows
+            # after every sink: a picture reaches them after the frame it shows
+            if renderer is not None:
                 renderer.on_frame(f)
         return self.frame
 
@@ -124,7 +128,8 @@ class Twin:
         q, qd, effort, poses, force, torque = self._world.state()
         sp = self.suction_pad
         step = self.step_index
-        # tuple.__new__, not Frame(...): a NamedTuple's __new__ is a Python function (0.2 us more a step)
+        # tuple.__new__, not Frame(...): a NamedTuple's __new__ is a Python function (0.2 us more a
+        # step)
         return _new_frame(Frame, (step, step * self.config.dt_ns, q, qd, effort, self._targets,
                                   sp.on, sp.sensed, sp.held, force, torque, self._pad_pose(q), poses))
 
@@ -295,8 +300,8 @@ class Twin:
     def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
         """Step until every joint is at its target and still; an Event if it times out."""
         max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
-        # the four joints' checks written out, on locals, with no tuple built per call: settle runs most of
-        # a task's steps (1601 of pick_place's 2517)
+        # the four joints' checks written out, on locals, with no tuple built per call: settle runs
+        # most of a task's steps (1601 of pick_place's 2517)
         t0, t1, t2, t3 = self._targets
         e0, e1, e2, e3 = SETTLE_TOL
         v0, v1, v2, v3 = SETTLE_SPEED_TOL
@@ -312,7 +317,8 @@ class Twin:
 
     # -- what each Command kind does: apply() looks the handler up in _COMMANDS -----------------
     def _clamped(self, joint: int, q: float) -> float:
-        if self.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
+        # CoppeliaSim's cyclic joint: the short way round
+        if self.profile.revolute_cyclic and joint != Z:
             now = self.frame.joint_q[joint]
             return now + kinematics.wrap_rad(q - now)
         lo, hi = self._limits[joint]

@@ -102,7 +102,8 @@ class World:
         pb.setGravity(*e.gravity_m_s2, physicsClientId=c)
         pb.setRealTimeSimulation(0, physicsClientId=c)
         floor = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=FLOOR_HALF_EXTENTS_M, physicsClientId=c)
-        pb.createMultiBody(0, floor, -1, (0.0, 0.0, -FLOOR_HALF_EXTENTS_M[2]), physicsClientId=c)  # top at z = 0
+        # top at z = 0
+        pb.createMultiBody(0, floor, -1, (0.0, 0.0, -FLOOR_HALF_EXTENTS_M[2]), physicsClientId=c)
         self._load_robot()
         self.object_ids = tuple(self._create_object(o) for o in self.config.objects)
 
@@ -178,7 +179,8 @@ class World:
         pb.resetJointState(self.robot, self.joints[joint], q, 0.0, physicsClientId=self.client)
 
     # The calls made every step pass the client positionally: pybullet then skips matching keyword
-    # names (measured: getJointStates 1.43 -> 1.28 us, getBasePositionAndOrientation 0.69 -> 0.56 us).
+    # names (measured: getJointStates 1.43 -> 1.28 us, getBasePositionAndOrientation 0.69 -> 0.56
+    # us).
     def step(self) -> None:
         _step_simulation(self.client)
         if self._overlapping:
@@ -191,7 +193,8 @@ class World:
         pose, and the hold's force and torque (_hold_wrench)."""
         c = self.client
         (q0, v0, _, e0), (q1, v1, _, e1), (q2, v2, _, e2), (q3, v3, _, e3) = _joint_states(self.robot, self.joints, c)
-        if len(self.object_ids) == 1:  # the usual scene, one box: 4.3k CPU instructions a step fewer (callgrind)
+        # the usual scene, one box: 4.3k CPU instructions a step fewer (callgrind)
+        if len(self.object_ids) == 1:
             p, o = _base_pose(self.object_ids[0], c)
             poses = (p + o,)
         else:

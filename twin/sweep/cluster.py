@@ -56,22 +56,28 @@ from twin.errors import ConfigError, exception_text
 
 HOST = "127.0.0.1"
 CONNECT_TIMEOUT_S = 10.0
-PROBE_GRACE_S = 2.0  # the handshake's bound past the connect timeout (Dask's connect bounds only the connect)
+# the handshake's bound past the connect timeout (Dask's connect bounds only the connect)
+PROBE_GRACE_S = 2.0
 
-# A local cluster's scheduler, nannies and workers take this configuration (set while the cluster starts,
-# and given to the nannies for the worker processes they spawn, also those they restart). Their event
-# loops' periodic work runs beside the simulation (in a worker, a thread that takes the GIL from it; the
-# scheduler on the same cores): idle, with Dask's defaults, the scheduler's process took 4.4 % of a core
-# and each worker 1.7-1.9 %; with the tick and memory-check intervals below 1.1 % and 0.3-0.4 %, and the
-# scheduler's process used 0.06-0.09 s of CPU per 150-scenario sweep instead of 0.14-0.20 s (measured).
+# A local cluster's scheduler, nannies and workers take this configuration (set while the cluster
+# starts, and given to the nannies for the worker processes they spawn, also those they restart).
+# Their event loops' periodic work runs beside the simulation (in a worker, a thread that takes the
+# GIL from it; the scheduler on the same cores): idle, with Dask's defaults, the scheduler's process
+# took 4.4 % of a core and each worker 1.7-1.9 %; with the tick and memory-check intervals below 1.1
+# % and 0.3-0.4 %, and the scheduler's process used 0.06-0.09 s of CPU per 150-scenario sweep
+# instead of 0.14-0.20 s (measured).
 WORKER_CONFIG = {
-    "distributed.worker.profile.enabled": False,  # its 10 ms stack sampling takes the GIL from the simulation
+    # its 10 ms stack sampling takes the GIL from the simulation
+    "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "2s",
-    "distributed.admin.tick.interval": "500ms",  # an event-loop health check (for warnings), default 20 ms
-    "distributed.worker.memory.monitor-interval": "1s",  # spill/pause/terminate checks, default 100 ms
-    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return memory at every
-    # free and turns off its adaptive threshold; the simulation allocates all the time (and the guarded
-    # children that run scenarios keep freed memory: worker.keep_freed_memory). Threads stay at 1.
+    # an event-loop health check (for warnings), default 20 ms
+    "distributed.admin.tick.interval": "500ms",
+    # spill/pause/terminate checks, default 100 ms
+    "distributed.worker.memory.monitor-interval": "1s",
+    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which makes glibc return memory at
+    # every free and turns off its adaptive threshold; the simulation allocates all the time (and
+    # the guarded children that run scenarios keep freed memory: worker.keep_freed_memory). Threads
+    # stay at 1.
     "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
 }
 
@@ -134,26 +140,29 @@ def start_local(jobs: int, *, dashboard: bool = False, preload: Sequence[str] = 
     if jobs < 1:
         raise ConfigError(f"a local Dask cluster needs at least 1 worker; got {jobs}")
     try:
-        security = Security.temporary()  # a self-signed CA/certificate/key for every role, in memory only
+        # a self-signed CA/certificate/key for every role, in memory only
+        security = Security.temporary()
     except ImportError as err:
         raise ConfigError("a local Dask cluster is secured with a throwaway TLS certificate, which needs "
                           "the cryptography package; install it with pip install 'twin[dask]'") from err
     quiet_scheduler, quiet_worker = _define_quiet_classes()
     settings = dict(config)
-    # Scheduler.__init__ appends to the routes list it reads from the configuration when bokeh is missing:
-    # a copy of it keeps the process's configuration unchanged
+    # Scheduler.__init__ appends to the routes list it reads from the configuration when bokeh is
+    # missing: a copy of it keeps the process's configuration unchanged
     settings["distributed.scheduler.http.routes"] = list(dask.config.get("distributed.scheduler.http.routes"))
     scheduler_options = {"host": HOST, "port": 0, "protocol": "tls://", "security": security, "services": {},
                          "dashboard": dashboard, "dashboard_address": f"{HOST}:0" if dashboard else None}
     worker_options = {
         "host": HOST, "protocol": "tls://", "security": security, "nthreads": 1,
-        "memory_limit": parse_memory_limit("auto", 1, jobs, logger=logging.getLogger(__name__)),  # as LocalCluster
-        "worker_class": quiet_worker,  # a spawned worker process unpickles it by name: module __getattr__
+        # as LocalCluster
+        "memory_limit": parse_memory_limit("auto", 1, jobs, logger=logging.getLogger(__name__)),
+        # a spawned worker process unpickles it by name: module __getattr__
+        "worker_class": quiet_worker,
         "dashboard": False, "dashboard_address": None, "silence_logs": logging.ERROR,
         "preload": list(preload),
-        # a nanny hands its worker processes a shallow copy of the configuration taken as it starts, whose
-        # nested dicts dask.config.set's context restores in place as it ends: without `config` here, a worker
-        # that the nanny restarts later would get Dask's defaults
+        # a nanny hands its worker processes a shallow copy of the configuration taken as it starts,
+        # whose nested dicts dask.config.set's context restores in place as it ends: without
+        # `config` here, a worker that the nanny restarts later would get Dask's defaults
         "config": dict(config)}
     worker = {"cls": Nanny, "options": worker_options}
     cluster = client = None
@@ -164,7 +173,8 @@ def start_local(jobs: int, *, dashboard: bool = False, preload: Sequence[str] = 
                 workers={i: worker for i in range(jobs)}, worker=worker, security=security,
                 silence_logs=logging.ERROR, name="twin")
             client = Client(cluster, security=security, set_as_default=False)
-    except (OSError, TimeoutError, RuntimeError, ValueError) as err:  # RuntimeError: a worker could not start
+    # RuntimeError: a worker could not start
+    except (OSError, TimeoutError, RuntimeError, ValueError) as err:
         for part in (client, cluster):
             if part is not None:
                 part.close()
@@ -224,7 +234,8 @@ def _security_for(address: str):
                 f"client's certificate (distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and "
                 f".key), e.g. {TLS_ENV}")
         try:
-            security.get_connection_args("client")  # reads the files now: a missing or bad one is named here
+            # reads the files now: a missing or bad one is named here
+            security.get_connection_args("client")
         except (OSError, ValueError) as err:
             raise ConfigError(f"cannot load the TLS certificates for --scheduler {address!r} "
                               f"(distributed.comm.tls.ca-file, .client.cert, .client.key): {_line(err)}") from err
@@ -268,20 +279,25 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
         raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: it accepted the connection "
                           "but did not answer Dask's handshake (expected a Dask scheduler's address, not another "
                           "server's)") from err
-    except OSError as err:  # refused or unreachable (retried for timeout_s), TLS refused, closed mid-handshake
-        cause = err.__cause__  # Dask's "Timed out trying to connect" names the last attempt's error only here
+    # refused or unreachable (retried for timeout_s), TLS refused, closed mid-handshake
+    except OSError as err:
+        # Dask's "Timed out trying to connect" names the last attempt's error only here
+        cause = err.__cause__
         why = _line(err) + (f" ({_line(cause)})" if cause is not None and exception_text(cause) else "")
         raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: {why} "
                           f"(expected a Dask scheduler's address{hint})") from err
-    except Exception as err:  # bytes that are not Dask's protocol (a length of exabytes: MemoryError...)
+    # bytes that are not Dask's protocol (a length of exabytes: MemoryError...)
+    except Exception as err:
         raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: it answered, but not in "
                           f"Dask's protocol ({_line(err)}); expected a Dask scheduler's address") from err
     if not isinstance(info, dict) or "workers" not in info:
         kind = str(info.get("type")) if isinstance(info, dict) else ""
-        kind = next((k for k in ("Worker", "Nanny") if k in kind), "server")  # QuietWorker: a Worker
+        # QuietWorker: a Worker
+        kind = next((k for k in ("Worker", "Nanny") if k in kind), "server")
         raise ConfigError(f"--scheduler {address!r} is a Dask {kind}, not a scheduler; "
                           "expected the scheduler's address (dask scheduler prints it)")
-    try:  # the Client's own timeout is also its default for later calls (gather, close...): the full one
+    # the Client's own timeout is also its default for later calls (gather, close...): the full one
+    try:
         return Client(address, timeout=timeout_s, security=security, set_as_default=False)
     except Exception as err:  # OSError, TimeoutError, a version or TLS refusal
         raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: {_line(err)} "

@@ -17,7 +17,8 @@ from twin.model.json_values import MAX_DEPTH, nesting_depth
 _CALL = re.compile(r"^\s*([a-z_]+)\s*\((.*)\)\s*$", re.DOTALL)
 MAX_CHOICES = 1000
 INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1  # a Parquet int64 column, as every integer a value meets
-NORMAL_REACH = 40  # normal(mu,sigma) needs mu +- 40 sigma finite: numpy's standard normal stays within +-13.8
+# normal(mu,sigma) needs mu +- 40 sigma finite: numpy's standard normal stays within +-13.8
+NORMAL_REACH = 40
 FINITE = "a finite number (at most +-1.8e308)"
 WHOLE = "a whole number -2**63..2**63-1 (int64)"
 
@@ -80,7 +81,8 @@ def parse_dist(text: str, key: str = "") -> Dist:
             raise ConfigError(f"{where} is invalid; expected uniform(a,b) with b - a finite (at most +-1.8e308)")
         if kind == "normal" and not b > 0:
             raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with sigma > 0")
-        if kind == "normal" and not math.isfinite(abs(a) + NORMAL_REACH * b):  # numpy draws mu + sigma * z
+        # numpy draws mu + sigma * z
+        if kind == "normal" and not math.isfinite(abs(a) + NORMAL_REACH * b):
             raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with mu +- {NORMAL_REACH}*sigma "
                               "finite (at most +-1.8e308)")
         return Dist(kind, (a, b), text.strip())

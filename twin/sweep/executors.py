@@ -22,9 +22,12 @@ from twin.sweep.guard import GuardedPool, run_batch_guarded
 from twin.sweep.worker import failed_row
 
 EXECUTORS = ("local", "dask")
-POOL_RESTARTS = 3  # a local worker that dies (killed, out of memory): its work is sent again, this often
-DASK_RETRIES = 2  # a task that raised is tried again this often; a worker that dies is handled by Dask itself
-DASK_WINDOW_PER_JOB = 4  # batches in flight per Dask worker: enough to keep it busy, few enough to stay small
+# a local worker that dies (killed, out of memory): its work is sent again, this often
+POOL_RESTARTS = 3
+# a task that raised is tried again this often; a worker that dies is handled by Dask itself
+DASK_RETRIES = 2
+# batches in flight per Dask worker: enough to keep it busy, few enough to stay small
+DASK_WINDOW_PER_JOB = 4
 
 
 class WorkerLost(TwinError):
@@ -93,7 +96,8 @@ class LocalExecutor:
             guarded.close()
         if self._pool is not None:
             pool, self._pool = self._pool, None
-            for proc in list(getattr(pool, "_processes", {}).values()):  # queued work is dropped, not finished
+            # queued work is dropped, not finished
+            for proc in list(getattr(pool, "_processes", {}).values()):
                 if proc.is_alive():
                     proc.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
@@ -108,7 +112,8 @@ class DaskExecutor:
     run depends on its inputs alone)."""
 
     name = "dask"
-    batches_per_job = 2  # a task costs Dask a few round trips: fewer, longer ones (measured: 2 per worker kept
+    # a task costs Dask a few round trips: fewer, longer ones (measured: 2 per worker kept
+    batches_per_job = 2
     #                      pace with the local pool where 4 lost 10-25 %)
 
     def __init__(self, jobs: int, scheduler: str | None = None, *, dashboard: bool = False) -> None:

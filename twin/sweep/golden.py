@@ -38,7 +38,8 @@ from twin.sweep.worker import Job
 from twin.verify.check import Outcome
 
 PERCENTILES = (("p50", "placement_p50_mm"), ("p95", "placement_p95_mm"), ("max", "placement_max_mm"))
-DEFINITION_KEYS = ("task", "scenarios", "seed")  # what makes a .toml a sweep definition (a robot profile has none)
+# what makes a .toml a sweep definition (a robot profile has none)
+DEFINITION_KEYS = ("task", "scenarios", "seed")
 MAX_BYTES = 4 * 2**20  # the largest definition or summary read: a golden is a few kB
 
 
@@ -135,7 +136,8 @@ def _regular_text(path: Path) -> str:
             raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
         if st.st_size > MAX_BYTES:
             raise ValueError(f"holds {st.st_size} bytes; expected at most {MAX_BYTES}")
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # never blocks, even if swapped for a FIFO
+        # never blocks, even if swapped for a FIFO
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         with os.fdopen(fd, "rb") as f:
             if not S_ISREG(os.fstat(f.fileno()).st_mode):
                 raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
@@ -167,7 +169,8 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
         before, now = g_pe.get(stat), pe[stat]
         if (before is None) != (now is None):
             problems.append(f"placement_error_mm.{stat} was {before} and is {now} now")
-        elif before is not None and not abs(now - before) <= tolerances[tol_name]:  # a NaN moved too
+        # a NaN moved too
+        elif before is not None and not abs(now - before) <= tolerances[tol_name]:
             problems.append(f"placement_error_mm.{stat} moved {now - before:+.3f} mm (golden {before:.3f}, now "
                             f"{now:.3f}; tolerance {tolerances[tol_name]:g} mm)")
     return problems
@@ -257,7 +260,8 @@ def _read(path: Path) -> dict:
         text = _regular_text(path)
     except ValueError as err:
         raise ConfigError(f"sweep golden summary {str(path)!r} {err}") from err
-    data = load_json_text(text, f"sweep golden summary {str(path)!r} is not valid JSON")  # also too deep: one line
+    # also too deep: one line
+    data = load_json_text(text, f"sweep golden summary {str(path)!r} is not valid JSON")
     return check_summary(data, str(path))
 
 

@@ -34,9 +34,11 @@ from twin.sweep.worker import (
 )
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
-OOM_EVENTS = "/sys/fs/cgroup/memory.events"  # cgroup v2: oom_kill counts the processes the OOM killer ended
-_PARENT_ENDS: set[int] = set()  # this process's ends of its children's pipes: a new child closes them, or a
-#                                 child would never read the end of its pipe while a sibling held that end open
+# cgroup v2: oom_kill counts the processes the OOM killer ended
+OOM_EVENTS = "/sys/fs/cgroup/memory.events"
+# this process's ends of its children's pipes: a new child closes them, or a
+_PARENT_ENDS: set[int] = set()
+# child would never read the end of its pipe while a sibling held that end open
 
 
 class Child:
@@ -49,7 +51,8 @@ class Child:
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
-        if pid == 0:  # the child: serve until the parent closes its end, never return into the parent's code
+        # the child: serve until the parent closes its end, never return into the parent's code
+        if pid == 0:
             code = 0
             try:
                 parent_end.close()
@@ -66,7 +69,8 @@ class Child:
         _PARENT_ENDS.add(self.conn.fileno())
         self.pending: deque[int] = deque()
         self.started_s = time.monotonic()  # when the scenario pending[0] started
-        self.confirm: str | None = None  # running one scenario again, alone: why its first run ended
+        # running one scenario again, alone: why its first run ended
+        self.confirm: str | None = None
         self.timed_out = False
         self.oom_before = oom_kills()
 
@@ -156,7 +160,8 @@ class GuardedPool:
         self.busy: list[Child] = []
         self.idle: list[Child] = []
         self.again: deque[list[int]] = deque()  # the rest of a batch whose child died
-        self.to_confirm: deque[tuple[int, str]] = deque()  # scenarios to run once more, alone: (i, first reason)
+        # scenarios to run once more, alone: (i, first reason)
+        self.to_confirm: deque[tuple[int, str]] = deque()
 
     def run(self, batches: Iterable[list[int]]) -> Iterator[dict]:
         source = iter(batches)
@@ -234,7 +239,8 @@ class GuardedPool:
         if child.pending:
             self.again.append(list(child.pending))
             child.pending.clear()
-        if child.confirm is None:  # first time: run it once more, alone, before calling it a failure
+        # first time: run it once more, alone, before calling it a failure
+        if child.confirm is None:
             self.to_confirm.append((scenario, reason))
             return None
         why = reason if reason == child.confirm else f"{reason} (first run: {child.confirm})"

@@ -47,7 +47,8 @@ def summary(spec: SweepSpec, rows: list[dict], *, planned: int | None = None) ->
     """summary.json's content: the definition's task, robot and seed, then the statistics; planned
     (when the sweep was stopped part-way) is the number of scenarios asked for."""
     names = {k: Path(v).name if v.endswith((".py", ".toml")) else v for k, v in (("task", spec.task), ("robot", spec.robot))}
-    out = {**names, "seed": spec.seed, **summarize(rows)}  # a file by its name: no folder, no absolute path
+    # a file by its name: no folder, no absolute path
+    out = {**names, "seed": spec.seed, **summarize(rows)}
     if planned is not None and planned != len(rows):
         out["interrupted"] = True
         out["planned"] = planned

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from twin.signals import Terminated
 from twin.sweep.worker import Job
 
-MAX_BATCH = 16  # scenarios per task: long enough to amortize sending it, short enough for steady progress
+# scenarios per task: long enough to amortize sending it, short enough for steady progress
+MAX_BATCH = 16
 BATCHES_PER_JOB = 4  # at least this many batches per worker, so the last ones finish together
 
 

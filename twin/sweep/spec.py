@@ -20,7 +20,8 @@ from twin.tasks import TaskFn, check_params, resolve
 MAX_SCENARIOS = 10_000_000
 MAX_SEED = 2**63 - 1
 SPEC_FIELDS = ("task", "robot", "seed", "scenarios", "rate_hz", "timeout_s", "params", "vary", "tolerance")
-TOLERANCES = {  # what a statistical golden allows by default (recordings/sweeps/README in the README's Sweeps)
+# what a statistical golden allows by default (recordings/sweeps/README in the README's Sweeps)
+TOLERANCES = {
     "placement_p50_mm": 0.5,
     "placement_p95_mm": 1.0,
     "placement_max_mm": 2.0,
@@ -126,7 +127,8 @@ def load_spec(path: str | Path) -> SweepSpec:
         raise ConfigError(f"sweep definition {str(path)!r} cannot be read: {err.strerror or err}") from err
     except UnicodeDecodeError as err:
         raise ConfigError(f"sweep definition {str(path)!r} is not valid TOML: {err}") from err
-    data = load_toml_text(text, f"sweep definition {str(path)!r} is not valid TOML")  # also too deep: one line
+    # also too deep: one line
+    data = load_toml_text(text, f"sweep definition {str(path)!r} is not valid TOML")
     unknown = sorted(set(data) - set(SPEC_FIELDS))
     if unknown:
         raise ConfigError(f"sweep definition {str(path)!r} has unknown field {unknown[0]!r}; "

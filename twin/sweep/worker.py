@@ -41,7 +41,8 @@ class Job:
     save: str = "failures"
 
 
-_PREPARED: dict[str, tuple[Prepared, RandomSampler]] = {}  # per worker process: a definition is prepared once
+# per worker process: a definition is prepared once
+_PREPARED: dict[str, tuple[Prepared, RandomSampler]] = {}
 
 
 def warm(job: Job) -> None:
@@ -60,8 +61,10 @@ def _prepared(spec: SweepSpec) -> tuple[Prepared, RandomSampler]:
 
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
-TRIM_THRESHOLD_BYTES = 64 << 20  # free memory at the heap's top kept for reuse: over twice what a scenario frees
-MMAP_THRESHOLD_BYTES = 32 << 20  # blocks below this come from the heap (glibc's largest dynamic threshold)
+# free memory at the heap's top kept for reuse: over twice what a scenario frees
+TRIM_THRESHOLD_BYTES = 64 << 20
+# blocks below this come from the heap (glibc's largest dynamic threshold)
+MMAP_THRESHOLD_BYTES = 32 << 20
 
 
 @functools.cache  # once per process (a forked child inherits the setting with the cache)
@@ -183,9 +186,11 @@ def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) ->
             with open_recorders(config, run, mcap_path=mcap_path, background=False,
                                 engine=engine_versions()) as sinks:
                 _task(config, prep.fn, params, tally, [*sinks, *limit])
-    except RecordingError:  # a file that cannot be written ends the sweep (one line), not the scenario
+    # a file that cannot be written ends the sweep (one line), not the scenario
+    except RecordingError:
         raise
-    except TwinError as err:  # the task failed, or the scenario's values are invalid: the sweep goes on
+    # the task failed, or the scenario's values are invalid: the sweep goes on
+    except TwinError as err:
         error = exception_text(err) or type(err).__name__
     worst = tally.worst_m
     return {"outcome": "error" if error else "ok", "error": error.splitlines()[0] if error else "",

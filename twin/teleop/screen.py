@@ -126,6 +126,7 @@ class CursesScreen:
         if len(lines) > height:  # a small terminal: keep the state, cut the help
             lines = lines[: height - 1] + ["(enlarge the terminal for the full key help)"]
         for row, text in enumerate(lines[:height]):
-            with contextlib.suppress(curses.error):  # the bottom-right cell raises in curses; the text is there
+            # the bottom-right cell raises in curses; the text is there
+            with contextlib.suppress(curses.error):
                 self.window.addnstr(row, 0, text, width - 1)
         self.window.refresh()

@@ -121,7 +121,8 @@ class Session:
         try:
             while True:
                 behind = origin_step + int((clock() - origin_s) / dt_s) - self.twin.step_index
-                for i, source in enumerate(sources):  # wait for keys only when the twin is not behind
+                # wait for keys only when the twin is not behind
+                for i, source in enumerate(sources):
                     for key in source.read(POLL_S if i == 0 and behind <= 0 else 0.0):
                         if not self.press(key):
                             return

@@ -42,7 +42,8 @@ def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[
     limit = [TimeLimit(timeout_s)] if timeout_s is not None else []
     twin = Twin(config, sinks=[collector, *sinks, *limit])
     try:
-        with contextlib.suppress(TwinError):  # recorded, not raised: the task_error event is part of the run
+        # recorded, not raised: the task_error event is part of the run
+        with contextlib.suppress(TwinError):
             run_task(twin, fn, dict(params))
     finally:
         twin.close()
@@ -97,7 +98,8 @@ class Outcome:
     """What checking one golden gave."""
 
     path: str
-    status: str  # "match", "differ", "updated", "refused" (differs; the re-run failed, not written), "error"
+    # "match", "differ", "updated", "refused" (differs; the re-run failed, not written), "error"
+    status: str
     exit_code: int
     summary: str  # the first divergence or the error, one line
     report: str  # the full text report ("" on error)
@@ -119,7 +121,8 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
         if update:
             run = dict(golden.run or {})
             if sha_now not in (None, "missing"):
-                run["task_sha256"] = sha_now  # the rewrite holds the task file's source as it is now
+                # the rewrite holds the task file's source as it is now
+                run["task_sha256"] = sha_now
             with open_recorders(golden.config, run, mcap_path=str(tmp), rate=golden.rate_steps,
                                 engine=engine_versions()) as sinks:
                 new, kinds = rerun(golden, sinks=sinks)

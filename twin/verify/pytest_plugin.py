@@ -53,7 +53,8 @@ class GoldenChecker:
         report = golden_path.with_name(f"{name}.report.md")
         failed = None if allow_error or candidate.outcome == "ok" else _failure(candidate)
         if not golden_path.exists():
-            if failed is not None:  # a golden is never made from a failed run unless asked (allow_error)
+            # a golden is never made from a failed run unless asked (allow_error)
+            if failed is not None:
                 pytest.fail(f"golden {str(golden_path)!r} does not exist, and this run cannot become it: {failed} "
                             "(pass allow_error=True to keep a failing run as the golden)", pytrace=False)
             golden_path.parent.mkdir(parents=True, exist_ok=True)

@@ -62,7 +62,8 @@ def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
     first, last = int(rec.frames.step[0]), int(rec.frames.step[-1])
     if first != 0:
         raise RecordingError(f"recording {rec.path or '<memory>'} starts at step {first}; replay needs step 0")
-    commands = sorted(rec.commands, key=lambda c: c.step)  # stable: keeps the recorded order within a step
+    # stable: keeps the recorded order within a step
+    commands = sorted(rec.commands, key=lambda c: c.step)
     if commands and commands[-1].step > last:
         raise RecordingError(f"recording {rec.path or '<memory>'} has a command at step {commands[-1].step}, "
                              f"after its last frame (step {last})")
@@ -117,7 +118,8 @@ def feed(rec: Recording, sinks: Sequence[Sink]) -> None:
         for s in sinks:
             s.on_frame(frame)
         upto = int(steps[i + 1]) if i + 1 < len(steps) else None
-        while mi < len(images) and (upto is None or images[mi].step < upto):  # pictures come right after their frame
+        # pictures come right after their frame
+        while mi < len(images) and (upto is None or images[mi].step < upto):
             for s in sinks:
                 s.on_image(images[mi])
             mi += 1

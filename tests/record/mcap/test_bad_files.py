@@ -32,7 +32,7 @@ from mcap.writer import CompressionType, Writer
 import twin
 import twin.record.mcap.info
 import twin.record.mcap.recover
-import twin.record.rerun.viewer  # the CLI imports these lazily: imported once here, every forked child has them
+import twin.record.rerun.viewer  # the CLI imports these lazily: imported here, forks have them
 import twin.verify.check
 from twin.cli import main
 from twin.errors import RecordingError
@@ -40,13 +40,15 @@ from twin.record.mcap import schemas as S
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
-MAX_RSS_MB = 400  # a reader in a forked child: its peak above pytest at the fork; a fresh twin: its whole peak
+# a reader in a forked child: its peak above pytest at the fork; a fresh twin: its whole peak
+MAX_RSS_MB = 400
 TIMEOUT_S = 30.0  # a hang guard; every run here takes well under a second or two
-AS_LIMIT = 6 << 30  # address-space cap of each child: a regression fails instead of swamping the machine
+# address-space cap of each child: a regression fails instead of swamping the machine
+AS_LIMIT = 6 << 30
 KEYS = "d*3 k g i wait"
 
 
-# -- running a reader in its own process ---------------------------------------------------------------
+# -- running a reader in its own process -----------------------------------------------------------
 
 class Run:
     def __init__(self, code: int, out: str, err: str, rss_mb: float, seconds: float) -> None:
@@ -145,7 +147,7 @@ def reader_argv(reader: str, path: Path, good: Path, out_dir: Path) -> list[str]
 READERS = ("info", "recover", "diff", "replay", "check", "view")
 
 
-# -- the corpus ----------------------------------------------------------------------------------------
+# -- the corpus ------------------------------------------------------------------------------------
 
 def _read(path: Path) -> dict:
     """Everything in an MCAP file, through mcap's own reader."""
@@ -282,14 +284,16 @@ def corpus(good, tmp_path_factory) -> dict[str, tuple[Path, str]]:
         pos = rng.randrange(8, len(raw) - 8)
         flipped[pos] ^= 1 << rng.randrange(8)
         add(f"bitflip_{i}_at_{pos}", bytes(flipped), "any")
-    # trailing zeros after a complete file, and zeros where its end should be (sparse: instant to make)
+    # trailing zeros after a complete file, and zeros where its end should be (sparse: instant to
+    # make)
     for name, keep in (("trailing_zeros_200MB", len(raw)), ("zeros_over_the_end_200MB", int(len(raw) * 0.6))):
         path = d / f"{name}.mcap"
         with open(path, "wb") as f:
             f.write(raw[:keep])
             f.truncate(keep + 200 * 1024 * 1024)
         out[name] = (path, "damaged")
-    # a 33 KB file holding one 1 GiB zstd-compressed zero message on /twin/joints (declared, or lied about)
+    # a 33 KB file holding one 1 GiB zstd-compressed zero message on /twin/joints (declared, or lied
+    # about)
     gib = 1 << 30
     joints_id = next(cid for cid, c in content["channels"].items() if c.topic == S.JOINTS.topic)
     bomb = zstd_of_zeros(gib, _message_record(joints_id, gib))
@@ -362,7 +366,8 @@ def _assert_clean(run: Run, expected: set[int], what: str) -> None:
     if run.code == 2:
         lines = run.err.splitlines()
         assert len(lines) == 1, f"{what}: {run!r}"
-        if not lines[0].startswith("twin: error: "):  # check reports each golden in its table, progress on stderr
+        # check reports each golden in its table, progress on stderr
+        if not lines[0].startswith("twin: error: "):
             assert what.startswith("check ") and ": error" in lines[0] and "error" in run.out, f"{what}: {run!r}"
 
 
@@ -444,11 +449,11 @@ def test_nan_in_event_data_is_written_as_null(tmp_path):
 
 
 # pictures and export
-# -- camera pictures through the readers that decode them (diff, replay, check) --------------------------
-# conftest's camera_run (pick_place, overhead and wrist cameras, 320x240 at 15 Hz) with its third overhead
-# picture (step 32) replaced. Was: an UnidentifiedImageError or DecompressionBombError traceback (exit 1)
-# from each, and 1.14-1.17 GB for the 9000x9000 PNG (decoded in full: 243 MB of pixels in a 430 KB file).
-# `twin export` on these and more: tests/export/test_export_bad_inputs.py.
+# -- camera pictures through the readers that decode them (diff, replay, check) --------------------
+# conftest's camera_run (pick_place, overhead and wrist cameras, 320x240 at 15 Hz) with its third
+# overhead picture (step 32) replaced. Was: an UnidentifiedImageError or DecompressionBombError
+# traceback (exit 1) from each, and 1.14-1.17 GB for the 9000x9000 PNG (decoded in full: 243 MB of
+# pixels in a 430 KB file). `twin export` on these and more: tests/export/test_export_bad_inputs.py.
 
 def _black_png(width: int, height: int, *, pixels: bool = True) -> bytes:
     """An 8-bit RGB PNG of black pixels, compressed row by row; pixels=False: the header and one row only."""
@@ -507,18 +512,23 @@ def test_a_bad_camera_picture_is_one_line_exit_2(bad_picture_runs, camera_run, t
 
 
 # readers and metadata
-# -- floods of empty messages: memory must not grow with the number of messages ----------------------------
-# The issue: a 44 MB file of empty messages cost `twin info` 2.34 GB and 14 s, `twin check` 1.22 GB. Measured
-# here on the files below before the fix (each `twin` process's whole peak, as run_binary measures it):
-#   empty_44M_tf (45 MB, 44 million empty /tf messages): info 5.6 GB, 143 s; check 5.6 GB, 141 s; both exit 0
-#   empty_44M_foreign (the same on a channel twin does not know): info 5.6 GB, 232 s; check 5.6 GB, 214 s
+# -- floods of empty messages: memory must not grow with the number of messages --------------------
+# The issue: a 44 MB file of empty messages cost `twin info` 2.34 GB and 14 s, `twin check` 1.22 GB.
+# Measured here on the files below before the fix (each `twin` process's whole peak, as run_binary
+# measures it):
+# empty_44M_tf (45 MB, 44 million empty /tf messages): info 5.6 GB, 143 s; check 5.6 GB, 141 s; both
+# exit 0
+# empty_44M_foreign (the same on a channel twin does not know): info 5.6 GB, 232 s; check 5.6 GB,
+# 214 s
 #   empty_44M_events (on /twin/events): info 5.6 GB, over 300 s (stopped)
-#   empty_3M_tf_timed (50 MB, 3 million empty /tf messages at distinct times): info 723 MB, 10.5 s; check
+# empty_3M_tf_timed (50 MB, 3 million empty /tf messages at distinct times): info 723 MB, 10.5 s;
+# check
 #   761 MB, 9.9 s; both exit 0
-# After: 80-125 MB and 1-2 s each, exit 2: the chunks hold more records than one per 8 bytes of the file
-# (twin's writer spends 16 bytes of message index per message); empty_3M_tf_timed, inside that bound, is
-# read (exit 0) in 117 and 154 MB, 1.2 and 1.5 s. The rule checked: the peak RSS of the whole `twin`
-# process under MAX_RSS_MB (400 MB) and the time under 10 s, whatever the number of messages.
+# After: 80-125 MB and 1-2 s each, exit 2: the chunks hold more records than one per 8 bytes of the
+# file (twin's writer spends 16 bytes of message index per message); empty_3M_tf_timed, inside that
+# bound, is read (exit 0) in 117 and 154 MB, 1.2 and 1.5 s. The rule checked: the peak RSS of the
+# whole `twin` process under MAX_RSS_MB (400 MB) and the time under 10 s, whatever the number of
+# messages.
 
 FLOOD_TIMEOUT_S = 10.0
 _FLOOD_RECORD = [("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"), ("log_time", "<u8"),
@@ -567,7 +577,8 @@ def floods(good, tmp_path_factory) -> dict[str, tuple[Path, int]]:
         channel = _channel_record(channel_id, schema_id, topic, encoding)
         flood = (b"".join(_flood_chunk(channel, channel_id, per_chunk, timed=True, first=i * per_chunk)
                           for i in range(chunks)) if timed
-                 else _flood_chunk(channel, channel_id, per_chunk, timed=False) * chunks)  # the same chunk again
+                 # the same chunk again
+                 else _flood_chunk(channel, channel_id, per_chunk, timed=False) * chunks)
         path = rewrite(content, folder / f"{name}.mcap", raw_chunk=flood)
         out[name] = (path, code)
     return out

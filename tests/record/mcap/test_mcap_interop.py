@@ -26,7 +26,8 @@ def _rerun(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_rerun_checks_every_channel_ok_and_converts_the_file(env, tmp_path, pick_place_cli):
-    recording = pick_place_cli["mcap"]  # `twin run pick_place --cycles 1 --record`, checked there to exit 0
+    # `twin run pick_place --cycles 1 --record`, checked there to exit 0
+    recording = pick_place_cli["mcap"]
     checked = _rerun("mcap", "check", str(recording))
     assert checked.returncode == 0, checked.stderr
     rows = {line.split()[3]: line.split()[0] for line in checked.stdout.splitlines()
@@ -39,7 +40,8 @@ def test_rerun_checks_every_channel_ok_and_converts_the_file(env, tmp_path, pick
 
 
 def test_rerun_refuses_a_cut_file(env, tmp_path, pick_place_cli):
-    recording = pick_place_cli["mcap"]  # `twin run pick_place --cycles 1 --record`, checked there to exit 0
+    # `twin run pick_place --cycles 1 --record`, checked there to exit 0
+    recording = pick_place_cli["mcap"]
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(recording.read_bytes()[: recording.stat().st_size // 2])
     assert _rerun("mcap", "check", str(cut)).returncode != 0

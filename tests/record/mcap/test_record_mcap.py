@@ -71,7 +71,8 @@ def test_rate_keeps_every_nth_step_and_the_last(tmp_path):
     expected = FrameColumns.concat([full.slice(i, i + 1) for i in keep])
     rec = twin.load(tmp_path / "rate.mcap")
     assert rec.frames.equals(expected)
-    assert rec.commands == collector.commands  # inputs are never thinned: the run stays re-executable
+    # inputs are never thinned: the run stays re-executable
+    assert rec.commands == collector.commands
 
 
 def _decoded(path: Path) -> dict[str, list]:
@@ -272,7 +273,8 @@ def test_the_fast_scanner_reads_what_mcaps_own_stream_reader_reads(recorded):
 
     path, _ = recorded
     with open(path, "rb") as f:
-        # the scanner skips index, statistics and summary-offset records (it reads every chunk anyway)
+        # the scanner skips index, statistics and summary-offset records (it reads every chunk
+        # anyway)
         theirs = [r for r in StreamReader(f).records if type(r) in {Message, *mcap_scan._PARSED.values()}]
     with open(path, "rb") as f:
         ours = [r.as_mcap() if isinstance(r, mcap_scan.Message) else r

@@ -85,7 +85,8 @@ def test_a_killed_run_is_recovered_but_for_at_most_the_last_second(tmp_path, cap
     again = _rerun(task, kept_s + 0.5)
     assert rec.frames.equals(again.columns().slice(0, len(rec.frames)))
     last = int(rec.frames.step[-1])
-    # (the task_start event, a Command too, names how the task was loaded and its parameters, which differ here)
+    # (the task_start event, a Command too, names how the task was loaded and its parameters, which
+    # differ here)
     assert rec.commands[1:] == [c for c in again.commands if c.step <= last][1:]
     assert rec.events[1:] == [e for e in again.events if e.step <= last][1:]
 
@@ -137,7 +138,8 @@ def test_a_damaged_chunk_is_reported_and_recovery_stops_before_it(complete, tmp_
     path, collector = complete
     data = bytearray(path.read_bytes())
     middle = len(data) // 2
-    data[middle:middle + 64] = bytes(64)  # zero 64 bytes inside a chunk: its CRC or its compression fails
+    # zero 64 bytes inside a chunk: its CRC or its compression fails
+    data[middle:middle + 64] = bytes(64)
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
     with pytest.raises(twin.errors.RecordingError, match="damaged"):

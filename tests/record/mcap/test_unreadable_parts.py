@@ -82,7 +82,7 @@ def good(pick_place_mcap) -> Path:
     return pick_place_mcap[0]
 
 
-# -- twin info: what it read, then exit 2 ----------------------------------------------------------------
+# -- twin info: what it read, then exit 2 ----------------------------------------------------------
 
 INFO_CASES = {
     # name: (how the file is made from a good one, what the error line says)
@@ -112,7 +112,8 @@ def test_info_prints_what_it_read_and_exits_2_when_a_part_is_unreadable(good, tm
     assert said in line and str(path) in line, line
     lines = out.splitlines()
     assert lines[0].startswith(f"file: {path} (") and "channels:" in lines and "finalized: yes (run outcome ok)" in out
-    assert any(x.startswith("problem: ") and said in x for x in lines), out  # the report names it too
+    # the report names it too
+    assert any(x.startswith("problem: ") and said in x for x in lines), out
     assert any(x.strip().startswith(S.TF.topic) for x in lines)  # and shows what it could read
 
 
@@ -155,7 +156,7 @@ def test_a_good_file_still_has_no_problem(good, capsys):
     assert _cli(capsys, "info", good)[0] == 0
 
 
-# -- a corrupt configuration record: every reader, one line --------------------------------------------
+# -- a corrupt configuration record: every reader, one line ----------------------------------------
 
 CONFIG_CASES = {
     "objects_7": (lambda c: c.update(objects=7), "objects = 7"),
@@ -185,7 +186,7 @@ def test_a_corrupt_config_record_is_one_line_from_every_reader(good, tmp_path, c
             assert said in _one_line(err), (reader, err)
 
 
-# -- a camera that cannot look anywhere ------------------------------------------------------------------
+# -- a camera that cannot look anywhere ------------------------------------------------------------
 
 @pytest.fixture(scope="module")
 def camera_file(tmp_path_factory) -> Path:

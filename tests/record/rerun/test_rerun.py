@@ -159,7 +159,8 @@ def test_events_and_commands_become_text_logs(run):
 def test_static_scene_has_the_robot_the_box_and_a_blueprint(run):
     reader = RrdReader(str(run["path"]))
     static = {c.entity_path for c in reader.stream() if c.is_static}
-    assert "/robot/mtb/visual_geometries/MTB_link1/visual_0" in static  # Rerun's URDF loader drew the links
+    # Rerun's URDF loader drew the links
+    assert "/robot/mtb/visual_geometries/MTB_link1/visual_0" in static
     assert "/" + scene.object_path("box") in static
     assert len(reader.blueprints()) == 1
     assert reader.recordings()[0].application_id == scene.APPLICATION_ID

@@ -250,7 +250,8 @@ def test_the_printed_url_streams_the_recording(recorded, tmp_path):
 
     proc = _start_view(str(recorded["mcap"]), "--web")
     port = _free_port()
-    with open(tmp_path / "headless.log", "wb") as log:  # its own TMPDIR: a killed viewer leaves rerun-data-*
+    # its own TMPDIR: a killed viewer leaves rerun-data-*
+    with open(tmp_path / "headless.log", "wb") as log:
         headless = subprocess.Popen([rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port),
                                      "--hide-welcome-screen"], stdout=log, stderr=log, start_new_session=True,
                                     env={**os.environ, "TMPDIR": str(tmp_path)})
@@ -351,7 +352,8 @@ def test_native_viewer_opens_a_window_on_loopback_beside_a_web_viewer(recorded, 
         try:
             _served(web)
             deadline = time.monotonic() + 60
-            while native.poll() is None and time.monotonic() < deadline:  # converting, then starting
+            # converting, then starting
+            while native.poll() is None and time.monotonic() < deadline:
                 children = psutil.Process(native.pid).children()
                 if children and _listening(children[0]):
                     break

@@ -56,10 +56,12 @@ class Info:
     config: TwinConfig | None = None  # what the run was: robot, scene, pad, cameras
     event_list: list[Event] = field(default_factory=list)  # every readable event, in file order
     machine: dict[str, str] = field(default_factory=dict)  # where it was made; empty in older files
-    problems: list[str] = field(default_factory=list)  # what is unreadable or foreign: twin info exits 2
+    # what is unreadable or foreign: twin info exits 2
+    problems: list[str] = field(default_factory=list)
 
 
-MAX_UNREADABLE = 1000  # unreadable messages of one topic counted one by one; past that, reading it stops
+# unreadable messages of one topic counted one by one; past that, reading it stops
+MAX_UNREADABLE = 1000
 MAX_KINDS = 1000  # distinct event kinds counted by name; any more are counted together
 
 

@@ -71,7 +71,8 @@ def check_run(run: dict) -> dict:
     if not isinstance(run, dict) or run.get("source") not in RUN_SOURCES:
         raise ConfigError(f"run description {run!r:.200} is invalid; expected source one of {RUN_SOURCES}")
     params = run.get("params", {})
-    if nesting_depth(params) > MAX_DEPTH:  # a reader refuses deeper (a recursion in every JSON tool)
+    # a reader refuses deeper (a recursion in every JSON tool)
+    if nesting_depth(params) > MAX_DEPTH:
         raise ConfigError(f"run parameters nest lists and objects more than {MAX_DEPTH} levels deep; expected "
                           f"at most {MAX_DEPTH}")
     try:
@@ -119,7 +120,8 @@ def parse_config(records: dict[str, dict[str, str]], where: str) -> TwinConfig:
     if record is None or "json" not in record:
         raise RecordingError(f"{where} has no {S.META_CONFIG} metadata; it was not written by twin")
     try:
-        return TwinConfig.from_dict(strict_json.loads(record["json"], constants=True))  # the schema names a NaN
+        # the schema names a NaN
+        return TwinConfig.from_dict(strict_json.loads(record["json"], constants=True))
     except (ValueError, ConfigError) as err:
         raise RecordingError(f"{where}: its twin configuration is unreadable: {err}") from err
 

@@ -56,8 +56,10 @@ class Scan:
     header: bool = False  # an MCAP header record was read
     complete: bool = False  # the footer was reached
     problem: str = ""  # why reading stopped early
-    _keep: set[int] = field(default_factory=set, repr=False)  # the channel ids whose messages are handed on
-    _dropped: set[str] = field(default_factory=set, repr=False)  # topics no longer kept (stop_keeping)
+    # the channel ids whose messages are handed on
+    _keep: set[int] = field(default_factory=set, repr=False)
+    # topics no longer kept (stop_keeping)
+    _dropped: set[str] = field(default_factory=set, repr=False)
 
     def stop_keeping(self, topic: str) -> None:
         """From now on, only count the messages of `topic` (a consumer that has seen enough of them)."""
@@ -83,7 +85,8 @@ class Scan:
         return out
 
 
-Consume = Callable[[Scan, str, Message], None]  # (the scan so far, the message's topic, the message)
+# (the scan so far, the message's topic, the message)
+Consume = Callable[[Scan, str, Message], None]
 
 
 def block_steps(message: Message) -> np.ndarray:
@@ -213,9 +216,12 @@ class RecordingBuilder:
         self.events: list[Event] = []
         self.urdf: str | None = None
         self._config: TwinConfig | None = None
-        self._pictures: dict[str, list[tuple[int, str, bytes]]] = {}  # image topic -> (t_ns, format, data)
-        self._early: list[tuple[str, Message]] = []  # pictures read before the configuration (twin never writes)
-        self._camera_poses: dict[tuple[str, int], tuple[float, ...]] = {}  # (frame_id, t_ns) -> pose
+        # image topic -> (t_ns, format, data)
+        self._pictures: dict[str, list[tuple[int, str, bytes]]] = {}
+        # pictures read before the configuration (twin never writes)
+        self._early: list[tuple[str, Message]] = []
+        # (frame_id, t_ns) -> pose
+        self._camera_poses: dict[tuple[str, int], tuple[float, ...]] = {}
 
     def wants(self, topic: str) -> bool:
         return topic in self.FIXED or _is_image_topic(topic) or topic == S.TF.topic
@@ -234,8 +240,10 @@ class RecordingBuilder:
                 self.urdf = parse_robot_description(m.data, where)
         elif topic == S.TF.topic:
             if self._without_cameras(s):
-                s.stop_keeping(topic)  # no camera: no picture's pose to read (the scene's /tf is the frames')
-            elif _CAMERA_FRAME in m.data:  # a picture's pose; the scene's own transforms are skipped
+                # no camera: no picture's pose to read (the scene's /tf is the frames')
+                s.stop_keeping(topic)
+            # a picture's pose; the scene's own transforms are skipped
+            elif _CAMERA_FRAME in m.data:
                 self._camera_pose(m.data, where)
         elif self._config is None and S.META_CONFIG not in s.metadata:
             self._early.append((topic, m))
@@ -392,7 +400,8 @@ class BlockParts:
         except RecordingError as err:
             raise RecordingError(f"recording {where!r}: a {self.topic} block is malformed: {err}") from err
         raws = [wire.raw_of(fields, f.number, f.wire) for f in self.fields]
-        if not raws[0]:  # twin writes a block when it holds frames: an empty one costs memory, says nothing
+        # twin writes a block when it holds frames: an empty one costs memory, says nothing
+        if not raws[0]:
             raise RecordingError(f"recording {where!r}: a {self.topic} block holds no frame; expected at least one")
         for part, raw in zip(self.parts, raws, strict=True):
             part.append(raw)

@@ -151,9 +151,11 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
     if S.META_CONFIG not in s.metadata:
         raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
                              " nothing to recover")
-    dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns  # a damaged config is a RecordingError
+    # a damaged config is a RecordingError
+    dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns
     last_step = ends.last_common_step()
-    writing = out_path.with_name(out_path.name + ".recovering")  # not .partial: that may be the source
+    # not .partial: that may be the source
+    writing = out_path.with_name(out_path.name + ".recovering")
     try:
         try:
             with open(writing, "wb") as f:
@@ -181,8 +183,10 @@ def _write(f, s: Scan, source: Path, last_step: int, dt_ns: int) -> int:
         cid: writer.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
         for cid, c in sorted(s.channels.items())
     }
-    for name, record in s.metadata.items():  # a file cut short loses its finalization too: what followed the
-        if name != S.META_RECOVERED and (s.complete or name != S.META_FINALIZED):  # kept frames is gone
+    # a file cut short loses its finalization too: what followed the
+    for name, record in s.metadata.items():
+        # kept frames is gone
+        if name != S.META_RECOVERED and (s.complete or name != S.META_FINALIZED):
             writer.add_metadata(name, record)
     writer.add_metadata(S.META_RECOVERED, {
         "source": Path(s.path).name, "problem": s.problem if not s.complete else "none (the source was complete)",

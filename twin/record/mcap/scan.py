@@ -62,7 +62,8 @@ _IN_CHUNK = (int(Opcode.SCHEMA), int(Opcode.CHANNEL))
 _MESSAGE = int(Opcode.MESSAGE)
 _RECORD_HEAD = struct.Struct("<BQ")
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
-_RECORD_HEAD_AND_ID = struct.Struct("<BQH")  # a record's opcode and length, and a message's channel id
+# a record's opcode and length, and a message's channel id
+_RECORD_HEAD_AND_ID = struct.Struct("<BQH")
 _PARSED = {Opcode.HEADER: Header, Opcode.FOOTER: Footer, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
            Opcode.METADATA: Metadata, Opcode.ATTACHMENT: Attachment, Opcode.DATA_END: DataEnd, Opcode.CHUNK: Chunk}
 
@@ -139,7 +140,8 @@ class _Pass:
     __slots__ = ("budget", "counts", "keep", "records_left", "records_limit")
 
     def __init__(self, size_bytes: int, counts: dict[int, int], keep: Container[int] | None) -> None:
-        self.budget = max(MAX_CHUNK_BYTES, MAX_EXPANSION * size_bytes)  # decompressed bytes still allowed
+        # decompressed bytes still allowed
+        self.budget = max(MAX_CHUNK_BYTES, MAX_EXPANSION * size_bytes)
         self.records_limit = self.records_left = RECORD_ALLOWANCE + size_bytes // MIN_BYTES_PER_RECORD
         self.counts = counts
         self.keep = keep
@@ -182,8 +184,10 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                 if keep is None or channel_id in keep:
                     channel_id, sequence, log_time, publish_time = message_head(data, start)
                     yield Message(channel_id, sequence, log_time, publish_time, data[start + 22:stop])
-                elif length == same and not (left & 255):  # now and then in a run of same-size messages:
-                    skipped = _count_run(data, stop, end, length, counts, keep, left)  # count it at once
+                # now and then in a run of same-size messages:
+                elif length == same and not (left & 255):
+                    # count it at once
+                    skipped = _count_run(data, stop, end, length, counts, keep, left)
                     left -= skipped
                     stop += skipped * (9 + length)
                 same = length

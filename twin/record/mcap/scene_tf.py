@@ -79,7 +79,8 @@ class SceneTransforms:
         root_names = len_field(2, WORLD.encode()) + len_field(3, self.root_link.encode())
         pad_names = len_field(2, WORLD.encode()) + len_field(3, PAD_TIP.encode())
         object_names = [len_field(2, WORLD.encode()) + len_field(3, n.encode()) for n in self.object_frames]
-        # the robot's transforms, in message order: (names, constant tail or None, moving joint or None)
+        # the robot's transforms, in message order: (names, constant tail or None, moving joint or
+        # None)
         static = [(root_names, _tail((0.0, 0.0, 0.0), IDENTITY_Q), None)]
         for j in self.joints:
             moving = j.column >= 0 and j.moving

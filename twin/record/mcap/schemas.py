@@ -136,8 +136,9 @@ ROBOT_DESCRIPTION = ChannelSpec("/robot_description", "std_msgs/String", "jsonsc
 # registration order fixes the schema and channel ids in every file
 CHANNELS = (ROBOT_DESCRIPTION, JOINTS, SUCTION, POSES, TF, LOG, EVENTS, COMMANDS)
 
-# A camera's channels, registered after CHANNELS for each of the configuration's cameras (a recording
-# without cameras has none): its pictures and, with each one, its calibration (Foxglove projects with it).
+# A camera's channels, registered after CHANNELS for each of the configuration's cameras (a
+# recording without cameras has none): its pictures and, with each one, its calibration (Foxglove
+# projects with it).
 IMAGE_SCHEMA, CALIBRATION_SCHEMA = "foxglove.CompressedImage", "foxglove.CameraCalibration"
 
 

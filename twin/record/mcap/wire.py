@@ -13,7 +13,8 @@ from twin.errors import RecordingError
 
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
 # Fields one message may hold: twin writes each block field once (packed), so a handful; other
-# writers' unpacked arrays are accepted up to this many values. A damaged message costs bounded time.
+# writers' unpacked arrays are accepted up to this many values. A damaged message costs bounded
+# time.
 MAX_FIELDS = 65_536
 _VARINT_CACHE = [bytes([i]) for i in range(128)]
 

@@ -60,7 +60,8 @@ def spawn(cmd: Sequence[str], log: IO[bytes], *, env: dict[str, str] | None = No
         env["TMPDIR"] = str(tmp_dir)
     return subprocess.Popen(list(cmd), stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env,
                             start_new_session=True,
-                            # the only hook that runs in the child before exec; it calls only prctl and getppid
+                            # the only hook that runs in the child before exec; it calls only prctl
+                            # and getppid
                             preexec_fn=_die_with_parent(os.getpid()))  # noqa: PLW1509
 
 

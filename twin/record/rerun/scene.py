@@ -21,7 +21,8 @@ from twin.robot.urdf import PAD_RADIUS_M, UrdfJoint, urdf_joints
 APPLICATION_ID = "twin"
 ROLES = ("shoulder", "elbow", "z", "wrist")
 ROBOT_PATH = "robot"
-JOINTS_PATH = "robot/joints"  # one animated Transform3D per driven joint, in the URDF's named frames
+# one animated Transform3D per driven joint, in the URDF's named frames
+JOINTS_PATH = "robot/joints"
 WORLD_PATH = "world"
 OBJECTS_PATH = "world/objects"
 PAD_PATH = "world/pad"
@@ -110,7 +111,8 @@ def log_static_scene(stream: rr.RecordingStream, config: TwinConfig, tree: rr.ur
         stream.log(object_path(obj.name), rr.Boxes3D(half_sizes=[np.asarray(obj.size_m) / 2], colors=[rgba],
                                                      fill_mode="solid", labels=[obj.name], show_labels=False),
                    static=True)
-    # The pad's state colours a sleeve over the pad, from its tip up to its root (positions: the tip).
+    # The pad's state colours a sleeve over the pad, from its tip up to its root (positions: the
+    # tip).
     pad_m = config.profile.pad_length_m
     stream.log(PAD_PATH, rr.Cylinders3D.from_fields(
         lengths=[pad_m + PAD_MARGIN_M], radii=[PAD_RADIUS_M + PAD_MARGIN_M], fill_mode="solid"), static=True)
@@ -142,8 +144,9 @@ def blueprint(config: TwinConfig, *, play_state: str | None = None) -> rrb.Bluep
         name="robot",
         origin="/",
         contents=[f"+ /{WORLD_PATH}/**", f"+ /{ROBOT_PATH}/**", f"- /{ROBOT_PATH}/**/collision_geometries/**"],
-        # The whole workspace at every moment: the arm at full reach in any direction, pick_place's pick
-        # (0.2, 0.7) and place (-0.3, -0.55) points and the box between them; from the front right, above.
+        # The whole workspace at every moment: the arm at full reach in any direction, pick_place's
+        # pick (0.2, 0.7) and place (-0.3, -0.55) points and the box between them; from the front
+        # right, above.
         eye_controls=rrb.EyeControls3D(
             position=(1.45 * reach_m, -1.7 * reach_m, 1.3 * reach_m), look_target=(0.0, 0.0, 0.05), eye_up=(0, 0, 1)
         ),

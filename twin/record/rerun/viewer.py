@@ -160,7 +160,8 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str
     out = Path(out_png).resolve()
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
     (port,) = loopback_ports(("--grpc-port", grpc_port))
-    env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))  # no notification toasts in the picture
+    # no notification toasts in the picture
+    env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))
     with open(Path(work_dir) / LOG_NAME, "w+b") as log:
         started = time.monotonic()
         proc = spawn([rerun_executable(), "--headless", "--bind", LOOPBACK, "--port", str(port),
@@ -183,7 +184,8 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str
                     client.set_time(scene.TIME_TIMELINE, play_state="following")
                 else:
                     client.set_time(scene.TIME_TIMELINE, duration=np.timedelta64(at_ns, "ns"), play_state="paused")
-                client.save_screenshot(str(out))  # blocks until a frame with the new cursor has been painted
+                # blocks until a frame with the new cursor has been painted
+                client.save_screenshot(str(out))
                 problems = [f"{v.name}: {r}" for v in client.get_state().views for r in v.reports]
             except (RuntimeError, ValueError, OSError) as err:
                 raise ViewerError(f"the headless Rerun viewer failed to take the screenshot: {err}") from err

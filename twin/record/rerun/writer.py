@@ -69,7 +69,8 @@ class RerunRecorder(Sink):
 
     def __init__(self, path: str | os.PathLike, config: TwinConfig, urdf_text: str, *,
                  batch_steps: int = DEFAULT_BATCH_STEPS) -> None:
-        tree = self._prepare(config, urdf_text, batch_steps)  # bad input fails before a file is created
+        # bad input fails before a file is created
+        tree = self._prepare(config, urdf_text, batch_steps)
         target = check_target(path, "recording", "a .rrd file path", error=RecordingError)
         self.path = str(path)
         self._start(file_stream(partial_path(target), config), tree)
@@ -91,7 +92,8 @@ class RerunRecorder(Sink):
         self.batch_steps = batch_steps
         tree = scene.load_urdf_tree(config, urdf_text)
         self._joints = [JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, urdf_text)]
-        # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per batch.
+        # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per
+        # batch.
         self._frame_names = [(pa.array([j.parent_frame] * batch_steps, pa.utf8()),
                               pa.array([j.child_frame] * batch_steps, pa.utf8())) for j in self._joints]
         self._object_paths = [scene.object_path(o.name) for o in config.objects]
@@ -209,7 +211,8 @@ class RerunRecorder(Sink):
         for j, joint in enumerate(self._joints):
             translations, quaternions = joint.transforms(b.joint_q[:n, j])
             parents, children = self._frame_names[j]
-            # Frame names go in every row: the viewer does not join a static frame name to timed poses.
+            # Frame names go in every row: the viewer does not join a static frame name to timed
+            # poses.
             send(scene.joint_path(joint.name), indexes=times, columns=rr.Transform3D.columns(
                 translation=translations, quaternion=quaternions,
                 parent_frame=parents.slice(0, n), child_frame=children.slice(0, n)))

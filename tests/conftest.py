@@ -36,9 +36,26 @@ def pick_place_cli(tmp_path_factory):
     mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
     # the rerun SDK may write its analytics config under HOME
     env = {**os.environ, "HOME": str(tmp)}
-    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "1", "--record",
-                           str(mcap), "--rrd", str(rrd)], capture_output=True, text=True, env=env, timeout=300,
-                          check=False)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "run",
+            "pick_place",
+            "--cycles",
+            "1",
+            "--record",
+            str(mcap),
+            "--rrd",
+            str(rrd),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     return {"tmp": tmp, "mcap": mcap, "rrd": rrd}
 

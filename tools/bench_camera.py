@@ -79,8 +79,12 @@ def bench(ctx) -> list[tuple[str, str]]:
         render, png = (statistics.median(s[i] for s in samples) for i in range(2))
         costs[name] = render + png
         ctx.figures[f"camera_{name}_ms_per_picture"] = render + png
-        rows.append((f"one {name} picture, 320x240: render + PNG (median of {repeats})",
-                     f"{render + png:.2f} ms ({render:.2f} + {png:.2f})"))
+        rows.append(
+            (
+                f"one {name} picture, 320x240: render + PNG (median of {repeats})",
+                f"{render + png:.2f} ms ({render:.2f} + {png:.2f})",
+            )
+        )
     with tempfile.TemporaryDirectory(prefix="twin-bench-camera-") as tmp:
         runs, here = [], []
         for _ in range(repeats):  # the two ways take turns: a machine that slows down slows both
@@ -88,15 +92,19 @@ def bench(ctx) -> list[tuple[str, str]]:
             here.append(recorded_camera_run(Path(tmp), background=False)[0])
     rate = statistics.median(r[0] for r in runs)
     ctx.rate_figures("record_camera", rate)
-    label = (f"twin + MCAP + overhead camera at 15 Hz (a picture every {every} steps, {runs[0][1]} pictures), "
-             "rendered in the render process: steps/s")
+    label = (
+        f"twin + MCAP + overhead camera at 15 Hz (a picture every {every} steps, {runs[0][1]} pictures), "
+        "rendered in the render process: steps/s"
+    )
     rows.append((label, ctx.ratio(rate)))
     in_thread = statistics.median(here)
     ctx.rate_figures("record_camera_in_thread", in_thread)
     rows.append(("the same, rendered in the stepping thread: steps/s", ctx.ratio(in_thread)))
     bound = every * 1e3 / costs["overhead"]
     ctx.figures["camera_render_bound_steps_per_s"] = bound
-    rows.append(("render bound: steps/s of a renderer drawing nothing but the pictures", f"{bound:,.0f}"))
+    rows.append(
+        ("render bound: steps/s of a renderer drawing nothing but the pictures", f"{bound:,.0f}")
+    )
     return rows
 
 

@@ -157,22 +157,41 @@ def bench(ctx) -> list[tuple[str, str]]:
     start_s = statistics.median(starts)
     one, two, dask = statistics.median(one), statistics.median(two), statistics.median(dask)
     pairs = vs_local
-    speedup, vs_local, overhead_ms = statistics.median(speedups), statistics.median(vs_local), statistics.median(overheads)
-    ctx.figures.update(sweep_scenarios_per_s=two, sweep_speedup_jobs2=speedup, sweep_dask_vs_local=vs_local,
-                       sweep_overhead_ms_per_scenario=overhead_ms, sweep_scenarios_per_s_jobs1=one,
-                       sweep_dask_scenarios_per_s=dask, sweep_dask_start_s=start_s)
+    speedup, vs_local, overhead_ms = (
+        statistics.median(speedups),
+        statistics.median(vs_local),
+        statistics.median(overheads),
+    )
+    ctx.figures.update(
+        sweep_scenarios_per_s=two,
+        sweep_speedup_jobs2=speedup,
+        sweep_dask_vs_local=vs_local,
+        sweep_overhead_ms_per_scenario=overhead_ms,
+        sweep_scenarios_per_s_jobs1=one,
+        sweep_dask_scenarios_per_s=dask,
+        sweep_dask_start_s=start_s,
+    )
     what = f"{SCENARIOS} scenarios of {DEFINITION.name}, --save none"
     return [
         (f"{what}: scenarios/s, 1 local worker (median of {repeats})", f"{one:.1f}"),
         ("scenarios/s, 2 local workers (pool start included)", f"{two:.1f}"),
-        ("2 workers over 1 (median of the pairs' ratios; goal >= 1.6)",
-         f"{speedup:.2f}x (pairs {min(speedups):.2f}..{max(speedups):.2f})"),
-        ("scenarios/s, Dask LocalCluster of 2 workers (started, warm) / 2 local workers around it",
-         f"{dask:.1f} / {statistics.median(local):.1f}"),
-        ("Dask over 2 local workers (median of the ratios to the runs around it; goal >= 0.9)",
-         f"{vs_local:.2f}x (pairs {min(pairs):.2f}..{max(pairs):.2f})"),
+        (
+            "2 workers over 1 (median of the pairs' ratios; goal >= 1.6)",
+            f"{speedup:.2f}x (pairs {min(speedups):.2f}..{max(speedups):.2f})",
+        ),
+        (
+            "scenarios/s, Dask LocalCluster of 2 workers (started, warm) / 2 local workers around it",
+            f"{dask:.1f} / {statistics.median(local):.1f}",
+        ),
+        (
+            "Dask over 2 local workers (median of the ratios to the runs around it; goal >= 0.9)",
+            f"{vs_local:.2f}x (pairs {min(pairs):.2f}..{max(pairs):.2f})",
+        ),
         ("Dask LocalCluster start (2 workers, twin preloaded; median)", f"{start_s:.2f} s"),
-        ("sweep overhead per scenario: CPU time of a 1-worker sweep over the runs alone", f"{overhead_ms:.2f} ms"),
+        (
+            "sweep overhead per scenario: CPU time of a 1-worker sweep over the runs alone",
+            f"{overhead_ms:.2f} ms",
+        ),
     ]
 
 

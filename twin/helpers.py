@@ -12,7 +12,9 @@ from collections.abc import Callable, Sequence
 TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-def start_helper(owner: object, target: Callable, args: tuple, *, name: str, other_ends: Sequence = ()):
+def start_helper(
+    owner: object, target: Callable, args: tuple, *, name: str, other_ends: Sequence = ()
+):
     """Fork `target(conn, *args)` as a daemon process joined to this one by a pipe; returns this side's
     end of the pipe and the process.
 
@@ -26,8 +28,12 @@ def start_helper(owner: object, target: Callable, args: tuple, *, name: str, oth
       wait forever for a child that ignores SIGTERM."""
     ctx = multiprocessing.get_context("fork")
     conn, child_conn = ctx.Pipe()
-    process = ctx.Process(target=_helper_main, args=(target, child_conn, [conn, *other_ends], args),
-                          name=name, daemon=True)
+    process = ctx.Process(
+        target=_helper_main,
+        args=(target, child_conn, [conn, *other_ends], args),
+        name=name,
+        daemon=True,
+    )
     blocked = signal.pthread_sigmask(signal.SIG_BLOCK, TWINS_SIGNALS)
     try:
         process.start()

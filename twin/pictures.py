@@ -23,7 +23,9 @@ def encode(rgb: np.ndarray, format: str = "png") -> bytes:
     from PIL import Image
 
     out = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(out, format="JPEG", quality=90)
+    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(
+        out, format="JPEG", quality=90
+    )
     return out.getvalue()
 
 
@@ -40,8 +42,14 @@ def png_bytes(rgb: np.ndarray) -> bytes:
     pixels[...] = rgb
     # 8 bits, truecolour, deflate, no filter choice, no interlace
     header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
-    return b"".join((b"\x89PNG\r\n\x1a\n", _png_chunk(b"IHDR", header),
-                     _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)), _png_chunk(b"IEND", b"")))
+    return b"".join(
+        (
+            b"\x89PNG\r\n\x1a\n",
+            _png_chunk(b"IHDR", header),
+            _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)),
+            _png_chunk(b"IEND", b""),
+        )
+    )
 
 
 def _png_chunk(kind: bytes, data: bytes) -> bytes:
@@ -53,7 +61,9 @@ _PIL_FORMATS = {"png": "PNG", "jpeg": "JPEG"}
 _PNG_HEAD = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR"
 
 
-def decode_rgb(data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None) -> np.ndarray:
+def decode_rgb(
+    data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None
+) -> np.ndarray:
     """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height) the
     header is checked first and nothing else is decoded: ValueError saying what the bytes are instead,
     also for pixel data Pillow cannot decode."""
@@ -97,12 +107,16 @@ def _open(data: bytes, format: str | None, size_px: tuple[int, int] | None = Non
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", Image.DecompressionBombWarning)
         try:
-            return Image.open(io.BytesIO(bytes(data)), formats=None if format is None else [_PIL_FORMATS[format]])
+            return Image.open(
+                io.BytesIO(bytes(data)), formats=None if format is None else [_PIL_FORMATS[format]]
+            )
         except Image.DecompressionBombError:
             raise ValueError(f"declares more than {Image.MAX_IMAGE_PIXELS} pixels") from None
         except UnidentifiedImageError:
             what = f"a {_PIL_FORMATS[format]} picture" if format else "a picture"
-            raise ValueError(f"is not {what} ({len(data)} bytes starting {bytes(data[:8])!r})") from None
+            raise ValueError(
+                f"is not {what} ({len(data)} bytes starting {bytes(data[:8])!r})"
+            ) from None
         except Exception as err:  # noqa: BLE001 - a damaged header: SyntaxError, OSError, struct.error, ...
             raise ValueError(f"has a damaged header ({_one_line(err)})") from None
 

@@ -27,7 +27,9 @@ def _with_darkened_picture(rec, camera: str, index: int):
 def test_identical_pictures_match_under_every_preset(camera_run):
     rec = twin.load(camera_run["mcap"])
     for preset in ("exact", "tight", "physical", "outcome"):
-        assert compare(rec, twin.load(camera_run["mcap"]), Tolerances.from_preset(preset)).match, preset
+        assert compare(rec, twin.load(camera_run["mcap"]), Tolerances.from_preset(preset)).match, (
+            preset
+        )
 
 
 def test_a_changed_picture_is_the_first_divergence_under_exact_and_tight(camera_run):

@@ -57,7 +57,11 @@ def test_a_last_bit_difference_prints_in_full_beside_fail(run):
 
 def test_event_data_compares_numerically_under_tight_and_noise(run):
     other = _copy(run)
-    i = next(k for k, c in enumerate(run.commands) if c.kind == "event" and c.args.get("kind") == "placed")
+    i = next(
+        k
+        for k, c in enumerate(run.commands)
+        if c.kind == "event" and c.args.get("kind") == "placed"
+    )
     c = run.commands[i]
     data = {**c.args["data"], "error_m": c.args["data"]["error_m"] + 1e-12}
     other.commands[i] = Command(c.step, c.kind, {**c.args, "data": data})

@@ -121,17 +121,36 @@ def test_quit_keys_never_steal_a_bound_key():
 
 
 def test_parse_keys_tokens_and_repeats():
-    assert parse_keys("d*3 up  x * **2 wait*2 esc") == ["d", "d", "d", "up", "x", "*", "*", "*", "wait", "wait", "esc"]
+    assert parse_keys("d*3 up  x * **2 wait*2 esc") == [
+        "d",
+        "d",
+        "d",
+        "up",
+        "x",
+        "*",
+        "*",
+        "*",
+        "wait",
+        "wait",
+        "esc",
+    ]
     assert parse_keys("") == []
-    for bad, shown in (("dd", "'dd'"), ("up*0", "*1 to *100000"), ("d*100001", "*1 to *100000"), ("Up", "'Up'")):
+    for bad, shown in (
+        ("dd", "'dd'"),
+        ("up*0", "*1 to *100000"),
+        ("d*100001", "*1 to *100000"),
+        ("Up", "'Up'"),
+    ):
         with pytest.raises(ConfigError, match=r".*" + shown.replace("*", r"\*")):
             parse_keys(bad)
 
 
 def test_user_keymap_toml_with_degrees_and_extends(tmp_path):
     path = tmp_path / "mine.toml"
-    path.write_text('extends = "seed000"\n[keys]\nw = [["jog", "elbow", "2.5deg"]]\n'
-                    'x = [["target", "MTB_axis3", 0.1], ["signal", "lamp", 3]]\nd = ["jog", "shoulder", 0.1]\n')
+    path.write_text(
+        'extends = "seed000"\n[keys]\nw = [["jog", "elbow", "2.5deg"]]\n'
+        'x = [["target", "MTB_axis3", 0.1], ["signal", "lamp", 3]]\nd = ["jog", "shoulder", 0.1]\n'
+    )
     keymap = load_keymap(path, PROFILES["mtb"])
     assert keymap["w"] == [["jog", "elbow", math.radians(2.5)]]
     assert keymap["x"] == [["target", "z", 0.1], ["signal", "lamp", 3]]
@@ -141,9 +160,13 @@ def test_user_keymap_toml_with_degrees_and_extends(tmp_path):
 
 def test_user_keymap_json(tmp_path):
     path = tmp_path / "mine.json"
-    path.write_text(json.dumps({"keys": {"space": [["suction", 1]], "left": [["jog_keep_heading", "AB", 0.2]]}}))
+    path.write_text(
+        json.dumps({"keys": {"space": [["suction", 1]], "left": [["jog_keep_heading", "AB", 0.2]]}})
+    )
     assert load_keymap(path, PROFILES["seed002"]) == {
-        "left": [["jog_keep_heading", "shoulder", 0.2]], "space": [["suction", 1]]}
+        "left": [["jog_keep_heading", "shoulder", 0.2]],
+        "space": [["suction", 1]],
+    }
 
 
 BAD_ENTRIES = [
@@ -156,9 +179,9 @@ BAD_ENTRIES = [
     ('[keys]\nk = [["suction", 2]]', "suction value 2"),
     ('[keys]\nk = [["signal", "lamp", 1.5]]', "signal value 1.5"),
     ('[keys]\nesc = [["suction", 1]]', "key 'esc' is not a key name"),
-    ('[keys]\nk = []', "non-empty list of actions"),
+    ("[keys]\nk = []", "non-empty list of actions"),
     ('[keys]\nk = [["jog", "elbow", 1]', "cannot be read"),
-    ('keys = 3', "expected a table `keys`"),
+    ("keys = 3", "expected a table `keys`"),
     ('extends = "robot9"\n[keys]\nk = [["suction", 1]]', "extends 'robot9' is unknown"),
     ('colour = 1\n[keys]\nk = [["suction", 1]]', "unknown entries ['colour']"),
 ]
@@ -177,13 +200,47 @@ def test_bad_keymap_file_on_the_command_line_exits_2_and_records_nothing(tmp_pat
     path = tmp_path / "bad.toml"
     path.write_text('[keys]\nk = [["jog", "knee", 1]]\n')
     rec = tmp_path / "run.mcap"
-    out = subprocess.run([sys.executable, "-m", "twin.cli", "teleop", "--keymap", str(path), "--keys", "k", "--record",
-                          str(rec)], check=False, capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "teleop",
+            "--keymap",
+            str(path),
+            "--keys",
+            "k",
+            "--record",
+            str(rec),
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2
-    assert out.stderr.count("\n") == 1 and "unknown joint 'knee'" in out.stderr and "Traceback" not in out.stderr
+    assert (
+        out.stderr.count("\n") == 1
+        and "unknown joint 'knee'" in out.stderr
+        and "Traceback" not in out.stderr
+    )
     assert not rec.exists()
-    missing = subprocess.run([sys.executable, "-m", "twin.cli", "teleop", "--keymap", str(tmp_path / "no.toml"),
-                              "--keys", "k"], check=False, capture_output=True, text=True, timeout=60)
+    missing = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "teleop",
+            "--keymap",
+            str(tmp_path / "no.toml"),
+            "--keys",
+            "k",
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert missing.returncode == 2 and "does not exist" in missing.stderr
 
 
@@ -195,7 +252,9 @@ def test_window_key_events_count_each_press_once():
     assert decode_key_events({a: rel}, down) == []  # its release is not a second press
     assert decode_key_events({a: rel}, down) == ["a"]  # a quick tap seen only as released
     assert decode_key_events({a: trig | rel}, down) == ["a"]
-    assert decode_key_events({pb.B3G_LEFT_ARROW: trig, pb.B3G_SHIFT: is_down, ord("d"): trig}, down) == ["D", "left"]
+    assert decode_key_events(
+        {pb.B3G_LEFT_ARROW: trig, pb.B3G_SHIFT: is_down, ord("d"): trig}, down
+    ) == ["D", "left"]
     assert decode_key_events({27: trig, pb.B3G_F1 + 1: trig, 7: trig}, down) == ["esc", "f2"]
 
 
@@ -204,5 +263,7 @@ def test_readme_example_keymap_loads(tmp_path):
     path = tmp_path / "example.toml"
     path.write_text(re.search(r"```toml\n(.*?)```", readme, re.DOTALL).group(1))
     keymap = load_keymap(path, PROFILES["mtb"])
-    assert keymap["w"] == [["jog", "elbow", math.radians(2)]] and keymap["n"] == [["signal", "lamp", 1]]
+    assert keymap["w"] == [["jog", "elbow", math.radians(2)]] and keymap["n"] == [
+        ["signal", "lamp", 1]
+    ]
     assert keymap["left"] == [["jog_keep_heading", "shoulder", math.radians(1)]] and "g" in keymap

@@ -151,8 +151,12 @@ def test_urdf_joints_carry_the_profile_names_limits_and_link_lengths(profile_nam
             assert (float(limit.get("lower")), float(limit.get("upper"))) == (lo, hi)
     axes = [joint.find("axis").get("xyz") for joint in joints]
     signs = profile.axis_signs
-    assert axes == [f"0 0 {'1' if signs[0] > 0 else '-1'}", f"0 0 {'1' if signs[1] > 0 else '-1'}",
-                    f"0 0 {'-1' if signs[2] > 0 else '1'}", f"0 0 {'1' if signs[3] > 0 else '-1'}"]
+    assert axes == [
+        f"0 0 {'1' if signs[0] > 0 else '-1'}",
+        f"0 0 {'1' if signs[1] > 0 else '-1'}",
+        f"0 0 {'-1' if signs[2] > 0 else '1'}",
+        f"0 0 {'1' if signs[3] > 0 else '-1'}",
+    ]
     elbow_xyz = [float(v) for v in joints[1].find("origin").get("xyz").split()]
     z_xyz = [float(v) for v in joints[2].find("origin").get("xyz").split()]
     assert math.hypot(*elbow_xyz[:2]) == profile.link1_m
@@ -162,8 +166,11 @@ def test_urdf_joints_carry_the_profile_names_limits_and_link_lengths(profile_nam
 def test_the_seed_profiles_carry_the_reports_link_lengths():
     lengths = {name: (p.link1_m, p.link2_m) for name, p in PROFILES.items()}
     assert lengths == {
-        "mtb": (0.467, 0.4005), "seed000": (0.8, 0.8), "seed001": (0.467, 0.401),
-        "seed002": (0.5, 0.5), "seed003": (0.468, 0.4),
+        "mtb": (0.467, 0.4005),
+        "seed000": (0.8, 0.8),
+        "seed001": (0.467, 0.401),
+        "seed002": (0.5, 0.5),
+        "seed003": (0.468, 0.4),
     }
     assert PROFILES["seed003"].suction_signals[0] == "suctionPad"
 
@@ -179,12 +186,20 @@ def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
     try:
         w = twin._world  # the engine, looked at directly (white-box)
         z_lo, z_hi = twin.profile.joint_limits()[2]
-        for q in [(0.3, -1.1, z_lo + 0.25 * (z_hi - z_lo), 0.7), (-2.5, 2.0, z_hi, -3.0), (1.9, 0.4, z_lo, 2.2)]:
+        for q in [
+            (0.3, -1.1, z_lo + 0.25 * (z_hi - z_lo), 0.7),
+            (-2.5, 2.0, z_hi, -3.0),
+            (1.9, 0.4, z_lo, 2.2),
+        ]:
             for joint, value in enumerate(q):
                 twin.set_joint_position(joint, value)
             fk = kinematics.fk(twin.profile, q)
-            pos, orn = pb.getLinkState(w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client)[4:6]
-            assert pos == pytest.approx((fk.x_m, fk.y_m, fk.z_m + twin.profile.pad_length_m), abs=1e-6)
+            pos, orn = pb.getLinkState(
+                w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client
+            )[4:6]
+            assert pos == pytest.approx(
+                (fk.x_m, fk.y_m, fk.z_m + twin.profile.pad_length_m), abs=1e-6
+            )
             yaw = pb.getEulerFromQuaternion(orn)[2]
             assert abs(kinematics.wrap_rad(yaw - fk.heading_rad)) < 1e-6
             assert twin.pad_position() == pytest.approx((fk.x_m, fk.y_m, fk.z_m), abs=1e-12)

@@ -36,12 +36,18 @@ class Arm:
         for _ in range(MAX_STEPS):
             self.sim.step()
             self.steps += 1
-            if all(abs(self.sim.getJointPosition(self.joints[j]) - q) < TOL_RAD for j, q in targets.items()):
+            if all(
+                abs(self.sim.getJointPosition(self.joints[j]) - q) < TOL_RAD
+                for j, q in targets.items()
+            ):
                 return
         raise AssertionError(f"joints did not reach {targets} in {MAX_STEPS} steps")
 
     def over(self, x_m: float, y_m: float) -> None:
-        current = (self.sim.getJointPosition(self.joints[0]), self.sim.getJointPosition(self.joints[1]))
+        current = (
+            self.sim.getJointPosition(self.joints[0]),
+            self.sim.getJointPosition(self.joints[1]),
+        )
         sol = kinematics.choose(kinematics.ik(self.profile, x_m, y_m), current)
         wrist = kinematics.wrist_for_heading(self.profile, sol, 0.0)
         self.settle({0: sol.shoulder_rad, 1: sol.elbow_rad, 3: wrist})
@@ -93,7 +99,9 @@ def test_stepped_pick_and_place_places_the_box_and_the_recording_replays_exactly
         for _ in range(3):
             sim.step()
         sim.stopSimulation()
-        server.wait_for(r"simulation stopped: run 2 lasted 3 steps .*released box; recorded .*session-2\.mcap")
+        server.wait_for(
+            r"simulation stopped: run 2 lasted 3 steps .*released box; recorded .*session-2\.mcap"
+        )
 
     rec = load(record)
     assert rec.run["source"] == "remote"
@@ -105,7 +113,9 @@ def test_stepped_pick_and_place_places_the_box_and_the_recording_replays_exactly
     assert kinds.count("attach") == 1 and "release" in kinds and "log" in kinds
     # event: the client's addLog
     assert {c.kind for c in rec.commands} == {"joint_target", "signal", "event"}
-    assert all(rec.commands[i].step <= rec.commands[i + 1].step for i in range(len(rec.commands) - 1))
+    assert all(
+        rec.commands[i].step <= rec.commands[i + 1].step for i in range(len(rec.commands) - 1)
+    )
     second = load(tmp_path / "session-2.mcap")
     assert len(second.frames) == 4
     # given while stopped: step 0 of the run

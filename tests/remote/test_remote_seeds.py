@@ -36,11 +36,19 @@ SEEDS = ("seed000", "seed001", "seed002", "seed003")
 def run_seed(seed: str, folder: Path, *server_args: str):
     """Serve, run the seed's program to its end, read the box, stop the run: (recording, box, program)."""
     record = folder / f"{seed}.mcap"
-    with ServerProcess("--realtime", "--speed", "1", "--robot", seed, "--record", str(record),
-                       *server_args) as server:
+    with ServerProcess(
+        "--realtime", "--speed", "1", "--robot", seed, "--record", str(record), *server_args
+    ) as server:
         env = dict(os.environ, TWIN_REMOTE_PORT=str(server.port), TWIN_REMOTE_HOST="127.0.0.1")
-        program = subprocess.run([sys.executable, f"{seed}.py"], cwd=CLIENTS, capture_output=True, text=True,
-                                 env=env, timeout=90, check=False)
+        program = subprocess.run(
+            [sys.executable, f"{seed}.py"],
+            cwd=CLIENTS,
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=90,
+            check=False,
+        )
         assert "Connected to remote API server" in program.stdout, program.stdout + program.stderr
         sim = server.client().require("sim")
         box = sim.getObjectPosition(sim.getObject("/box"), sim.handle_world)
@@ -57,7 +65,10 @@ def seed_runs(tmp_path_factory) -> dict:
 
     def work(seed: str) -> None:
         try:  # report 003's author pressed Play: its program never starts the simulation
-            results[seed] = (*run_seed(seed, folder, *(["--start"] if seed == "seed003" else [])), folder)
+            results[seed] = (
+                *run_seed(seed, folder, *(["--start"] if seed == "seed003" else [])),
+                folder,
+            )
         except BaseException as err:  # noqa: BLE001 - handed to the test that asks for this seed
             results[seed] = err
 
@@ -102,14 +113,19 @@ def test_the_fixtures_are_the_reports_programs_but_for_the_import_and_the_loop_b
     seeds = Path(__file__).resolve().parents[3] / "shared" / "seeds"
     if not seeds.is_dir():
         pytest.skip("the reports are not beside this checkout")
-    reports = {p.name[:3]: p.read_text(encoding="utf-8").replace("\u00a0", " ") for p in seeds.glob("*.txt")}
+    reports = {
+        p.name[:3]: p.read_text(encoding="utf-8").replace("\u00a0", " ")
+        for p in seeds.glob("*.txt")
+    }
     for seed in SEEDS:
         changed = []
         for line in (CLIENTS / f"{seed}.py").read_text(encoding="utf-8").splitlines():
             if line.strip() and line not in reports[seed[-3:]]:
                 changed.append(line.strip())
         assert changed[0] == "from twin.remote import legacy as vrep"
-        assert all(c.startswith("for _pass in range(1):  # the report: while True") for c in changed[1:]), changed
+        assert all(
+            c.startswith("for _pass in range(1):  # the report: while True") for c in changed[1:]
+        ), changed
 
 
 def test_report000_program_carries_the_box_to_b_and_back(seed_runs, capsys):
@@ -125,7 +141,9 @@ def test_report000_program_carries_the_box_to_b_and_back(seed_runs, capsys):
 
 
 @pytest.mark.parametrize("seed, miss_m", [("seed001", (0.10, 0.16))])
-def test_report001_program_misses_the_box_and_the_recording_shows_it(seed, miss_m, seed_runs, capsys):
+def test_report001_program_misses_the_box_and_the_recording_shows_it(
+    seed, miss_m, seed_runs, capsys
+):
     rec, box, program, folder = _result(seed_runs, seed)
     assert program.returncode == 0, program.stderr
     empty = _kinds(rec, "suction_empty")

@@ -54,8 +54,12 @@ def test_ik_returns_exactly_the_branches_within_the_limits(name, rf, angle):
     profile = PROFILES[name]
     (s_lo, s_hi), (e_lo, e_hi) = profile.joint_limits()[:2]
     x, y = _point(profile, rf, angle)
-    within = [b for b in k.ik_branches(profile, x, y)
-              if s_lo - 1e-12 <= b.shoulder_rad <= s_hi + 1e-12 and e_lo - 1e-12 <= b.elbow_rad <= e_hi + 1e-12]
+    within = [
+        b
+        for b in k.ik_branches(profile, x, y)
+        if s_lo - 1e-12 <= b.shoulder_rad <= s_hi + 1e-12
+        and e_lo - 1e-12 <= b.elbow_rad <= e_hi + 1e-12
+    ]
     if not within:
         with pytest.raises(OutOfReach, match="beyond the joint limits"):
             k.ik(profile, x, y)
@@ -68,8 +72,13 @@ def test_ik_returns_exactly_the_branches_within_the_limits(name, rf, angle):
 
 
 @settings(max_examples=200, deadline=None)
-@given(name=profiles, rf=st.floats(0.01, 0.99), angle=st.floats(-math.pi, math.pi),
-       heading=st.floats(-math.pi, math.pi), z_fraction=fraction)
+@given(
+    name=profiles,
+    rf=st.floats(0.01, 0.99),
+    angle=st.floats(-math.pi, math.pi),
+    heading=st.floats(-math.pi, math.pi),
+    z_fraction=fraction,
+)
 def test_wrist_keeps_the_heading_and_z_sets_the_height(name, rf, angle, heading, z_fraction):
     profile = PROFILES[name]
     x, y = _point(profile, rf, angle)
@@ -92,9 +101,15 @@ def test_wrist_keeps_the_heading_and_z_sets_the_height(name, rf, angle, heading,
 
 
 @settings(max_examples=200, deadline=None)
-@given(name=profiles, angle=st.floats(-math.pi, math.pi), outside=st.sampled_from(["in", "out"]),
-       margin=st.floats(1e-6, 5.0))
-def test_unreachable_targets_raise_out_of_reach_naming_target_annulus_and_limits(name, angle, outside, margin):
+@given(
+    name=profiles,
+    angle=st.floats(-math.pi, math.pi),
+    outside=st.sampled_from(["in", "out"]),
+    margin=st.floats(1e-6, 5.0),
+)
+def test_unreachable_targets_raise_out_of_reach_naming_target_annulus_and_limits(
+    name, angle, outside, margin
+):
     profile = PROFILES[name]
     inner, outer = profile.reach_m
     if outside == "in" and inner == 0.0:
@@ -166,6 +181,7 @@ def test_choose_prefers_the_branch_nearest_the_current_pose():
 
 # -- each report's own joint conventions (docs/seed-conventions.md) --------------------------------
 
+
 def _report000_ik(x, y):
     """Report 000's ik(x, y) (links 0.8/0.8): degrees, q2 = -acos(...), q1 = atan2(y, x) + atan2(...)."""
     q2 = -math.acos((x**2 + y**2 - 0.8**2 - 0.8**2) / (2 * 0.8 * 0.8))
@@ -193,8 +209,9 @@ def _heron(x, y, a, b):
     return base + tri, deg2, deg2 - (base + tri)
 
 
-@pytest.mark.parametrize("name, links, miss_m", [("seed001", (0.467, 0.401), 0.1319),
-                                                  ("seed002", (0.5, 0.5), 0.2572)])
+@pytest.mark.parametrize(
+    "name, links, miss_m", [("seed001", (0.467, 0.401), 0.1319), ("seed002", (0.5, 0.5), 0.2572)]
+)
 def test_heron_ik_misses_the_box_in_its_own_frame_and_keeps_the_heading(name, links, miss_m):
     profile = PROFILES[name]
     deg1, deg2, deg3 = _heron(0.2, 0.7, *links)
@@ -215,8 +232,15 @@ def test_report003_ik_is_the_mtb_frame():
     assert (pose.x_m, pose.y_m) == pytest.approx((0.2, 0.7), abs=1e-12)
 
 
-@pytest.mark.parametrize("name, down, up", [("seed000", 0.06, -0.06), ("seed001", -0.055, 0.0),
-                                             ("seed002", -0.09, 0.0), ("mtb", 0.2, 0.0)])
+@pytest.mark.parametrize(
+    "name, down, up",
+    [
+        ("seed000", 0.06, -0.06),
+        ("seed001", -0.055, 0.0),
+        ("seed002", -0.09, 0.0),
+        ("mtb", 0.2, 0.0),
+    ],
+)
 def test_each_scene_s_down_puts_the_pad_on_a_50_mm_box(name, down, up):
     profile = PROFILES[name]
     assert (profile.z_down(), profile.z_up()) == (down, up)
@@ -231,4 +255,12 @@ def test_the_per_step_pad_pose_is_fk_bit_for_bit(name, q):
     profile = PROFILES[name]
     pose = k.fk(profile, q)
     half = 0.5 * pose.heading_rad
-    assert k.pad_pose_function(profile)(q) == (pose.x_m, pose.y_m, pose.z_m, 0.0, 0.0, math.sin(half), math.cos(half))
+    assert k.pad_pose_function(profile)(q) == (
+        pose.x_m,
+        pose.y_m,
+        pose.z_m,
+        0.0,
+        0.0,
+        math.sin(half),
+        math.cos(half),
+    )

@@ -18,8 +18,12 @@ BOX_XY_M = (0.5, 0.0)
 HIGH = 1e3  # a limit that is never reached
 
 
-def _twin(mass_kg: float = 0.1, size_z_m: float = 0.05, robot: str = "mtb", **suction) -> tuple[Twin, FrameCollector]:
-    box = SceneObject("box", size_m=(0.05, 0.05, size_z_m), mass_kg=mass_kg, pos_m=(*BOX_XY_M, size_z_m / 2))
+def _twin(
+    mass_kg: float = 0.1, size_z_m: float = 0.05, robot: str = "mtb", **suction
+) -> tuple[Twin, FrameCollector]:
+    box = SceneObject(
+        "box", size_m=(0.05, 0.05, size_z_m), mass_kg=mass_kg, pos_m=(*BOX_XY_M, size_z_m / 2)
+    )
     sink = FrameCollector()
     config = TwinConfig(profile=PROFILES[robot], objects=(box,), suction=SuctionParams(**suction))
     return Twin(config, sinks=[sink]), sink
@@ -100,7 +104,9 @@ def test_an_empty_pad_switched_off_reports_suction_empty():
 
 
 def test_a_heavy_box_breaks_a_finite_hold_on_pull():
-    twin, sink = _twin(mass_kg=0.5, infinite_strength=False, max_shear_force_n=HIGH, max_peel_torque_nm=HIGH)
+    twin, sink = _twin(
+        mass_kg=0.5, infinite_strength=False, max_shear_force_n=HIGH, max_peel_torque_nm=HIGH
+    )
     _pick(twin)
     twin.wait(1.0)
     breaks = [e for e in sink.events if e.kind == "break"]
@@ -118,8 +124,12 @@ def test_the_same_box_holds_with_infinite_strength():
 
 
 def test_a_fast_swing_breaks_a_weak_hold_on_shear():
-    twin, sink = _twin(infinite_strength=False, max_pull_force_n=HIGH, max_shear_force_n=5.0,
-                       max_peel_torque_nm=HIGH)
+    twin, sink = _twin(
+        infinite_strength=False,
+        max_pull_force_n=HIGH,
+        max_shear_force_n=5.0,
+        max_peel_torque_nm=HIGH,
+    )
     _pick(twin, gentle=True)
     assert _kinds(sink) == ["attach"]  # lifting is not shear
     twin.move_to(-0.3, -0.55)
@@ -154,8 +164,13 @@ def test_peel_is_the_torque_at_the_cup_face():
 def test_pressing_the_held_box_down_is_not_pull():
     """A tall box held and pushed into the floor: the pad pushes it down (negative z), which must
     not count as pull; lifting it afterwards keeps the hold."""
-    twin, sink = _twin(size_z_m=0.07, infinite_strength=False, max_pull_force_n=20.0, max_shear_force_n=HIGH,
-                       max_peel_torque_nm=HIGH)
+    twin, sink = _twin(
+        size_z_m=0.07,
+        infinite_strength=False,
+        max_pull_force_n=20.0,
+        max_shear_force_n=HIGH,
+        max_peel_torque_nm=HIGH,
+    )
     twin.move_to(*BOX_XY_M)
     twin.suction(True)
     twin.z_to(0.06, settle=False)  # 10 mm into the box's top

@@ -14,8 +14,30 @@ def record_camera_run(folder: Path, *extra: str) -> dict[str, Path]:
     mcap, rrd = folder / "camera.mcap", folder / "camera.rrd"
     # the rerun SDK may write its analytics config under HOME
     env = {**os.environ, "HOME": str(folder)}
-    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "1", "--camera",
-                           "overhead", "--camera", "wrist", *extra, "--record", str(mcap), "--rrd", str(rrd)],
-                          capture_output=True, text=True, env=env, timeout=300, check=False)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "run",
+            "pick_place",
+            "--cycles",
+            "1",
+            "--camera",
+            "overhead",
+            "--camera",
+            "wrist",
+            *extra,
+            "--record",
+            str(mcap),
+            "--rrd",
+            str(rrd),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     return {"mcap": mcap, "rrd": rrd}

@@ -25,7 +25,11 @@ class RawClient:
         return cbor2.loads(self.socket.recv())
 
     def call(self, func: str, args: list, **extra) -> dict:
-        return self.raw(cbor2.dumps({"func": func, "args": args, "argsL": len(args), "uuid": self.uuid, **extra}))
+        return self.raw(
+            cbor2.dumps(
+                {"func": func, "args": args, "argsL": len(args), "uuid": self.uuid, **extra}
+            )
+        )
 
     def close(self) -> None:
         self.socket.close()

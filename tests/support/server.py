@@ -26,8 +26,21 @@ class ServerProcess:
         if "--record" not in args:
             args = (*args, "--no-record")  # never write into the working tree
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "twin.cli", "serve", "--host", "127.0.0.1", "--port", "0", *args],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+            [
+                sys.executable,
+                "-m",
+                "twin.cli",
+                "serve",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                *args,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
         )
         self.lines: list[str] = []
         self._queue: queue.Queue[str | None] = queue.Queue()
@@ -61,7 +74,9 @@ class ServerProcess:
             self.lines.append(line)
             if re.search(pattern, line):
                 return line
-        raise AssertionError(f"no line matching {pattern!r}; output so far:\n" + "\n".join(self.lines))
+        raise AssertionError(
+            f"no line matching {pattern!r}; output so far:\n" + "\n".join(self.lines)
+        )
 
     def client(self) -> RemoteAPIClient:
         return RemoteAPIClient("127.0.0.1", self.port)

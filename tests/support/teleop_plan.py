@@ -15,11 +15,19 @@ from twin.tasks.pick_place import POINT_A_M, POINT_B_M
 Z_WAIT = ["wait"] * 6
 MAPS = {
     # report 000's Lua: joints set at once; 8 = suction on and Z up to its count, 5 = Z to the stop
-    "seed000": {"jog": ("d", "a", "e", "q"), "pick": ["8", "5", "8"], "place": ["5", "s", "8"],
-                "keeps_heading": False},
+    "seed000": {
+        "jog": ("d", "a", "e", "q"),
+        "pick": ["8", "5", "8"],
+        "place": ["5", "s", "8"],
+        "keeps_heading": False,
+    },
     # report 001's Lua: the wrist follows deg2 - deg1, so the pad does not keep its heading
-    "seed001": {"jog": ("left", "right", "up", "down"), "pick": ["3", *Z_WAIT, "4", *Z_WAIT],
-                "place": ["3", *Z_WAIT, "5", "4"], "keeps_heading": False},
+    "seed001": {
+        "jog": ("left", "right", "up", "down"),
+        "pick": ["3", *Z_WAIT, "4", *Z_WAIT],
+        "place": ["3", *Z_WAIT, "5", "4"],
+        "keeps_heading": False,
+    },
 }
 
 
@@ -71,7 +79,9 @@ def plan(profile_name, keeps_heading=None, pick_tolerance_m=0.005):
         # pad frame
         offset = _rot((POINT_A_M[0] - pad_a[0], POINT_A_M[1] - pad_a[1]), 0.0 if keeps else -h_a)
         for place in _grid_points(profile, POINT_B_M):
-            pad_b, h_b = _pad_xy_heading(profile, place, _wrist_deg(profile_name, pick, place, wrist_a))
+            pad_b, h_b = _pad_xy_heading(
+                profile, place, _wrist_deg(profile_name, pick, place, wrist_a)
+            )
             off = _rot(offset, 0.0 if keeps else h_b)
             box_m = (pad_b[0] + off[0], pad_b[1] + off[1])
             presses = sum(abs(v) for v in pick) + abs(place[0] - pick[0]) + abs(place[1] - pick[1])

@@ -25,8 +25,13 @@ def _libs():
 
 
 LIBS = _libs()
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(shutil.which("Xvfb") is None or LIBS is None,
-                                                   reason="needs Xvfb and libXtst (tools/setup_test_system.sh)")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        shutil.which("Xvfb") is None or LIBS is None,
+        reason="needs Xvfb and libXtst (tools/setup_test_system.sh)",
+    ),
+]
 
 
 class XKeyboard:
@@ -45,12 +50,28 @@ class XKeyboard:
         x11.XDefaultRootWindow.restype = ctypes.c_ulong
         x11.XDefaultRootWindow.argtypes = [ctypes.c_void_p]
         window_list = ctypes.POINTER(ctypes.POINTER(ctypes.c_ulong))
-        x11.XQueryTree.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.POINTER(ctypes.c_ulong),
-                                   ctypes.POINTER(ctypes.c_ulong), window_list, ctypes.POINTER(ctypes.c_uint)]
+        x11.XQueryTree.argtypes = [
+            ctypes.c_void_p,
+            ctypes.c_ulong,
+            ctypes.POINTER(ctypes.c_ulong),
+            ctypes.POINTER(ctypes.c_ulong),
+            window_list,
+            ctypes.POINTER(ctypes.c_uint),
+        ]
         x11.XFree.argtypes = [ctypes.c_void_p]
-        xtst.XTestFakeKeyEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
-        xtst.XTestFakeMotionEvent.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int,
-                                              ctypes.c_ulong]
+        xtst.XTestFakeKeyEvent.argtypes = [
+            ctypes.c_void_p,
+            ctypes.c_uint,
+            ctypes.c_int,
+            ctypes.c_ulong,
+        ]
+        xtst.XTestFakeMotionEvent.argtypes = [
+            ctypes.c_void_p,
+            ctypes.c_int,
+            ctypes.c_int,
+            ctypes.c_int,
+            ctypes.c_ulong,
+        ]
         self.x11, self.xtst = x11, xtst
         self.display = x11.XOpenDisplay(display.encode())
         assert self.display, f"cannot open X display {display}"
@@ -58,8 +79,14 @@ class XKeyboard:
     def windows(self) -> int:
         root, parent = ctypes.c_ulong(), ctypes.c_ulong()
         children, count = ctypes.POINTER(ctypes.c_ulong)(), ctypes.c_uint()
-        self.x11.XQueryTree(self.display, self.x11.XDefaultRootWindow(self.display), ctypes.byref(root),
-                            ctypes.byref(parent), ctypes.byref(children), ctypes.byref(count))
+        self.x11.XQueryTree(
+            self.display,
+            self.x11.XDefaultRootWindow(self.display),
+            ctypes.byref(root),
+            ctypes.byref(parent),
+            ctypes.byref(children),
+            ctypes.byref(count),
+        )
         if children:
             self.x11.XFree(children)
         return count.value
@@ -102,8 +129,11 @@ def xvfb():
     while Path(f"/tmp/.X11-unix/X{number}").exists() or Path(f"/tmp/.X{number}-lock").exists():
         number += 1
     display = f":{number}"
-    server = subprocess.Popen(["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp", "-noreset"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server = subprocess.Popen(
+        ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp", "-noreset"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 10
     while not Path(f"/tmp/.X11-unix/X{number}").exists():
         assert time.monotonic() < deadline and server.poll() is None, "Xvfb did not start"
@@ -116,16 +146,23 @@ def xvfb():
 def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_path, capsys):
     record = tmp_path / "window.mcap"
     env = {**os.environ, "DISPLAY": xvfb, "HOME": str(tmp_path)}
-    twin = subprocess.Popen([sys.executable, "-m", "twin.cli", "teleop", "--gui", "--record", str(record)],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+    twin = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", "teleop", "--gui", "--record", str(record)],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     keyboard = XKeyboard(xvfb)
     try:
         deadline = time.monotonic() + 30
         # the window is up and the session is stepping (written to NAME.partial until it is
         # finalized)
         while keyboard.windows() == 0 or not _grown(partial_path(record)):
-            assert time.monotonic() < deadline and twin.poll() is None, "no PyBullet window or no steps"
+            assert time.monotonic() < deadline and twin.poll() is None, (
+                "no PyBullet window or no steps"
+            )
             time.sleep(0.05)
         keyboard.point_at(300, 300)  # no window manager: keys go to the window under the pointer
         # distinct keys in key-code order: even if some wait in PyBullet's queue, their order is
@@ -142,7 +179,9 @@ def test_keys_typed_into_the_window_are_recorded_and_replay_exactly(xvfb, tmp_pa
             twin.wait(timeout=10)
     assert twin.returncode == 0, err[-2000:]
     summary = next(line for line in out.splitlines() if line.startswith("teleop (gui)"))
-    assert summary.startswith("teleop (gui) robot mtb: 4 key presses (2 not in the key map)"), summary
+    assert summary.startswith("teleop (gui) robot mtb: 4 key presses (2 not in the key map)"), (
+        summary
+    )
     # whoever saw Esc first
     assert summary.endswith(("ended by esc", "ended by window closed")), summary
     rec = load(record)
@@ -173,11 +212,18 @@ def test_the_window_opens_on_the_arm_with_the_debug_panels_hidden(xvfb, tmp_path
     from PIL import Image
 
     shot = tmp_path / "window.png"
-    done = subprocess.run([sys.executable, "-c", WINDOW_SHOT, xvfb, str(shot)], check=False, capture_output=True,
-                          text=True,
-                          env={**os.environ, "DISPLAY": xvfb}, timeout=60)
+    done = subprocess.run(
+        [sys.executable, "-c", WINDOW_SHOT, xvfb, str(shot)],
+        check=False,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "DISPLAY": xvfb},
+        timeout=60,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
-    camera = json.loads(next(line for line in done.stdout.splitlines() if line.startswith("camera="))[7:])
+    camera = json.loads(
+        next(line for line in done.stdout.splitlines() if line.startswith("camera="))[7:]
+    )
     from twin.model.profiles import PROFILES
 
     reach_m = PROFILES["mtb"].link1_m + PROFILES["mtb"].link2_m

@@ -22,7 +22,9 @@ pytest_plugins = ["pytester"]
 
 
 def _regen_module():
-    spec = importlib.util.spec_from_file_location("regen_goldens", ROOT / "tools" / "regen_goldens.py")
+    spec = importlib.util.spec_from_file_location(
+        "regen_goldens", ROOT / "tools" / "regen_goldens.py"
+    )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up
     spec.loader.exec_module(module)
@@ -35,7 +37,8 @@ def test_every_golden_rerun_matches():
     bad = {Path(o.path).name: o.summary for o in outcomes if o.status != "match"}
     assert not bad, "\n".join(f"{name}: {why}" for name, why in bad.items()) + (
         "\n(if the change is intended: python tools/regen_goldens.py rewrites every golden with this machine's "
-        "runs; review `twin diff` old vs new first)")
+        "runs; review `twin diff` old vs new first)"
+    )
 
 
 @pytest.mark.parametrize("path", GOLDENS, ids=lambda p: p.stem)
@@ -96,13 +99,17 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     failed = pytester.runpytest_inprocess("-p", "no:cacheprovider")
     failed.assert_outcomes(failed=1)
     assert "step 400" in failed.stdout.str()
-    assert (goldens / "one_cycle.obtained.mcap").exists() and (goldens / "one_cycle.report.md").exists()
+    assert (goldens / "one_cycle.obtained.mcap").exists() and (
+        goldens / "one_cycle.report.md"
+    ).exists()
     monkeypatch.setenv("TWIN_TOL", "outcome")
     # lands within 5 mm
     pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
     monkeypatch.delenv("TWIN_TOL")
 
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
+    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+        passed=1
+    )
     assert not (goldens / "one_cycle.obtained.mcap").exists()
     pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
 
@@ -126,7 +133,10 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     monkeypatch.setenv("TWIN_FAIL", "1")
     first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
     first.assert_outcomes(failed=1)
-    assert "this run cannot become it: its task ended error" in first.stdout.str() and not golden.exists()
+    assert (
+        "this run cannot become it: its task ended error" in first.stdout.str()
+        and not golden.exists()
+    )
     # still not written
     pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     monkeypatch.delenv("TWIN_FAIL")
@@ -139,4 +149,6 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     assert "rerun with --update-goldens" not in update.stdout.str()
     assert "this run cannot become the golden: its task ended error" in update.stdout.str()
     monkeypatch.setenv("TWIN_ALLOW", "1")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
+    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+        passed=1
+    )

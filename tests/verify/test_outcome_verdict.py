@@ -35,6 +35,9 @@ def test_failed_cycles_under_keep_going_do_not_pass_outcome(tmp_path, capsys):
     assert sum(e.kind == "cycle_failed" for e in load(str(candidate)).events) == 2
     capsys.readouterr()
     assert main(["diff", str(golden), str(candidate), "--tolerance", "outcome"]) == 1
-    assert "first divergence: step" in (out := capsys.readouterr().out) and "counts.cycle_failed" in out
+    assert (
+        "first divergence: step" in (out := capsys.readouterr().out)
+        and "counts.cycle_failed" in out
+    )
     shutil.copyfile(golden, tmp_path / "same.mcap")
     assert main(["diff", str(golden), str(tmp_path / "same.mcap"), "--tolerance", "outcome"]) == 0

@@ -19,16 +19,27 @@ import pytest
 from twin.record.mcap.reader import load
 
 ROOT = Path(__file__).resolve().parents[2]
-GOLDENS = sorted(p for p in (ROOT / "recordings").glob("*.mcap") if not p.name.endswith(".obtained.mcap"))
+GOLDENS = sorted(
+    p for p in (ROOT / "recordings").glob("*.mcap") if not p.name.endswith(".obtained.mcap")
+)
 BLAS_CORES = ("Prescott", "Haswell", "SkylakeX", "Zen")
 NO_FMA = {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA"}
 MACHINES = {"here": {}, "no-fma libm": NO_FMA, "SkylakeX BLAS": {"OPENBLAS_CORETYPE": "SkylakeX"}}
 
 
-def twin_cli(*args, env: dict[str, str] | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def twin_cli(
+    *args, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.CompletedProcess:
     full = {**os.environ, "OPENBLAS_NUM_THREADS": "1", **(env or {})}
-    return subprocess.run([sys.executable, "-m", "twin", *map(str, args)], check=False, capture_output=True, text=True,
-                          env=full, cwd=cwd, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "twin", *map(str, args)],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=full,
+        cwd=cwd,
+        timeout=600,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +56,9 @@ def local_goldens(tmp_path_factory) -> Path:
 @pytest.mark.slow
 @pytest.mark.parametrize("core", BLAS_CORES)
 def test_goldens_made_here_are_bit_identical_under_every_blas_kernel(local_goldens, core):
-    done = twin_cli("check", "--tolerance", "exact", "-j", "2", local_goldens, env={"OPENBLAS_CORETYPE": core})
+    done = twin_cli(
+        "check", "--tolerance", "exact", "-j", "2", local_goldens, env={"OPENBLAS_CORETYPE": core}
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     assert f"{len(GOLDENS)} match" in done.stdout
 
@@ -54,9 +67,20 @@ def test_goldens_made_here_are_bit_identical_under_every_blas_kernel(local_golde
 def test_goldens_made_here_are_bit_identical_without_numpys_simd_dispatch(local_goldens):
     import numpy as np
 
-    found = [name for name, on in np._core._multiarray_umath.__cpu_features__.items() if on and name.startswith("AVX")]
-    done = twin_cli("check", "--tolerance", "exact", "-j", "2", local_goldens,
-                    env={"NPY_DISABLE_CPU_FEATURES": " ".join(found)})
+    found = [
+        name
+        for name, on in np._core._multiarray_umath.__cpu_features__.items()
+        if on and name.startswith("AVX")
+    ]
+    done = twin_cli(
+        "check",
+        "--tolerance",
+        "exact",
+        "-j",
+        "2",
+        local_goldens,
+        env={"NPY_DISABLE_CPU_FEATURES": " ".join(found)},
+    )
     assert done.returncode == 0, done.stdout + done.stderr
 
 
@@ -85,7 +109,11 @@ def run(twin, target_x_m=0.2, late_steps=0, pause_s=0.5):
     twin.wait(0.3)
     twin.raise_()
 """
-CHANGES = {"1 mm target": "target_x_m=0.201", "1 step late suction": "late_steps=1", "5 ms longer wait": "pause_s=0.505"}
+CHANGES = {
+    "1 mm target": "target_x_m=0.201",
+    "1 step late suction": "late_steps=1",
+    "5 ms longer wait": "pause_s=0.505",
+}
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +135,9 @@ def test_an_unchanged_user_task_checks_green_everywhere(user_golden, machine):
 @pytest.mark.slow
 @pytest.mark.parametrize("machine", list(MACHINES))
 @pytest.mark.parametrize("change", list(CHANGES))
-def test_a_changed_user_task_fails_the_default_check_at_its_onset(user_golden, tmp_path, machine, change):
+def test_a_changed_user_task_fails_the_default_check_at_its_onset(
+    user_golden, tmp_path, machine, change
+):
     d = tmp_path / "work"
     shutil.copytree(user_golden, d)
     name, value = CHANGES[change].split("=")
@@ -130,7 +160,15 @@ def _first_change(a, b, above: float = 0.0) -> int:
 
     n = min(len(a.frames), len(b.frames))
     steps = [n]
-    for column in ("joint_q", "joint_qd", "joint_effort", "joint_target", "pad_pose", "object_poses", "suction_on"):
+    for column in (
+        "joint_q",
+        "joint_qd",
+        "joint_effort",
+        "joint_target",
+        "pad_pose",
+        "object_poses",
+        "suction_on",
+    ):
         x, y = getattr(a.frames, column)[:n], getattr(b.frames, column)[:n]
         moved = (x != y) if above == 0 else np.abs(x.astype(float) - y.astype(float)) > above
         rows = np.flatnonzero(moved.reshape(n, -1).any(axis=1))
@@ -163,8 +201,14 @@ save(record_task({config}, "pick_place", {{"cycles": 1}}), sys.argv[1])
 
 
 def _record(config: str, path: Path, env: dict[str, str]) -> None:
-    done = subprocess.run([sys.executable, "-c", RECORD.format(config=config), str(path)], check=False,
-                          capture_output=True, text=True, env={**os.environ, **env}, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-c", RECORD.format(config=config), str(path)],
+        check=False,
+        capture_output=True,
+        text=True,
+        env={**os.environ, **env},
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr
 
 
@@ -179,7 +223,9 @@ def config_golden(tmp_path_factory) -> Path:
 # BLAS kernels give the same bits (the exact checks above)
 @pytest.mark.parametrize("machine", ["no-fma libm"])
 @pytest.mark.parametrize("change", list(CONFIG_CHANGES))
-def test_a_changed_configuration_run_elsewhere_fails_the_default_diff(config_golden, tmp_path, machine, change):
+def test_a_changed_configuration_run_elsewhere_fails_the_default_diff(
+    config_golden, tmp_path, machine, change
+):
     env = MACHINES[machine]
     _record(CONFIG_CHANGES[change], tmp_path / "elsewhere.mcap", env)
     done = twin_cli("diff", config_golden, tmp_path / "elsewhere.mcap", env=env)

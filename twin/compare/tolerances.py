@@ -26,21 +26,50 @@ FIELDS: dict[str, tuple[str, str]] = {
     "final.position": ("m", "distance between final object positions"),
     "final.orientation": ("rad", "angle between final object orientations"),
     "run.length": ("steps", "difference in the last step"),
-    "commands.sequence": ("", ("every Command that acts (joints, suction, keys): step, kind and text exactly, "
-                          "in order; the numbers in its arguments within the tolerance")),
-    "commands.annotations": ("", ("every annotation (an `event` Command: what the task said, such as "
-                             "task_start naming the task by its content's sha256), judged like commands.sequence "
-                             "but reported apart from the first physical divergence")),
-    "outcome.task": ("", ("how the task ended: ok (no task_error, finalized ok), error, interrupted, or "
-                          "unfinished (a file cut short, also once recovered); exact or off")),
+    "commands.sequence": (
+        "",
+        (
+            "every Command that acts (joints, suction, keys): step, kind and text exactly, "
+            "in order; the numbers in its arguments within the tolerance"
+        ),
+    ),
+    "commands.annotations": (
+        "",
+        (
+            "every annotation (an `event` Command: what the task said, such as "
+            "task_start naming the task by its content's sha256), judged like commands.sequence "
+            "but reported apart from the first physical divergence"
+        ),
+    ),
+    "outcome.task": (
+        "",
+        (
+            "how the task ended: ok (no task_error, finalized ok), error, interrupted, or "
+            "unfinished (a file cut short, also once recovered); exact or off"
+        ),
+    ),
     "counts.attach": ("events", "number of attach events"),
     "counts.release": ("events", "number of release events"),
     "counts.break": ("events", "number of break events"),
-    "counts.cycle_failed": ("events", "number of cycle_failed events (a cycle a task let fail and went on)"),
-    "images.pixels": ("levels", "mean absolute difference of a camera picture's pixels (0..255 per channel)"),
+    "counts.cycle_failed": (
+        "events",
+        "number of cycle_failed events (a cycle a task let fail and went on)",
+    ),
+    "images.pixels": (
+        "levels",
+        "mean absolute difference of a camera picture's pixels (0..255 per channel)",
+    ),
 }
-DISCRETE = frozenset({"suction.on", "suction.sensed", "suction.held", "commands.sequence", "commands.annotations",
-                      "outcome.task"})
+DISCRETE = frozenset(
+    {
+        "suction.on",
+        "suction.sensed",
+        "suction.held",
+        "commands.sequence",
+        "commands.annotations",
+        "outcome.task",
+    }
+)
 COUNTED_EVENTS = ("attach", "release", "break", "cycle_failed")
 _ALWAYS = {"outcome.task": 0.0, **{f"counts.{kind}": 0.0 for kind in COUNTED_EVENTS}}
 # tight: a picture may differ by half a level on average (another CPU's rounding)
@@ -72,12 +101,20 @@ _PHYSICAL = _ALWAYS | {
     "images.pixels": INF,
 }
 # outcome: where the objects ended, whether the task ended ok, how often the pad took and let go
-_OUTCOME = {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
+_OUTCOME = (
+    {name: INF for name in FIELDS} | _ALWAYS | {"final.position": 5e-3, "final.orientation": 0.05}
+)
 
 # tight: 1e-9 on every number (frames of another libm stayed within it over 44k steps), commands'
 # numbers too
-_TIGHT = {name: 0.0 if name in DISCRETE - {"commands.sequence", "commands.annotations"} or name == "run.length" or name in _ALWAYS else 1e-9
-          for name in FIELDS} | {"images.pixels": IMAGE_TIGHT_LEVELS}
+_TIGHT = {
+    name: 0.0
+    if name in DISCRETE - {"commands.sequence", "commands.annotations"}
+    or name == "run.length"
+    or name in _ALWAYS
+    else 1e-9
+    for name in FIELDS
+} | {"images.pixels": IMAGE_TIGHT_LEVELS}
 # preset -> (field tolerances, event window in steps; None: events are not paired)
 PRESETS: dict[str, tuple[dict[str, float], int | None]] = {
     "noise": (_TIGHT, 0),
@@ -106,7 +143,9 @@ class Tolerances:
     @staticmethod
     def from_preset(name: str) -> Tolerances:
         if name not in PRESETS:
-            raise ConfigError(f"unknown tolerance preset {name!r}; expected one of {', '.join(PRESETS)}")
+            raise ConfigError(
+                f"unknown tolerance preset {name!r}; expected one of {', '.join(PRESETS)}"
+            )
         values, window = PRESETS[name]
         return Tolerances(name, dict(values), window, noise_margin=NOISE_MARGINS.get(name))
 
@@ -126,7 +165,9 @@ class Tolerances:
         if steps is None:
             return self
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
-            raise ConfigError(f"event window {steps!r} is invalid; expected a whole number of steps >= 0")
+            raise ConfigError(
+                f"event window {steps!r} is invalid; expected a whole number of steps >= 0"
+            )
         return replace(self, event_window_steps=steps)
 
     def to_dict(self) -> dict:
@@ -143,14 +184,18 @@ def parse_override(spec: str) -> tuple[list[str], float]:
     """`joints.position=1e-4` -> (["joints.position"], 1e-4); `hold=inf` -> every hold.* field."""
     known = ", ".join(FIELDS)
     if not isinstance(spec, str) or spec.count("=") != 1:
-        raise ConfigError(f"tolerance {spec!r} is malformed; expected CHANNEL.FIELD=VALUE, e.g. joints.position=1e-4")
+        raise ConfigError(
+            f"tolerance {spec!r} is malformed; expected CHANNEL.FIELD=VALUE, e.g. joints.position=1e-4"
+        )
     name, text = (s.strip() for s in spec.split("="))
     if name in FIELDS:
         names = [name]
     else:
         names = [f for f in FIELDS if f.split(".")[0] == name]
         if not names:
-            raise ConfigError(f"tolerance {spec!r} names unknown field {name!r}; expected one of {known}")
+            raise ConfigError(
+                f"tolerance {spec!r} names unknown field {name!r}; expected one of {known}"
+            )
     try:
         value = float(text)
     except ValueError:

@@ -60,8 +60,10 @@ def spans(rec: Recording, mode: str) -> list[tuple[int, int, int]]:
         if match:
             starts.setdefault(int(match.group(1)), ev.step)
     if not starts:
-        raise ConfigError(f"recording {rec.path!r} has no pick-place cycles (phase events 'cycle N: ...'); "
-                          "expected a pick_place run, or --episodes recording")
+        raise ConfigError(
+            f"recording {rec.path!r} has no pick-place cycles (phase events 'cycle N: ...'); "
+            "expected a pick_place run, or --episodes recording"
+        )
     cycles = sorted(starts.items(), key=lambda item: item[1])
     ends = [step for _, step in cycles[1:]] + [last]
     return [(step, end, number) for (number, step), end in zip(cycles, ends, strict=True)]
@@ -79,8 +81,10 @@ def check_fps(rec: Recording, fps: int) -> None:
     if isinstance(fps, bool) or not isinstance(fps, int) or fps < 1:
         raise ConfigError(f"--fps {fps!r:.30} is invalid; expected a whole number 1..{top}")
     if fps > top:
-        raise ConfigError(f"--fps {fps} is above the physics rate of recording {rec.path!r} ({top} steps per "
-                          f"second): its dataset frames would only repeat steps; expected --fps 1..{top}")
+        raise ConfigError(
+            f"--fps {fps} is above the physics rate of recording {rec.path!r} ({top} steps per "
+            f"second): its dataset frames would only repeat steps; expected --fps 1..{top}"
+        )
 
 
 def check_times(rec: Recording) -> None:
@@ -90,8 +94,10 @@ def check_times(rec: Recording) -> None:
     wrong = np.nonzero(f.t_ns != f.step * dt_ns)[0]
     if wrong.size:
         i = int(wrong[0])
-        raise RecordingError(f"recording {rec.path!r}: the frame at step {int(f.step[i])} has time {int(f.t_ns[i])} ns; "
-                             f"expected step x {dt_ns} ns = {int(f.step[i]) * dt_ns} ns")
+        raise RecordingError(
+            f"recording {rec.path!r}: the frame at step {int(f.step[i])} has time {int(f.t_ns[i])} ns; "
+            f"expected step x {dt_ns} ns = {int(f.step[i]) * dt_ns} ns"
+        )
 
 
 def frame_count(rec: Recording, first_step: int, end_step: int, fps: int) -> tuple[int, int, int]:
@@ -101,7 +107,9 @@ def frame_count(rec: Recording, first_step: int, end_step: int, fps: int) -> tup
     lo = int(np.searchsorted(steps, first_step, side="left"))
     hi = int(np.searchsorted(steps, end_step, side="left")) - 1
     if hi < lo:
-        raise ConfigError(f"recording {rec.path!r} has no frame between steps {first_step} and {end_step}")
+        raise ConfigError(
+            f"recording {rec.path!r} has no frame between steps {first_step} and {end_step}"
+        )
     span_ns = int(rec.frames.t_ns[hi]) - int(rec.frames.t_ns[lo])
     return lo, hi, span_ns * fps // NS_PER_S + 1
 
@@ -111,7 +119,7 @@ def resample(rec: Recording, first_step: int, end_step: int, fps: int, cycle: in
     lo, hi, count = frame_count(rec, first_step, end_step, fps)
     t_ns = rec.frames.t_ns
     t0 = int(t_ns[lo])
-    rows = lo + nearest((t_ns[lo:hi + 1] - t0) * fps, np.arange(count, dtype=np.int64) * NS_PER_S)
+    rows = lo + nearest((t_ns[lo : hi + 1] - t0) * fps, np.arange(count, dtype=np.int64) * NS_PER_S)
     return Episode(rec, rows, t0, cycle)
 
 
@@ -136,7 +144,9 @@ def episodes(recordings: list[Recording], fps: int, mode: str) -> list[Episode]:
         total += frame_count(rec, first, end, fps)[2]
         if total > MAX_DATASET_FRAMES:
             seconds = sum(int(r.frames.t_ns[-1] - r.frames.t_ns[0]) for r in recordings) / NS_PER_S
-            raise ConfigError(f"the dataset would hold more than {MAX_DATASET_FRAMES:,} frames ({seconds:.1f} s of "
-                              f"recordings at --fps {fps}); expected at most {MAX_DATASET_FRAMES:,}: lower --fps, "
-                              "or export the recordings in parts")
+            raise ConfigError(
+                f"the dataset would hold more than {MAX_DATASET_FRAMES:,} frames ({seconds:.1f} s of "
+                f"recordings at --fps {fps}); expected at most {MAX_DATASET_FRAMES:,}: lower --fps, "
+                "or export the recordings in parts"
+            )
     return [resample(rec, first, end, fps, cycle) for rec, first, end, cycle in cut]

@@ -75,14 +75,20 @@ def camera_names(episodes: list[Episode]) -> list[str]:
     """The cameras every episode's recording has (the same set in each, each of one size, else ConfigError)."""
     sets = {tuple(sorted(getattr(ep.rec, "cameras", None) or {})) for ep in episodes}
     if len(sets) > 1:
-        raise ConfigError("the recordings have different cameras: " + " vs ".join(
-            "(" + ", ".join(s) + ")" for s in sorted(sets)) + "; expected the same cameras in every recording")
+        raise ConfigError(
+            "the recordings have different cameras: "
+            + " vs ".join("(" + ", ".join(s) + ")" for s in sorted(sets))
+            + "; expected the same cameras in every recording"
+        )
     names = list(sets.pop()) if sets else []
     for name in names:
         sizes = {(ep.rec.cameras[name].width_px, ep.rec.cameras[name].height_px) for ep in episodes}
         if len(sizes) > 1:
-            raise ConfigError(f"the recordings' camera {name!r} has different sizes: " + " vs ".join(
-                f"{w}x{h}" for w, h in sorted(sizes)) + " px; expected one size in every recording")
+            raise ConfigError(
+                f"the recordings' camera {name!r} has different sizes: "
+                + " vs ".join(f"{w}x{h}" for w, h in sorted(sizes))
+                + " px; expected one size in every recording"
+            )
     return names
 
 
@@ -99,10 +105,12 @@ def check_finite(episodes: list[Episode]) -> None:
                 bad = np.argwhere(~np.isfinite(values.astype(np.float32)))
             if bad.size:
                 k, j = (int(v) for v in bad[0])
-                raise RecordingError(f"recording {ep.rec.path!r}: {names[j]} is {values[k, j]} at step "
-                                     f"{int(f.step[rows[k]])}; expected finite float32 values in a dataset (its "
-                                     "stats.json and LeRobot's normalization need them; --format csv or parquet "
-                                     "keeps them)")
+                raise RecordingError(
+                    f"recording {ep.rec.path!r}: {names[j]} is {values[k, j]} at step "
+                    f"{int(f.step[rows[k]])}; expected finite float32 values in a dataset (its "
+                    "stats.json and LeRobot's normalization need them; --format csv or parquet "
+                    "keeps them)"
+                )
 
 
 def camera_picks(ep: Episode, name: str, fps: int) -> np.ndarray:
@@ -114,8 +122,15 @@ def camera_picks(ep: Episode, name: str, fps: int) -> np.ndarray:
     return nearest(elapsed, np.arange(len(ep), dtype=np.int64) * NS_PER_S)
 
 
-def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int, provenance: dict,
-                  *, overwrite: bool = False) -> Written:
+def write_dataset(
+    episodes: list[Episode],
+    tasks: list[str],
+    out: Path,
+    fps: int,
+    provenance: dict,
+    *,
+    overwrite: bool = False,
+) -> Written:
     """Write the episodes (with one task text each) as a LeRobot v3.0 dataset in folder `out`.
 
     Written in a temporary folder beside `out` and renamed into place when complete, so `out` is
@@ -140,7 +155,12 @@ def write_dataset(episodes: list[Episode], tasks: list[str], out: Path, fps: int
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return Written(out, len(episodes), sum(len(ep) for ep in episodes), [f"observation.images.{c}" for c in cameras])
+    return Written(
+        out,
+        len(episodes),
+        sum(len(ep) for ep in episodes),
+        [f"observation.images.{c}" for c in cameras],
+    )
 
 
 def remove_stale(out: Path) -> list[Path]:
@@ -157,9 +177,9 @@ def remove_stale(out: Path) -> list[Path]:
     for entry in entries:
         name = entry.name
         if name.startswith(partial):
-            pid_text = name[len(partial):]
+            pid_text = name[len(partial) :]
         elif name.startswith(old) and (out / "meta" / "info.json").is_file():
-            pid_text = name[len(old):].partition("-")[0]
+            pid_text = name[len(old) :].partition("-")[0]
         else:
             continue
         if not pid_text.isdigit() or entry.is_symlink() or not entry.is_dir():
@@ -204,8 +224,14 @@ def _start_time(pid: int) -> float | None:
         return None
 
 
-def _write_all(root: Path, episodes: list[Episode], tasks: list[str], cameras: list[str], fps: int,
-               provenance: dict) -> None:
+def _write_all(
+    root: Path,
+    episodes: list[Episode],
+    tasks: list[str],
+    cameras: list[str],
+    fps: int,
+    provenance: dict,
+) -> None:
     task_index = {t: i for i, t in enumerate(dict.fromkeys(tasks))}
     ep_rows, ep_stats, totals = _write_data(root, episodes, tasks, task_index, fps)
     video_info, image_stats_by_key = _write_videos(root, episodes, cameras, fps, ep_rows)
@@ -217,19 +243,29 @@ def _write_all(root: Path, episodes: list[Episode], tasks: list[str], cameras: l
     _write_episodes(root, ep_rows, ep_stats)
     _write_tasks(root, task_index)
     features = _features(*state_names(episodes[0].rec), video_info)
-    info = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features,
-            "total_episodes": len(episodes), "total_frames": sum(len(ep) for ep in episodes),
-            "total_tasks": len(task_index), "chunks_size": CHUNKS_SIZE, "data_files_size_in_mb": DATA_FILES_MB,
-            "video_files_size_in_mb": VIDEO_FILES_MB, "data_path": DATA_PATH,
-            "video_path": VIDEO_PATH if cameras else None,
-            "robot_type": "+".join(dict.fromkeys(ep.rec.config.profile.name for ep in episodes)),
-            "splits": {"train": f"0:{len(episodes)}"}}
+    info = {
+        "codebase_version": CODEBASE_VERSION,
+        "fps": fps,
+        "features": features,
+        "total_episodes": len(episodes),
+        "total_frames": sum(len(ep) for ep in episodes),
+        "total_tasks": len(task_index),
+        "chunks_size": CHUNKS_SIZE,
+        "data_files_size_in_mb": DATA_FILES_MB,
+        "video_files_size_in_mb": VIDEO_FILES_MB,
+        "data_path": DATA_PATH,
+        "video_path": VIDEO_PATH if cameras else None,
+        "robot_type": "+".join(dict.fromkeys(ep.rec.config.profile.name for ep in episodes)),
+        "splits": {"train": f"0:{len(episodes)}"},
+    }
     _write_json(root / "meta/info.json", info)
     _write_json(root / "meta/stats.json", {k: stats[k] for k in features})
     _write_json(root / PROVENANCE_PATH, provenance)
 
 
-def _write_data(root: Path, episodes: list[Episode], tasks: list[str], task_index: dict[str, int], fps: int):
+def _write_data(
+    root: Path, episodes: list[Episode], tasks: list[str], task_index: dict[str, int], fps: int
+):
     """data/chunk-000/file-000.parquet, one row group per episode. Returns each episode's row of the
     episodes table (so far), each episode's stats, and every column over the whole dataset."""
     import pyarrow as pa
@@ -244,17 +280,31 @@ def _write_data(root: Path, episodes: list[Episode], tasks: list[str], task_inde
         n = len(ep)
         state, action = episode_arrays(ep, commands[id(ep.rec)])
         frame_index = np.arange(n, dtype=np.int64)
-        cols = {"observation.state": state, "action": action,
-                "timestamp": (frame_index / fps).astype(np.float32), "frame_index": frame_index,
-                "episode_index": np.full(n, e, dtype=np.int64), "index": start + frame_index,
-                "task_index": np.full(n, task_index[task], dtype=np.int64)}
+        cols = {
+            "observation.state": state,
+            "action": action,
+            "timestamp": (frame_index / fps).astype(np.float32),
+            "frame_index": frame_index,
+            "episode_index": np.full(n, e, dtype=np.int64),
+            "index": start + frame_index,
+            "task_index": np.full(n, task_index[task], dtype=np.int64),
+        }
         table = pa.table({k: _arrow_column(v) for k, v in cols.items()})
         writer = writer or pq.ParquetWriter(path, table.schema, compression="snappy")
         writer.write_table(table)  # one row group per episode, as LeRobot writes them
         parts.append(cols)
         ep_stats.append({k: feature_stats(v) for k, v in cols.items()})
-        ep_rows.append({"episode_index": e, "tasks": [task], "length": n, "data/chunk_index": 0,
-                        "data/file_index": 0, "dataset_from_index": start, "dataset_to_index": start + n})
+        ep_rows.append(
+            {
+                "episode_index": e,
+                "tasks": [task],
+                "length": n,
+                "data/chunk_index": 0,
+                "data/file_index": 0,
+                "dataset_from_index": start,
+                "dataset_to_index": start + n,
+            }
+        )
         start += n
     writer.close()
     return ep_rows, ep_stats, {k: np.concatenate([c[k] for c in parts]) for k in parts[0]}
@@ -269,8 +319,9 @@ def _arrow_column(values: np.ndarray):
     return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1)), values.shape[1])
 
 
-def _write_videos(root: Path, episodes: list[Episode], cameras: list[str], fps: int,
-                  ep_rows: list[dict]) -> tuple[dict, dict]:
+def _write_videos(
+    root: Path, episodes: list[Episode], cameras: list[str], fps: int, ep_rows: list[dict]
+) -> tuple[dict, dict]:
     """One MP4 per camera holding every episode in order; the episode rows get their video spans."""
     from twin.export.video import check_size, encode_mp4, probe
 
@@ -283,13 +334,25 @@ def _write_videos(root: Path, episodes: list[Episode], cameras: list[str], fps: 
         path = root / VIDEO_PATH.format(video_key=key, chunk_index=0, file_index=0)
         path.parent.mkdir(parents=True)
         stats[key] = []
-        encode_mp4(path, _camera_images(episodes, name, fps, shape, ep_rows, stats[key]), fps, shape[1], shape[0])
+        encode_mp4(
+            path,
+            _camera_images(episodes, name, fps, shape, ep_rows, stats[key]),
+            fps,
+            shape[1],
+            shape[0],
+        )
         info[key] = {"shape": list(shape), "info": probe(path)}
     return info, stats
 
 
-def _camera_images(episodes: list[Episode], name: str, fps: int, shape: tuple[int, int, int], ep_rows: list[dict],
-                   stats_out: list[dict]):
+def _camera_images(
+    episodes: list[Episode],
+    name: str,
+    fps: int,
+    shape: tuple[int, int, int],
+    ep_rows: list[dict],
+    stats_out: list[dict],
+):
     """Each episode's images of one camera in turn, decoded one picture at a time (a picture shown by
     several dataset frames is decoded once: they come in order); records each episode's video span in
     its row and, once its images are through, its image statistics in stats_out (from the sampled
@@ -299,12 +362,20 @@ def _camera_images(episodes: list[Episode], name: str, fps: int, shape: tuple[in
     for ep, row in zip(episodes, ep_rows, strict=True):
         track = ep.rec.cameras[name]
         if (track.height_px, track.width_px, 3) != shape:
-            raise ConfigError(f"recording {ep.rec.path!r}: camera {name!r} is {track.width_px}x{track.height_px} px; "
-                              f"expected {shape[1]}x{shape[0]} px as in the first recording")
+            raise ConfigError(
+                f"recording {ep.rec.path!r}: camera {name!r} is {track.width_px}x{track.height_px} px; "
+                f"expected {shape[1]}x{shape[0]} px as in the first recording"
+            )
         picks = camera_picks(ep, name, fps).tolist()
         sampled = set(image_sample(len(picks)))
-        row.update({f"videos/{key}/chunk_index": 0, f"videos/{key}/file_index": 0,
-                    f"videos/{key}/from_timestamp": at / fps, f"videos/{key}/to_timestamp": (at + len(ep)) / fps})
+        row.update(
+            {
+                f"videos/{key}/chunk_index": 0,
+                f"videos/{key}/file_index": 0,
+                f"videos/{key}/from_timestamp": at / fps,
+                f"videos/{key}/to_timestamp": (at + len(ep)) / fps,
+            }
+        )
         at += len(ep)
         thumbs, shown, image = [], -1, None
         for k, i in enumerate(picks):
@@ -326,19 +397,30 @@ def _merged_image_stats(per_episode: list[dict]) -> dict:
     total = counts.sum()
     mean = (arr["mean"] * counts).sum(axis=0) / total
     var = ((arr["std"] ** 2 + (arr["mean"] - mean) ** 2) * counts).sum(axis=0) / total
-    out = {"min": arr["min"].min(axis=0).tolist(), "max": arr["max"].max(axis=0).tolist(), "mean": mean.tolist(),
-           "std": np.sqrt(var).tolist(), "count": [int(total)]}
+    out = {
+        "min": arr["min"].min(axis=0).tolist(),
+        "max": arr["max"].max(axis=0).tolist(),
+        "mean": mean.tolist(),
+        "std": np.sqrt(var).tolist(),
+        "count": [int(total)],
+    }
     for key in (k for k in per_episode[0] if k.startswith("q")):
         out[key] = (arr[key].min(axis=0) if int(key[1:]) <= 50 else arr[key].max(axis=0)).tolist()
     return out
 
 
 def _features(state_of: list[str], action_of: list[str], video_info: dict) -> dict:
-    features = {"observation.state": {"dtype": "float32", "shape": [len(state_of)], "names": state_of},
-                "action": {"dtype": "float32", "shape": [len(action_of)], "names": action_of}}
+    features = {
+        "observation.state": {"dtype": "float32", "shape": [len(state_of)], "names": state_of},
+        "action": {"dtype": "float32", "shape": [len(action_of)], "names": action_of},
+    }
     for key, v in video_info.items():
-        features[key] = {"dtype": "video", "shape": v["shape"], "names": ["height", "width", "channels"],
-                         "info": v["info"]}
+        features[key] = {
+            "dtype": "video",
+            "shape": v["shape"],
+            "names": ["height", "width", "channels"],
+            "info": v["info"],
+        }
     features["timestamp"] = {"dtype": "float32", "shape": [1], "names": None}
     for key in INDEX_FEATURES[1:]:
         features[key] = {"dtype": "int64", "shape": [1], "names": None}
@@ -369,17 +451,44 @@ def _write_tasks(root: Path, task_index: dict[str, int]) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    pandas_meta = {"index_columns": ["task"], "column_indexes": [
-        {"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object",
-         "metadata": {"encoding": "UTF-8"}}],
-        "columns": [{"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64",
-                     "metadata": None},
-                    {"name": "task", "field_name": "task", "pandas_type": "unicode", "numpy_type": "object",
-                     "metadata": None}],
-        "attributes": {}, "creator": {"library": "pyarrow", "version": pa.__version__}, "pandas_version": "2.2.0"}
-    table = pa.table({"task_index": pa.array(list(task_index.values()), pa.int64()),
-                      "task": pa.array(list(task_index), pa.string())},
-                     metadata={"pandas": json.dumps(pandas_meta)})
+    pandas_meta = {
+        "index_columns": ["task"],
+        "column_indexes": [
+            {
+                "name": None,
+                "field_name": None,
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": {"encoding": "UTF-8"},
+            }
+        ],
+        "columns": [
+            {
+                "name": "task_index",
+                "field_name": "task_index",
+                "pandas_type": "int64",
+                "numpy_type": "int64",
+                "metadata": None,
+            },
+            {
+                "name": "task",
+                "field_name": "task",
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": None,
+            },
+        ],
+        "attributes": {},
+        "creator": {"library": "pyarrow", "version": pa.__version__},
+        "pandas_version": "2.2.0",
+    }
+    table = pa.table(
+        {
+            "task_index": pa.array(list(task_index.values()), pa.int64()),
+            "task": pa.array(list(task_index), pa.string()),
+        },
+        metadata={"pandas": json.dumps(pandas_meta)},
+    )
     pq.write_table(table, root / "meta/tasks.parquet")
 
 
@@ -396,7 +505,9 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
             fsync_file(path)
     if out.exists() and any(out.iterdir()):
         if not overwrite:  # checked before any work too; a folder filled meanwhile is not replaced
-            raise ConfigError(f"output folder {str(out)!r} is not empty; expected a new or empty folder (or --overwrite)")
+            raise ConfigError(
+                f"output folder {str(out)!r} is not empty; expected a new or empty folder (or --overwrite)"
+            )
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
         os.replace(out, old / out.name)
         os.replace(tmp, out)

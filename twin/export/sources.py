@@ -28,10 +28,18 @@ class Source:
 
     def provenance(self) -> dict:
         """The sidecar's entry: the file by name (no absolute path), its hash, what replay said."""
-        return {"file": Path(self.path).name, "sha256": self.sha256, "robot": self.rec.config.profile.name,
-                "task": str(self.rec.run.get("task", "")), "source": str(self.rec.run.get("source", "")),
-                "frames": len(self.rec.frames), "rate_steps": self.rec.rate_steps, "outcome": self.rec.outcome,
-                "verified": self.verified, "replay": self.replay}
+        return {
+            "file": Path(self.path).name,
+            "sha256": self.sha256,
+            "robot": self.rec.config.profile.name,
+            "task": str(self.rec.run.get("task", "")),
+            "source": str(self.rec.run.get("source", "")),
+            "frames": len(self.rec.frames),
+            "rate_steps": self.rec.rate_steps,
+            "outcome": self.rec.outcome,
+            "verified": self.verified,
+            "replay": self.replay,
+        }
 
 
 def load_source(path: str) -> Source:
@@ -53,11 +61,15 @@ def check_commands(rec: Recording) -> None:
     for c in rec.commands:
         expected = COMMAND_ARGS.get(c.kind)
         if expected is None:
-            raise RecordingError(f"recording {rec.path!r}: unknown command kind {c.kind!r:.40} at step {c.step}; "
-                                 f"expected one of {sorted(COMMAND_ARGS)}")
+            raise RecordingError(
+                f"recording {rec.path!r}: unknown command kind {c.kind!r:.40} at step {c.step}; "
+                f"expected one of {sorted(COMMAND_ARGS)}"
+            )
         if not isinstance(c.args, dict) or sorted(c.args) != sorted(expected):
-            raise RecordingError(f"recording {rec.path!r}: {c.kind} command at step {c.step} has arguments "
-                                 f"{c.args!r:.80}; expected {', '.join(expected)}")
+            raise RecordingError(
+                f"recording {rec.path!r}: {c.kind} command at step {c.step} has arguments "
+                f"{c.args!r:.80}; expected {', '.join(expected)}"
+            )
         try:
             if c.kind == "signal":
                 hash(c.args["name"])
@@ -66,8 +78,10 @@ def check_commands(rec: Recording) -> None:
             elif c.kind == "key":
                 hash(c.args["key"])
         except (TypeError, ValueError, OverflowError) as err:
-            raise RecordingError(f"recording {rec.path!r}: {c.kind} command at step {c.step} is malformed: "
-                                 f"{str(err)[:80]}") from None
+            raise RecordingError(
+                f"recording {rec.path!r}: {c.kind} command at step {c.step} is malformed: "
+                f"{str(err)[:80]}"
+            ) from None
 
 
 def check_pictures(rec: Recording) -> None:
@@ -100,8 +114,14 @@ def verify(source: Source) -> Source:
 
     try:
         again = replay(source.rec)
-        result = judge(source.rec, again, Tolerances.from_preset(DEFAULT), replay, source=source.rec,
-                       event_kinds=replayed_event_kinds(source.rec))
+        result = judge(
+            source.rec,
+            again,
+            Tolerances.from_preset(DEFAULT),
+            replay,
+            source=source.rec,
+            event_kinds=replayed_event_kinds(source.rec),
+        )
     except TwinError as err:  # not replayable (no step 0, a malformed command, not comparable)
         source.replay, source.verified = f"not replayable: {err}", False
         return source

@@ -26,18 +26,23 @@ def require_av():
     try:
         import av
     except ImportError:
-        raise ConfigError("video export needs the av package (PyAV): pip install 'twin[export]' or pip install av") \
-            from None
+        raise ConfigError(
+            "video export needs the av package (PyAV): pip install 'twin[export]' or pip install av"
+        ) from None
     return av
 
 
 def check_size(name: str, width_px: int, height_px: int) -> None:
     """yuv420p halves the colour resolution: both sides must be even."""
     if width_px % 2 or height_px % 2 or width_px <= 0 or height_px <= 0:
-        raise ConfigError(f"camera {name!r} is {width_px}x{height_px} px; video export needs an even width and height")
+        raise ConfigError(
+            f"camera {name!r} is {width_px}x{height_px} px; video export needs an even width and height"
+        )
 
 
-def encode_mp4(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int) -> int:
+def encode_mp4(
+    path: str | os.PathLike, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int
+) -> int:
     """Encode (H, W, 3) uint8 RGB frames into an MP4 file at fps; returns the number of frames."""
     av = require_av()
     # SVT-AV1 prints its configuration to stderr unless told not to
@@ -86,8 +91,16 @@ def probe(path: str | os.PathLike) -> dict:
     av = require_av()
     with av.open(str(Path(path))) as container:
         stream = container.streams.video[0]
-        return {"video.height": stream.height, "video.width": stream.width,
-                "video.codec": stream.codec_context.codec.canonical_name, "video.pix_fmt": stream.pix_fmt,
-                "video.fps": int(stream.base_rate), "video.channels": 3, "has_audio": False,
-                "video.g": int(OPTIONS["g"]), "video.crf": int(OPTIONS["crf"]), "video.preset": int(OPTIONS["preset"]),
-                "is_depth_map": False}
+        return {
+            "video.height": stream.height,
+            "video.width": stream.width,
+            "video.codec": stream.codec_context.codec.canonical_name,
+            "video.pix_fmt": stream.pix_fmt,
+            "video.fps": int(stream.base_rate),
+            "video.channels": 3,
+            "has_audio": False,
+            "video.g": int(OPTIONS["g"]),
+            "video.crf": int(OPTIONS["crf"]),
+            "video.preset": int(OPTIONS["preset"]),
+            "is_depth_map": False,
+        }

@@ -50,20 +50,32 @@ class CameraSpec:
 
     def __post_init__(self) -> None:
         if not self.name or not all(c.isalnum() or c in "_-" for c in self.name):
-            raise ConfigError(f"camera name {self.name!r} is invalid; expected letters, digits, '_' or '-'")
+            raise ConfigError(
+                f"camera name {self.name!r} is invalid; expected letters, digits, '_' or '-'"
+            )
         for side in (self.width_px, self.height_px):
             if isinstance(side, bool) or not isinstance(side, int) or not 16 <= side <= MAX_SIDE_PX:
-                raise ConfigError(f"camera {self.name!r} size {self.width_px}x{self.height_px} is invalid; "
-                                  f"expected whole numbers of pixels 16..{MAX_SIDE_PX}")
+                raise ConfigError(
+                    f"camera {self.name!r} size {self.width_px}x{self.height_px} is invalid; "
+                    f"expected whole numbers of pixels 16..{MAX_SIDE_PX}"
+                )
         if not (math.isfinite(self.rate_hz) and 0.1 <= self.rate_hz <= 1000):
-            raise ConfigError(f"camera {self.name!r} rate {self.rate_hz} Hz is invalid; expected 0.1..1000 Hz")
+            raise ConfigError(
+                f"camera {self.name!r} rate {self.rate_hz} Hz is invalid; expected 0.1..1000 Hz"
+            )
         if self.mount not in MOUNTS:
-            raise ConfigError(f"camera {self.name!r} mount {self.mount!r} is invalid; expected one of {MOUNTS}")
+            raise ConfigError(
+                f"camera {self.name!r} mount {self.mount!r} is invalid; expected one of {MOUNTS}"
+            )
         if self.format not in FORMATS:
-            raise ConfigError(f"camera {self.name!r} format {self.format!r} is invalid; expected one of {FORMATS}")
+            raise ConfigError(
+                f"camera {self.name!r} format {self.format!r} is invalid; expected one of {FORMATS}"
+            )
         if not (0 < self.near_m < self.far_m and 1 <= self.fov_deg <= 170):
-            raise ConfigError(f"camera {self.name!r}: near {self.near_m} m, far {self.far_m} m, field of view "
-                              f"{self.fov_deg} deg; expected 0 < near < far and 1..170 deg")
+            raise ConfigError(
+                f"camera {self.name!r}: near {self.near_m} m, far {self.far_m} m, field of view "
+                f"{self.fov_deg} deg; expected 0 < near < far and 1..170 deg"
+            )
 
     def every_steps(self, dt_ns: int) -> int:
         """Every how many physics steps this camera takes a picture (step 0 always)."""
@@ -94,16 +106,28 @@ class CameraSpec:
 # and 6 cm behind it, looking down at what the pad picks.
 CAMERAS = {
     "overhead": CameraSpec("overhead"),
-    "wrist": CameraSpec("wrist", mount="pad", fov_deg=75.0, near_m=0.01, far_m=2.0,
-                        eye_m=(-0.06, 0.0, 0.03), target_m=(0.0, 0.0, -0.05), up=(1.0, 0.0, 0.0)),
+    "wrist": CameraSpec(
+        "wrist",
+        mount="pad",
+        fov_deg=75.0,
+        near_m=0.01,
+        far_m=2.0,
+        eye_m=(-0.06, 0.0, 0.03),
+        target_m=(0.0, 0.0, -0.05),
+        up=(1.0, 0.0, 0.0),
+    ),
 }
 
 
-def camera(name: str, size_px: tuple[int, int] = DEFAULT_SIZE_PX, rate_hz: float = DEFAULT_RATE_HZ) -> CameraSpec:
+def camera(
+    name: str, size_px: tuple[int, int] = DEFAULT_SIZE_PX, rate_hz: float = DEFAULT_RATE_HZ
+) -> CameraSpec:
     """A built-in camera by name, at this size and rate."""
     if name not in CAMERAS:
         raise ConfigError(f"unknown camera {name!r}; expected one of {', '.join(CAMERAS)}")
-    return replace(CAMERAS[name], width_px=int(size_px[0]), height_px=int(size_px[1]), rate_hz=float(rate_hz))
+    return replace(
+        CAMERAS[name], width_px=int(size_px[0]), height_px=int(size_px[1]), rate_hz=float(rate_hz)
+    )
 
 
 def camera_view(spec: CameraSpec, pad_pose: tuple[float, ...]) -> tuple[tuple[float, ...], ...]:
@@ -112,11 +136,16 @@ def camera_view(spec: CameraSpec, pad_pose: tuple[float, ...]) -> tuple[tuple[fl
     if spec.mount == "world":
         return spec.eye_m, spec.target_m, spec.up
     origin, turn = pad_pose[:3], pad_pose[3:7]
-    eye, target = (tuple(o + v for o, v in zip(origin, rotate(turn, p), strict=True)) for p in (spec.eye_m, spec.target_m))
+    eye, target = (
+        tuple(o + v for o, v in zip(origin, rotate(turn, p), strict=True))
+        for p in (spec.eye_m, spec.target_m)
+    )
     return eye, target, rotate(turn, spec.up)
 
 
-def optical_pose(eye: tuple[float, ...], target: tuple[float, ...], up: tuple[float, ...]) -> tuple[float, ...]:
+def optical_pose(
+    eye: tuple[float, ...], target: tuple[float, ...], up: tuple[float, ...]
+) -> tuple[float, ...]:
     """The camera's optical frame in world axes as (x, y, z, qx, qy, qz, qw): z looks at the target,
     x to the image's right, y down the image (the convention of Foxglove's CameraCalibration)."""
     forward = _unit(tuple(t - e for t, e in zip(target, eye, strict=True)))
@@ -185,26 +214,40 @@ class CameraTrack:
     def _bad(self, i: int, why: str) -> RecordingError:
         where = f"recording {self.source!r}: " if self.source else ""
         step = f"step {int(self.step[i])}" if i < len(self.step) else f"picture {i}"
-        return RecordingError(f"{where}camera {self.name!r} picture at {step} {why}; expected a "
-                              f"{self.format.upper()} picture of {self.width_px}x{self.height_px} px (the camera's "
-                              "configured format and size)")
+        return RecordingError(
+            f"{where}camera {self.name!r} picture at {step} {why}; expected a "
+            f"{self.format.upper()} picture of {self.width_px}x{self.height_px} px (the camera's "
+            "configured format and size)"
+        )
 
     @staticmethod
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
-        return CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
-                           np.array([im.step for im in images], dtype=np.int64),
-                           np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images],
-                           pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7))
+        return CameraTrack(
+            spec.name,
+            spec.width_px,
+            spec.height_px,
+            spec.format,
+            np.array([im.step for im in images], dtype=np.int64),
+            np.array([im.t_ns for im in images], dtype=np.int64),
+            [im.data for im in images],
+            pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7),
+        )
 
 
 def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[str, CameraTrack]:
     """Each camera's pictures among images (in the order they came), as tracks by camera name."""
-    return {spec.name: CameraTrack.from_images(spec, [im for im in images if im.camera == spec.name])
-            for spec in cameras}
+    return {
+        spec.name: CameraTrack.from_images(spec, [im for im in images if im.camera == spec.name])
+        for spec in cameras
+    }
 
 
-def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTrack], frame_steps: np.ndarray,
-                    pad_poses: np.ndarray) -> list[CameraImage]:
+def recorded_images(
+    cameras: tuple[CameraSpec, ...],
+    by_name: dict[str, CameraTrack],
+    frame_steps: np.ndarray,
+    pad_poses: np.ndarray,
+) -> list[CameraImage]:
     """A recording's pictures as CameraImages in step order (camera order within a step), each with the
     pose its track holds (the file's /tf). A track without poses (a file that holds none) has them
     worked out from the recorded frame at (or, in a decimated file, just before) its step."""
@@ -221,5 +264,7 @@ def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTr
             else:
                 row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
                 pose = optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))
-            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose))
+            out.append(
+                CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose)
+            )
     return sorted(out, key=lambda im: im.step)

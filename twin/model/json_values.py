@@ -37,7 +37,9 @@ def all_finite(value: object) -> bool:
 def finite_number(value: object) -> float | None:
     """value as a float if it is a finite int or float (a bool is no number), else None."""
     try:
-        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        ok = (
+            not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        )
     except OverflowError:  # an int too large for a float
         return None
     return float(value) if ok else None
@@ -81,7 +83,9 @@ def shown(value: object, width: int = 60, *, as_json: bool = False) -> str:
 
 
 def _too_deep(what: str, limit: int) -> ConfigError:
-    return ConfigError(f"{what}: arrays or tables nest more than {limit} levels deep; twin reads at most {limit}")
+    return ConfigError(
+        f"{what}: arrays or tables nest more than {limit} levels deep; twin reads at most {limit}"
+    )
 
 
 def _first_line(err: BaseException) -> str:

@@ -29,12 +29,36 @@ from twin.errors import ConfigError, UnknownName
 from twin.model.json_values import load_json_text, load_toml_text
 from twin.model.profiles import ROLES, RobotProfile
 
-NAMED_KEYS = ("up", "down", "left", "right", "space", "enter", "tab", "backspace", "delete", "insert",
-              "home", "end", "pageup", "pagedown", *(f"f{i}" for i in range(1, 13)))
+NAMED_KEYS = (
+    "up",
+    "down",
+    "left",
+    "right",
+    "space",
+    "enter",
+    "tab",
+    "backspace",
+    "delete",
+    "insert",
+    "home",
+    "end",
+    "pageup",
+    "pagedown",
+    *(f"f{i}" for i in range(1, 13)),
+)
 ALWAYS_QUIT = ("esc", "ctrl-c", "ctrl-d")
 WAIT = "wait"  # in a --keys script: no key for one interval
 OPS = ("jog", "jog_keep_heading", "target", "position", "add", "diff", "signal", "suction")
-_ARITY = {"jog": 3, "jog_keep_heading": 3, "target": 3, "position": 3, "add": 4, "diff": 4, "signal": 3, "suction": 2}
+_ARITY = {
+    "jog": 3,
+    "jog_keep_heading": 3,
+    "target": 3,
+    "position": 3,
+    "add": 4,
+    "diff": 4,
+    "signal": 3,
+    "suction": 2,
+}
 HOW = ("target", "position")
 
 
@@ -95,7 +119,13 @@ MTB = {
     "r": [["suction", 0]],
 }
 
-BUILTIN: dict[str, dict] = {"mtb": MTB, "seed000": SEED000, "seed001": SEED001, "seed002": MTB, "seed003": MTB}
+BUILTIN: dict[str, dict] = {
+    "mtb": MTB,
+    "seed000": SEED000,
+    "seed001": SEED001,
+    "seed002": MTB,
+    "seed003": MTB,
+}
 
 
 def builtin_keymap(profile_name: str) -> dict:
@@ -104,7 +134,9 @@ def builtin_keymap(profile_name: str) -> dict:
 
 
 def is_key_name(name: object) -> bool:
-    return isinstance(name, str) and ((len(name) == 1 and 33 <= ord(name) <= 126) or name in NAMED_KEYS)
+    return isinstance(name, str) and (
+        (len(name) == 1 and 33 <= ord(name) <= 126) or name in NAMED_KEYS
+    )
 
 
 def quit_keys(keymap: dict) -> tuple[str, ...]:
@@ -125,11 +157,15 @@ def parse_keys(text: str) -> list[str]:
         if star and head and tail.isdigit():
             name, count = head, int(tail)
             if not 1 <= count <= MAX_REPEAT:
-                raise ConfigError(f"--keys token {token!r}: repeat count {count} is invalid; "
-                                  f"expected *1 to *{MAX_REPEAT}")
+                raise ConfigError(
+                    f"--keys token {token!r}: repeat count {count} is invalid; "
+                    f"expected *1 to *{MAX_REPEAT}"
+                )
         if not (is_key_name(name) or name in ALWAYS_QUIT or name == WAIT):
-            raise ConfigError(f"--keys token {token!r} is not a key; expected a single character or one of "
-                              f"{', '.join(NAMED_KEYS[:8])}, ..., esc, or wait, optionally followed by *N")
+            raise ConfigError(
+                f"--keys token {token!r} is not a key; expected a single character or one of "
+                f"{', '.join(NAMED_KEYS[:8])}, ..., esc, or wait, optionally followed by *N"
+            )
         keys.extend([name] * count)
     return keys
 
@@ -146,7 +182,7 @@ def _value(src: str, key: str, action: list, raw: object, joint: int) -> float:
     except OverflowError:  # a JSON integer too large for a float
         finite = False
     if not finite:
-        unit = "metres" if joint == ROLES.index("z") else "radians or a string like \"5deg\""
+        unit = "metres" if joint == ROLES.index("z") else 'radians or a string like "5deg"'
         raise _bad(src, key, action, f"value {raw!r} is not a finite number; expected {unit}")
     return float(raw)
 
@@ -160,10 +196,18 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
         raise _bad(src, key, action, f"expected a list [op, ...] with op one of {', '.join(OPS)}")
     op = action[0]
     if len(action) != _ARITY[op]:
-        shapes = {"jog": "[op, joint, delta]", "target": "[op, joint, value|\"min\"|\"max\"|\"down\"|\"up\"]",
-                  "position": "[op, joint, value]", "add": "[op, joint, delta, \"target\"|\"position\"]",
-                  "diff": "[op, joint, a, b]", "signal": "[op, name, integer]", "suction": "[op, 0|1]"}
-        raise _bad(src, key, action, f"has {len(action)} items; expected {shapes.get(op, shapes['jog'])}")
+        shapes = {
+            "jog": "[op, joint, delta]",
+            "target": '[op, joint, value|"min"|"max"|"down"|"up"]',
+            "position": "[op, joint, value]",
+            "add": '[op, joint, delta, "target"|"position"]',
+            "diff": "[op, joint, a, b]",
+            "signal": "[op, name, integer]",
+            "suction": "[op, 0|1]",
+        }
+        raise _bad(
+            src, key, action, f"has {len(action)} items; expected {shapes.get(op, shapes['jog'])}"
+        )
     if op == "suction":
         if action[1] not in (0, 1) or isinstance(action[1], bool):
             raise _bad(src, key, action, f"suction value {action[1]!r} is invalid; expected 0 or 1")
@@ -171,21 +215,33 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
     if op == "signal":
         name, value = action[1], action[2]
         if not isinstance(name, str) or not name:
-            raise _bad(src, key, action, f"signal name {name!r} is invalid; expected a non-empty string")
+            raise _bad(
+                src, key, action, f"signal name {name!r} is invalid; expected a non-empty string"
+            )
         if isinstance(value, bool) or not isinstance(value, int):
             raise _bad(src, key, action, f"signal value {value!r} is invalid; expected an integer")
         return [op, name, value]
     joint_name = action[1]
     joint = _joint(src, key, action, joint_name, profile)
     if op == "jog_keep_heading" and ROLES[joint] not in ("shoulder", "elbow"):
-        raise _bad(src, key, action, f"keeping the heading needs the shoulder or elbow, not {joint_name!r}")
-    if op == "target" and (action[2] in ("min", "max") or action[2] in ("down", "up") and ROLES[joint] == "z"):
+        raise _bad(
+            src, key, action, f"keeping the heading needs the shoulder or elbow, not {joint_name!r}"
+        )
+    if op == "target" and (
+        action[2] in ("min", "max") or action[2] in ("down", "up") and ROLES[joint] == "z"
+    ):
         return [op, ROLES[joint], action[2]]
     if op == "diff":
-        return [op, ROLES[joint], *(ROLES[_joint(src, key, action, name, profile)] for name in action[2:4])]
+        return [
+            op,
+            ROLES[joint],
+            *(ROLES[_joint(src, key, action, name, profile)] for name in action[2:4]),
+        ]
     if op == "add":
         if action[3] not in HOW:
-            raise _bad(src, key, action, f"how {action[3]!r} is invalid; expected one of {', '.join(HOW)}")
+            raise _bad(
+                src, key, action, f"how {action[3]!r} is invalid; expected one of {', '.join(HOW)}"
+            )
         return [op, ROLES[joint], _value(src, key, action, action[2], joint), action[3]]
     return [op, ROLES[joint], _value(src, key, action, action[2], joint)]
 
@@ -197,8 +253,13 @@ def _joint(src: str, key: str, action: list, name: object, profile: RobotProfile
             return profile.joint_index(name)
     except UnknownName:
         pass
-    raise _bad(src, key, action, f"unknown joint {name!r}; expected one of {', '.join(ROLES)} "
-                                 f"or {', '.join(profile.joint_names)}")
+    raise _bad(
+        src,
+        key,
+        action,
+        f"unknown joint {name!r}; expected one of {', '.join(ROLES)} "
+        f"or {', '.join(profile.joint_names)}",
+    )
 
 
 def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in)") -> dict:
@@ -208,12 +269,16 @@ def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in
     out = {}
     for key in sorted(keymap):
         if not is_key_name(key):
-            raise ConfigError(f"key map {src}: key {key!r} is not a key name; expected a single printable "
-                              f"character or one of {', '.join(NAMED_KEYS)}")
+            raise ConfigError(
+                f"key map {src}: key {key!r} is not a key name; expected a single printable "
+                f"character or one of {', '.join(NAMED_KEYS)}"
+            )
         actions = keymap[key]
         if not isinstance(actions, list) or not actions:
-            raise ConfigError(f"key map {src}: key {key!r}: expected a non-empty list of actions, got "
-                              f"{json.dumps(actions)}")
+            raise ConfigError(
+                f"key map {src}: key {key!r}: expected a non-empty list of actions, got "
+                f"{json.dumps(actions)}"
+            )
         if all(not isinstance(a, list) for a in actions):
             actions = [actions]  # a single action written without the outer list
         out[key] = [_action(src, key, a, profile) for a in actions]
@@ -232,7 +297,9 @@ def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
     try:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"key map {src} cannot be read: {(str(err).splitlines() or [type(err).__name__])[0]}") from err
+        raise ConfigError(
+            f"key map {src} cannot be read: {(str(err).splitlines() or [type(err).__name__])[0]}"
+        ) from err
     # malformed or nested too deep: one line, never a RecursionError
     what = f"key map {src} cannot be read"
     data = load_toml_text(text, what) if p.suffix == ".toml" else load_json_text(text, what)
@@ -240,12 +307,16 @@ def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
         raise ConfigError(f"key map {src}: expected a table `keys` (key = list of actions)")
     unknown = sorted(str(k) for k in set(data) - {"keys", "extends"})
     if unknown:
-        raise ConfigError(f"key map {src}: unknown entries {unknown}; expected `keys` and optionally `extends`")
+        raise ConfigError(
+            f"key map {src}: unknown entries {unknown}; expected `keys` and optionally `extends`"
+        )
     base: dict = {}
     if "extends" in data:
         if not isinstance(data["extends"], str) or data["extends"] not in BUILTIN:
-            raise ConfigError(f"key map {src}: extends {data['extends']!r} is unknown; expected one of "
-                              f"{', '.join(BUILTIN)}")
+            raise ConfigError(
+                f"key map {src}: extends {data['extends']!r} is unknown; expected one of "
+                f"{', '.join(BUILTIN)}"
+            )
         base = builtin_keymap(data["extends"])
     return validate_keymap({**base, **data["keys"]}, profile, src)
 
@@ -332,7 +403,11 @@ def describe_action(action: list) -> str:
     if op == "diff":
         return f"{joint} target = {value} - {action[3]}"
     if op == "position":
-        return f"set Z to {value:.3f} m" if joint == "z" else f"set {joint} to {math.degrees(value):+g} deg"
+        return (
+            f"set Z to {value:.3f} m"
+            if joint == "z"
+            else f"set {joint} to {math.degrees(value):+g} deg"
+        )
     if op == "add":
         how = "set" if action[3] == "position" else "target"
         step = f"{value * 100:+g} cm" if joint == "z" else f"{math.degrees(value):+.4g} deg"
@@ -351,9 +426,21 @@ def describe_action(action: list) -> str:
 
 def help_lines(keymap: dict) -> list[str]:
     """One line per key: `key  what it does`, grouped by joint (shoulder, elbow, Z, wrist, then the rest)."""
+
     def order(key: str) -> tuple:
         first = keymap[key][0]
-        joint = first[1] if first[0] in ("jog", "jog_keep_heading", "target", "position", "add", "diff") else ""
-        return (ROLES.index(joint) if joint in ROLES else len(ROLES), key.lower(), key != key.lower())
+        joint = (
+            first[1]
+            if first[0] in ("jog", "jog_keep_heading", "target", "position", "add", "diff")
+            else ""
+        )
+        return (
+            ROLES.index(joint) if joint in ROLES else len(ROLES),
+            key.lower(),
+            key != key.lower(),
+        )
 
-    return [f"{key:>5}  " + " + ".join(describe_action(a) for a in keymap[key]) for key in sorted(keymap, key=order)]
+    return [
+        f"{key:>5}  " + " + ".join(describe_action(a) for a in keymap[key])
+        for key in sorted(keymap, key=order)
+    ]

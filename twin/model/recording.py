@@ -56,7 +56,11 @@ class Recording:
         units in the names), "events" or "commands"; the columns are described in model.tables."""
         from twin.model import tables
 
-        builders = {"frames": tables.frames_table, "events": tables.events_table, "commands": tables.commands_table}
+        builders = {
+            "frames": tables.frames_table,
+            "events": tables.events_table,
+            "commands": tables.commands_table,
+        }
         if table not in builders:
             raise ValueError(f"table {table!r} is unknown; expected one of {', '.join(builders)}")
         return builders[table](self)
@@ -66,7 +70,9 @@ class Recording:
         try:
             import pandas  # noqa: F401 - only to say clearly that it is missing
         except ImportError:
-            raise ImportError("Recording.to_pandas needs the pandas package: pip install pandas") from None
+            raise ImportError(
+                "Recording.to_pandas needs the pandas package: pip install pandas"
+            ) from None
         return self.to_arrow(table).to_pandas()
 
     @property

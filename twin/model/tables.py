@@ -28,10 +28,19 @@ from twin.model.profiles import ROLES
 
 # The column stem of each Frame field; units and components come from model.fields.
 _STEMS = {
-    "step": "step", "t_ns": "t_ns",
-    "joint_q": "position", "joint_qd": "velocity", "joint_effort": "effort", "joint_target": "target",
-    "suction_on": "suction.on", "sensed_body": "suction.sensed", "held_body": "suction.held",
-    "hold_force_n": "hold.force", "hold_torque_nm": "hold.torque", "pad_pose": "pad", "object_poses": "",
+    "step": "step",
+    "t_ns": "t_ns",
+    "joint_q": "position",
+    "joint_qd": "velocity",
+    "joint_effort": "effort",
+    "joint_target": "target",
+    "suction_on": "suction.on",
+    "sensed_body": "suction.sensed",
+    "held_body": "suction.held",
+    "hold_force_n": "hold.force",
+    "hold_torque_nm": "hold.torque",
+    "pad_pose": "pad",
+    "object_poses": "",
 }
 if tuple(_STEMS) != tuple(f.name for f in FRAME_FIELDS):
     raise ImportError("twin.model.tables: give every model.fields.FRAME_FIELDS entry a column stem")
@@ -61,7 +70,10 @@ def frame_column_names(object_names: list[str]) -> list[str]:
         if f.shape == "frame":
             names.append(stem)
         elif f.shape == "joint":
-            names += [f"joint.{role}.{stem}_{_unit(f, prismatic=j == _PRISMATIC)}" for j, role in enumerate(ROLES)]
+            names += [
+                f"joint.{role}.{stem}_{_unit(f, prismatic=j == _PRISMATIC)}"
+                for j, role in enumerate(ROLES)
+            ]
         elif f.shape == "xyz":
             names += [f"{stem}_{axis}_{_unit(f)}" for axis in _XYZ]
         elif f.shape == "pose":
@@ -84,12 +96,17 @@ def frames_table(rec):
         arrays += [np.ascontiguousarray(flat[:, i]) for i in range(flat.shape[1])]
     names = frame_column_names([o.name for o in rec.config.objects])
     if len(names) != len(arrays):
-        raise ValueError(f"recording {rec.path or '<memory>'}: {len(arrays)} frame columns for {len(names)} names; "
-                         "its frames do not match its configuration's joints and objects")
+        raise ValueError(
+            f"recording {rec.path or '<memory>'}: {len(arrays)} frame columns for {len(names)} names; "
+            "its frames do not match its configuration's joints and objects"
+        )
     arrays.append(suction_command(rec))
     names.append("suction.command")
-    meta = {"twin.robot": rec.config.profile.name, "twin.objects": json.dumps([o.name for o in rec.config.objects]),
-            "twin.rate_steps": str(rec.rate_steps)}
+    meta = {
+        "twin.robot": rec.config.profile.name,
+        "twin.objects": json.dumps([o.name for o in rec.config.objects]),
+        "twin.rate_steps": str(rec.rate_steps),
+    }
     return pa.table(dict(zip(names, arrays, strict=True)), metadata=meta)
 
 
@@ -98,14 +115,16 @@ def events_table(rec):
     import pyarrow as pa
 
     ev = rec.events
-    return pa.table({
-        "step": pa.array([e.step for e in ev], pa.int64()),
-        "t_ns": pa.array([e.t_ns for e in ev], pa.int64()),
-        "kind": pa.array([e.kind for e in ev], pa.string()),
-        "body": pa.array([e.body for e in ev], pa.string()),
-        "message": pa.array([e.message for e in ev], pa.string()),
-        "data_json": pa.array([json.dumps(e.data, sort_keys=True) for e in ev], pa.string()),
-    })
+    return pa.table(
+        {
+            "step": pa.array([e.step for e in ev], pa.int64()),
+            "t_ns": pa.array([e.t_ns for e in ev], pa.int64()),
+            "kind": pa.array([e.kind for e in ev], pa.string()),
+            "body": pa.array([e.body for e in ev], pa.string()),
+            "message": pa.array([e.message for e in ev], pa.string()),
+            "data_json": pa.array([json.dumps(e.data, sort_keys=True) for e in ev], pa.string()),
+        }
+    )
 
 
 def commands_table(rec):
@@ -114,12 +133,14 @@ def commands_table(rec):
 
     cmds = rec.commands
     dt_ns = rec.config.dt_ns
-    return pa.table({
-        "step": pa.array([c.step for c in cmds], pa.int64()),
-        "t_ns": pa.array([c.step * dt_ns for c in cmds], pa.int64()),
-        "kind": pa.array([c.kind for c in cmds], pa.string()),
-        "args_json": pa.array([json.dumps(c.args, sort_keys=True) for c in cmds], pa.string()),
-    })
+    return pa.table(
+        {
+            "step": pa.array([c.step for c in cmds], pa.int64()),
+            "t_ns": pa.array([c.step * dt_ns for c in cmds], pa.int64()),
+            "kind": pa.array([c.kind for c in cmds], pa.string()),
+            "args_json": pa.array([json.dumps(c.args, sort_keys=True) for c in cmds], pa.string()),
+        }
+    )
 
 
 def suction_command(rec) -> np.ndarray:

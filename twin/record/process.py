@@ -56,18 +56,34 @@ class RecorderProcess(Sink):
     the MCAP file, one for the .rrd, both reading the same ring. Apart, a burst of the Rerun writer
     (it sends its columns every 8192 frames) cannot hold the MCAP writer, nor the twin, up."""
 
-    def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
-                 mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int,
-                 engine: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        config: TwinConfig,
+        run: dict,
+        *,
+        urdf: str,
+        meshes: list[Path],
+        mcap_path: str | Path | None,
+        rrd_path: str | Path | None,
+        rate: int,
+        engine: dict[str, str] | None = None,
+    ) -> None:
         self._rows = FrameRows(len(config.profile.joint_names), len(config.objects))
         self._publish_every = _frames(config, PUBLISH_S)
         mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
         capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
-        writers = [(w, p, ahead) for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
-                   if p is not None]
+        writers = [
+            (w, p, ahead)
+            for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
+            if p is not None
+        ]
         self._ring = FrameRing(self._rows, capacity, len(writers))
         # what on_frame needs, bound once: it runs every step
-        self._pack, self._row_size, self._memory = self._rows.pack_into, self._rows.size, self._ring.memory
+        self._pack, self._row_size, self._memory = (
+            self._rows.pack_into,
+            self._rows.size,
+            self._ring.memory,
+        )
         # the ring's first and last rows
         self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
@@ -80,14 +96,22 @@ class RecorderProcess(Sink):
         # Load the writers here, once: every forked recorder inherits them instead of importing anew
         # (rerun alone takes ~0.3 s to import).
         import twin.record.mcap.writer
+
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
         self._children: list[_Child] = []
         starting = None
         try:
             for reader, (writer, path, ahead) in enumerate(writers):
-                self._children.append(_Child(writer, reader, ahead, self._children, (
-                    self._ring, config, run, urdf, meshes, path, rate, engine)))
+                self._children.append(
+                    _Child(
+                        writer,
+                        reader,
+                        ahead,
+                        self._children,
+                        (self._ring, config, run, urdf, meshes, path, rate, engine),
+                    )
+                )
             for starting in self._children:  # they start side by side; each says when it is ready
                 starting.expect_ok("recording could not start")
         except BaseException:
@@ -114,13 +138,19 @@ class RecorderProcess(Sink):
     # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
     # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
     def on_command(self, command: Command) -> None:
-        self._others.append((self._written, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append(
+            (self._written, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL))
+        )
 
     def on_event(self, event: Event) -> None:
-        self._others.append((self._written, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append(
+            (self._written, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL))
+        )
 
     def on_image(self, image: CameraImage) -> None:
-        self._others.append((self._written, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append(
+            (self._written, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL))
+        )
 
     def _publish(self) -> None:
         """The others down the pipes, then the rows up to here published; then room for the next ones
@@ -171,14 +201,21 @@ class _Child:
     """One recorder process, the twin's end of its pipe, and how far ahead of it the twin may go
     (`ahead` rows: for the MCAP file that bounds what a kill -9 loses; the view gets the whole ring)."""
 
-    def __init__(self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple) -> None:
+    def __init__(
+        self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple
+    ) -> None:
         self.writer = writer
         self.reader = reader
         self.ahead = ahead
         self.wakes = 0  # wake-ups the twin sent it (it falls behind)
         self._nudged_at = -1
-        self.conn, self.process = start_helper(self, _serve, (writer, reader, *args), name=f"twin-recorder-{writer}",
-                                               other_ends=[s.conn for s in siblings])
+        self.conn, self.process = start_helper(
+            self,
+            _serve,
+            (writer, reader, *args),
+            name=f"twin-recorder-{writer}",
+            other_ends=[s.conn for s in siblings],
+        )
 
     def send(self, message: bytes) -> None:
         try:
@@ -208,7 +245,9 @@ class _Child:
         try:
             reply = self.conn.recv_bytes()
         except (EOFError, OSError) as err:
-            raise RecordingError(f"{what}: the recorder process stopped ({self._exit_text()})") from err
+            raise RecordingError(
+                f"{what}: the recorder process stopped ({self._exit_text()})"
+            ) from err
         if reply != b"OK":
             self.process.join(timeout=5)
             raise RecordingError(reply.decode(errors="replace"))
@@ -219,8 +258,10 @@ class _Child:
             try:
                 self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
             except OSError as err:
-                raise RecordingError(f"recording could not be finished: the recorder process stopped "
-                                     f"({self._exit_text()})") from err
+                raise RecordingError(
+                    f"recording could not be finished: the recorder process stopped "
+                    f"({self._exit_text()})"
+                ) from err
             self.expect_ok("recording could not be finished")
         finally:
             self.stop()
@@ -235,8 +276,19 @@ class _Child:
         return "still running" if code is None else f"exit code {code}"
 
 
-def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, run: dict, urdf: str,
-           meshes: list[Path], path: str | Path, rate: int, engine: dict[str, str] | None) -> None:
+def _serve(
+    conn,
+    writer: str,
+    reader: int,
+    ring: FrameRing,
+    config: TwinConfig,
+    run: dict,
+    urdf: str,
+    meshes: list[Path],
+    path: str | Path,
+    rate: int,
+    engine: dict[str, str] | None,
+) -> None:
     """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes, finish
     on request.
 
@@ -252,7 +304,9 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
     sinks = []
     try:
         if writer == "mcap":
-            sinks.append(McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine))
+            sinks.append(
+                McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine)
+            )
         else:
             from twin.record.rerun.writer import RerunRecorder
 
@@ -276,7 +330,9 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
         feed.take(written, final=end is not None)
         ring.release(reader, feed.read)
         # More rows while it wrote (a block, a burst): at once; rows: the timer; none: a slower one.
-        timeout = 0.0 if ring.written() > feed.read else POLL_S if came else min(2 * timeout, IDLE_POLL_S)
+        timeout = (
+            0.0 if ring.written() > feed.read else POLL_S if came else min(2 * timeout, IDLE_POLL_S)
+        )
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
             if not feed.failure:
                 _abandon(sinks)
@@ -361,4 +417,3 @@ def _abandon(sinks: list) -> None:
             sink.abandon()
         except Exception:  # noqa: BLE001, S110 - already failing: keep what can be kept
             pass
-

@@ -26,7 +26,9 @@ class FrameRing:
 
     def __init__(self, rows: FrameRows, capacity: int, readers: int) -> None:
         if capacity < 1 or readers < 1:
-            raise ValueError(f"a ring of {capacity} rows for {readers} readers; expected at least one of each")
+            raise ValueError(
+                f"a ring of {capacity} rows for {readers} readers; expected at least one of each"
+            )
         self.rows = rows
         self.capacity = capacity
         self.readers = readers
@@ -44,7 +46,10 @@ class FrameRing:
         """Say that rows [0, written) are in the ring; returns each reader's read counter."""
         with self._lock:
             _COUNTER.pack_into(self.memory, 0, written)
-            return [_COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + i))[0] for i in range(self.readers)]
+            return [
+                _COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + i))[0]
+                for i in range(self.readers)
+            ]
 
     def read(self, reader: int) -> int:
         """How many rows reader `reader` has taken in."""
@@ -69,7 +74,8 @@ class FrameRing:
         while start < end:
             # the ring's end, or `end`
             stop = min(end, start - start % self.capacity + self.capacity)
-            runs.append(view[self.offset(start):self.offset(start) + (stop - start) * self.rows.size])
+            runs.append(
+                view[self.offset(start) : self.offset(start) + (stop - start) * self.rows.size]
+            )
             start = stop
         return runs
-

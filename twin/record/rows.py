@@ -53,9 +53,13 @@ class FrameRows:
         # frame).
         scope = {"pack_into": self._struct.pack_into, "unpack": self._struct.unpack_from,
                  "chain": itertools.chain.from_iterable, "Frame": Frame}
-        self.pack_into = eval(f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope)
-        self._unpack = eval(f"lambda buf, offset: (lambda v: Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
-                            scope)
+        self.pack_into = eval(
+            f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope
+        )
+        self._unpack = eval(
+            f"lambda buf, offset: (lambda v: Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
+            scope,
+        )
 
     def pack(self, frame: Frame) -> bytes:
         """One Frame as its row."""
@@ -81,5 +85,9 @@ class FrameRows:
         records = self.records(buf)
         if not copy:
             return FrameColumns(**{f.name: records[f.name] for f in FRAME_FIELDS})
-        return FrameColumns(**{f.name: np.ascontiguousarray(records[f.name]).astype(f.dtype, copy=False)
-                               for f in FRAME_FIELDS})
+        return FrameColumns(
+            **{
+                f.name: np.ascontiguousarray(records[f.name]).astype(f.dtype, copy=False)
+                for f in FRAME_FIELDS
+            }
+        )

@@ -62,11 +62,15 @@ class Intake:
         self._lock = threading.Lock()  # _conns: the server's loop reports, the thread measures
         self._lines: list[str] = []
         self._thread: threading.Thread | None = None
-        self._epoll = select.epoll() if hasattr(select, "epoll") and hasattr(socket, "TCP_INFO") else None
+        self._epoll = (
+            select.epoll() if hasattr(select, "epoll") and hasattr(socket, "TCP_INFO") else None
+        )
         self._unmeasurable_said = self._epoll is None
         if self._epoll is None:
-            self._lines.append("note: this system offers no TCP_INFO/epoll: a multipart message is bounded per "
-                               "part only")
+            self._lines.append(
+                "note: this system offers no TCP_INFO/epoll: a multipart message is bounded per "
+                "part only"
+            )
             return
         self._wake_r, self._wake_w = os.pipe()  # a byte in it ends the thread
         self._epoll.register(self._wake_r, select.EPOLLIN)
@@ -74,7 +78,9 @@ class Intake:
     def start(self) -> None:
         """Measure from now on, in a thread (until close())."""
         if self._epoll is not None and self._thread is None:
-            self._thread = threading.Thread(target=self._watch, name="twin-serve-intake", daemon=True)
+            self._thread = threading.Thread(
+                target=self._watch, name="twin-serve-intake", daemon=True
+            )
             self._thread.start()
 
     def lines(self) -> list[str]:
@@ -146,7 +152,9 @@ class Intake:
                         self._measure(fd)
                 except Exception as err:  # noqa: BLE001 - never end the thread: report it, go on measuring
                     with self._lock:
-                        self._lines.append(f"internal error measuring a connection: {type(err).__name__}: {err}")
+                        self._lines.append(
+                            f"internal error measuring a connection: {type(err).__name__}: {err}"
+                        )
 
     def _measure(self, fd: int) -> None:
         """Shut connection `fd` down if it is over the limit (called holding the lock)."""
@@ -178,14 +186,20 @@ class Intake:
             s.detach()  # the descriptor stays ZMQ's
         conn.cut = True
         where = ":".join(str(p) for p in conn.peer[:2])
-        self._lines.append(f"closed the connection from {where}: it sent {unread} bytes without completing a "
-                           f"message, over the limit of {self.limit} (a request is one frame; multipart messages "
-                           "and requests sent before the previous reply are refused once they exceed it)")
+        self._lines.append(
+            f"closed the connection from {where}: it sent {unread} bytes without completing a "
+            f"message, over the limit of {self.limit} (a request is one frame; multipart messages "
+            "and requests sent before the previous reply are refused once they exceed it)"
+        )
 
     def _probe(self, fd: int, family: int) -> tuple[tuple, int, int] | None:
         """(peer address, address family, bytes received) of TCP socket `fd`, or None."""
         try:  # a family given spares two system calls; -1: find out
-            s = socket.socket(family, socket.SOCK_STREAM, 0, fd) if family != -1 else socket.socket(fileno=fd)
+            s = (
+                socket.socket(family, socket.SOCK_STREAM, 0, fd)
+                if family != -1
+                else socket.socket(fileno=fd)
+            )
         except OSError:
             return None  # closed, or not a socket
         try:
@@ -202,7 +216,9 @@ class Intake:
         if len(info) < _TCP_INFO_LEN:
             if not self._unmeasurable_said:
                 self._unmeasurable_said = True
-                self._lines.append("note: this kernel's TCP_INFO has no tcpi_bytes_received: a multipart message "
-                                   "is bounded per part only")
+                self._lines.append(
+                    "note: this kernel's TCP_INFO has no tcpi_bytes_received: a multipart message "
+                    "is bounded per part only"
+                )
             return None
         return peer, family, struct.unpack_from("=Q", info, _BYTES_RECEIVED_AT)[0]

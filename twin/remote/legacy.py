@@ -120,8 +120,14 @@ def _endpoint(address: str, port: int) -> tuple[str, int]:
     return host, port
 
 
-def simxStart(connectionAddress: str, connectionPort: int, waitUntilConnected: bool, doNotReconnectOnceDisconnected: bool,
-              timeOutInMs: int, commThreadCycleInMs: int) -> int:
+def simxStart(
+    connectionAddress: str,
+    connectionPort: int,
+    waitUntilConnected: bool,
+    doNotReconnectOnceDisconnected: bool,
+    timeOutInMs: int,
+    commThreadCycleInMs: int,
+) -> int:
     """Connect; the client id (>= 0), or -1 when no server answers within timeOutInMs (5000 if <= 0)."""
     global _next_id
     host, port = _endpoint(connectionAddress, int(connectionPort))
@@ -182,11 +188,15 @@ def _get(clientID: int, func: str, operationMode: int, *args: Any) -> tuple[int,
     return _do(clientID, func, *args)
 
 
-def simxSetJointTargetPosition(clientID: int, jointHandle: int, targetPosition: float, operationMode: int) -> int:
+def simxSetJointTargetPosition(
+    clientID: int, jointHandle: int, targetPosition: float, operationMode: int
+) -> int:
     return _set(clientID, "sim.setJointTargetPosition", operationMode, jointHandle, targetPosition)
 
 
-def simxSetJointPosition(clientID: int, jointHandle: int, position: float, operationMode: int) -> int:
+def simxSetJointPosition(
+    clientID: int, jointHandle: int, position: float, operationMode: int
+) -> int:
     return _set(clientID, "sim.setJointPosition", operationMode, jointHandle, position)
 
 
@@ -195,7 +205,9 @@ def simxGetJointPosition(clientID: int, jointHandle: int, operationMode: int) ->
     return rc, (q if rc == simx_return_ok else 0.0)
 
 
-def simxSetIntegerSignal(clientID: int, signalName: str, signalValue: int, operationMode: int) -> int:
+def simxSetIntegerSignal(
+    clientID: int, signalName: str, signalValue: int, operationMode: int
+) -> int:
     return _set(clientID, "sim.setInt32Signal", operationMode, signalName, signalValue)
 
 
@@ -237,15 +249,21 @@ def simxSynchronousTrigger(clientID: int) -> int:
     return _do(clientID, "sim.step")[0]
 
 
-def simxGetObjectPosition(clientID: int, objectHandle: int, relativeToObjectHandle: int,
-                          operationMode: int) -> tuple[int, list[float]]:
-    rc, pos = _get(clientID, "sim.getObjectPosition", operationMode, objectHandle, relativeToObjectHandle)
+def simxGetObjectPosition(
+    clientID: int, objectHandle: int, relativeToObjectHandle: int, operationMode: int
+) -> tuple[int, list[float]]:
+    rc, pos = _get(
+        clientID, "sim.getObjectPosition", operationMode, objectHandle, relativeToObjectHandle
+    )
     return rc, (pos if rc == simx_return_ok else [0.0, 0.0, 0.0])
 
 
-def simxGetObjectOrientation(clientID: int, objectHandle: int, relativeToObjectHandle: int,
-                             operationMode: int) -> tuple[int, list[float]]:
-    rc, euler = _get(clientID, "sim.getObjectOrientation", operationMode, objectHandle, relativeToObjectHandle)
+def simxGetObjectOrientation(
+    clientID: int, objectHandle: int, relativeToObjectHandle: int, operationMode: int
+) -> tuple[int, list[float]]:
+    rc, euler = _get(
+        clientID, "sim.getObjectOrientation", operationMode, objectHandle, relativeToObjectHandle
+    )
     return rc, (euler if rc == simx_return_ok else [0.0, 0.0, 0.0])
 
 

@@ -59,17 +59,26 @@ def decode(raw: bytes) -> Request:
     be an integer of a million digits, which repr() refuses.
     """
     if len(raw) > MAX_REQUEST_BYTES:
-        raise RequestError(f"request of {len(raw)} bytes exceeds the limit of {MAX_REQUEST_BYTES} bytes (1 MiB)")
+        raise RequestError(
+            f"request of {len(raw)} bytes exceeds the limit of {MAX_REQUEST_BYTES} bytes (1 MiB)"
+        )
     if len(raw) > MAX_ITEMS:  # only then can it hold more than MAX_ITEMS items
         _check_item_count(raw)
     try:
-        msg = cbor2.loads(raw, max_depth=MAX_DEPTH, semantic_decoders=_REFUSED_TAGS, tag_hook=_refuse_tag,
-                          strict_hashable_types=True)
+        msg = cbor2.loads(
+            raw,
+            max_depth=MAX_DEPTH,
+            semantic_decoders=_REFUSED_TAGS,
+            tag_hook=_refuse_tag,
+            strict_hashable_types=True,
+        )
     except Exception as err:  # noqa: BLE001 - cbor2 raises CBORDecodeError, ValueError, MemoryError, ...
         refused = _refused_tag(err)
         if refused is not None:
             raise RequestError(f"malformed request: {refused}") from None
-        raise RequestError(f"malformed request: not valid CBOR ({type(err).__name__}: {safe_str(err)})") from None
+        raise RequestError(
+            f"malformed request: not valid CBOR ({type(err).__name__}: {safe_str(err)})"
+        ) from None
     if not isinstance(msg, dict):
         raise RequestError(f"malformed request: expected a CBOR map, got {type(msg).__name__}")
     uuid = msg.get("uuid")
@@ -80,16 +89,22 @@ def decode(raw: bytes) -> Request:
         )
     func = msg.get("func")
     if not isinstance(func, str) or not func:
-        raise RequestError(f"malformed request: 'func' must be a non-empty string, got {brief_value(func)}")
+        raise RequestError(
+            f"malformed request: 'func' must be a non-empty string, got {brief_value(func)}"
+        )
     args = msg.get("args", [])
     if args is None:
         args = []
     if not isinstance(args, list):
-        raise RequestError(f"malformed request to {brief(func)}: 'args' must be an array, got {type(args).__name__}")
+        raise RequestError(
+            f"malformed request to {brief(func)}: 'args' must be an array, got {type(args).__name__}"
+        )
     n = msg.get("argsL", len(args))
     if isinstance(n, bool) or not isinstance(n, int) or not len(args) <= n <= MAX_ARGS:
-        raise RequestError(f"malformed request to {brief(func)}: 'argsL' {brief_value(n)} must be an integer "
-                           f"{len(args)}..{MAX_ARGS}")
+        raise RequestError(
+            f"malformed request to {brief(func)}: 'argsL' {brief_value(n)} must be an integer "
+            f"{len(args)}..{MAX_ARGS}"
+        )
     if n > len(args):
         args = args + [None] * (n - len(args))  # trailing nulls the encoder dropped
     first = None
@@ -113,13 +128,16 @@ def _refuse_tag(*args: Any) -> Any:
 def _refuse_semantic_tag(number: int) -> Callable[..., Any]:
     def refuse(*_: Any) -> Any:
         raise RequestError(f"CBOR tag {number} is not accepted (only 2 and 3, big integers)")
+
     return refuse
 
 
 # cbor2's own tags (dates, decimals, shared references 28/29 whose values repeat without end, string
 # references, regular expressions, sets, ...) are refused; 2 and 3 (big integers) stay.
-_REFUSED_TAGS = {t: _refuse_semantic_tag(t) for t in
-                 (0, 1, 4, 5, 25, 28, 29, 30, 35, 36, 37, 100, 256, 258, 260, 261, 1004, 55799)}
+_REFUSED_TAGS = {
+    t: _refuse_semantic_tag(t)
+    for t in (0, 1, 4, 5, 25, 28, 29, 30, 35, 36, 37, 100, 256, 258, 260, 261, 1004, 55799)
+}
 
 
 def _refused_tag(err: BaseException) -> RequestError | None:
@@ -143,7 +161,7 @@ def _check_item_count(raw: bytes) -> None:
         length = info
         if 24 <= info <= 27:
             width = 1 << (info - 24)
-            length = int.from_bytes(raw[i:i + width], "big")
+            length = int.from_bytes(raw[i : i + width], "big")
             i += width
         if major in (2, 3) and info != 31:
             i += length  # a string's bytes
@@ -275,8 +293,17 @@ def _list_or_none(v: Any) -> list:
     return v
 
 
-KINDS = {"int": _int, "float": _float, "str": _str, "name": _name, "text": _text, "bool": _bool, "any": _any,
-         "map?": _map_or_none, "list?": _list_or_none}
+KINDS = {
+    "int": _int,
+    "float": _float,
+    "str": _str,
+    "name": _name,
+    "text": _text,
+    "bool": _bool,
+    "any": _any,
+    "map?": _map_or_none,
+    "list?": _list_or_none,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -311,6 +338,7 @@ def check_args(signature: Signature, args: list) -> list:
         try:
             out.append(KINDS[p.kind](args[i]))
         except TypeError as err:
-            raise RequestError(f"argument {i + 1} ({p.name}) is {brief_value(args[i])}; expected {err}") from None
+            raise RequestError(
+                f"argument {i + 1} ({p.name}) is {brief_value(args[i])}; expected {err}"
+            ) from None
     return out
-

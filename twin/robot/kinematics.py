@@ -82,8 +82,15 @@ def pad_pose_function(profile: RobotProfile):
         t1 = zero + s1 * q[0]
         t12 = t1 + s2 * q[1]
         half = 0.5 * (t12 + s4 * q[3])
-        return (l1 * cos(t1) + l2 * cos(t12), l1 * sin(t1) + l2 * sin(t12), z0 - s3 * q[2],
-                0.0, 0.0, sin(half), cos(half))
+        return (
+            l1 * cos(t1) + l2 * cos(t12),
+            l1 * sin(t1) + l2 * sin(t12),
+            z0 - s3 * q[2],
+            0.0,
+            0.0,
+            sin(half),
+            cos(half),
+        )
 
     return pad_pose
 
@@ -136,9 +143,17 @@ def ik(profile: RobotProfile, x_m: float, y_m: float) -> list[ArmSolution]:
         inner = profile.reach_m[0]
         valid = branches if math.hypot(x_m, y_m) >= inner - 1e-12 else []
     else:
-        valid = [s for s in branches if _within(s.shoulder_rad, limits[0]) and _within(s.elbow_rad, limits[1])]
+        valid = [
+            s
+            for s in branches
+            if _within(s.shoulder_rad, limits[0]) and _within(s.elbow_rad, limits[1])
+        ]
     if not valid:
-        why = "outside the reach annulus" if not branches or profile.revolute_cyclic else "beyond the joint limits"
+        why = (
+            "outside the reach annulus"
+            if not branches or profile.revolute_cyclic
+            else "beyond the joint limits"
+        )
         raise OutOfReach(f"target ({x_m:.4f}, {y_m:.4f}) m is {why}: {_reach_text(profile)}")
     return valid
 
@@ -147,7 +162,10 @@ def choose(solutions: list[ArmSolution], current: tuple[float, float]) -> ArmSol
     """The solution nearest the current (shoulder, elbow); ties go to the +1 branch."""
     return min(
         solutions,
-        key=lambda s: (abs(s.shoulder_rad - current[0]) + abs(s.elbow_rad - current[1]), -s.elbow_sign),
+        key=lambda s: (
+            abs(s.shoulder_rad - current[0]) + abs(s.elbow_rad - current[1]),
+            -s.elbow_sign,
+        ),
     )
 
 
@@ -169,5 +187,7 @@ def z_joint_for_height(profile: RobotProfile, z_m: float) -> float:
     lo, hi = profile.joint_limits()[2]
     if not (math.isfinite(q3) and lo - 1e-12 <= q3 <= hi + 1e-12):
         heights = sorted(profile.tip_z0_m - profile.axis_signs[2] * v for v in (lo, hi))
-        raise OutOfReach(f"pad height {z_m} m is outside the Z stroke: {heights[0]:.4f}..{heights[1]:.4f} m")
+        raise OutOfReach(
+            f"pad height {z_m} m is outside the Z stroke: {heights[0]:.4f}..{heights[1]:.4f} m"
+        )
     return min(hi, max(lo, q3))

@@ -44,26 +44,51 @@ class RenderWorld(World):
         for body, pose in zip(self.object_ids, frame.object_poses, strict=True):
             pb.resetBasePositionAndOrientation(body, pose[:3], pose[3:7], physicsClientId=c)
 
-    def render(self, spec: CameraSpec, eye: tuple[float, ...], target: tuple[float, ...],
-               up: tuple[float, ...]) -> np.ndarray:
+    def render(
+        self,
+        spec: CameraSpec,
+        eye: tuple[float, ...],
+        target: tuple[float, ...],
+        up: tuple[float, ...],
+    ) -> np.ndarray:
         """The scene as this camera sees it: (height, width, 3) uint8."""
         view = pb.computeViewMatrix(eye, target, up)
-        projection = pb.computeProjectionMatrixFOV(spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m)
-        _, _, rgba, _, _ = pb.getCameraImage(spec.width_px, spec.height_px, view, projection,
-                                             renderer=pb.ER_TINY_RENDERER, flags=pb.ER_NO_SEGMENTATION_MASK,
-                                             physicsClientId=self.client)
-        return np.reshape(np.asarray(rgba, dtype=np.uint8), (spec.height_px, spec.width_px, 4))[:, :, :3]
+        projection = pb.computeProjectionMatrixFOV(
+            spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m
+        )
+        _, _, rgba, _, _ = pb.getCameraImage(
+            spec.width_px,
+            spec.height_px,
+            view,
+            projection,
+            renderer=pb.ER_TINY_RENDERER,
+            flags=pb.ER_NO_SEGMENTATION_MASK,
+            physicsClientId=self.client,
+        )
+        return np.reshape(np.asarray(rgba, dtype=np.uint8), (spec.height_px, spec.width_px, 4))[
+            :, :, :3
+        ]
 
 
-def render_frame(world: RenderWorld, cameras: tuple[CameraSpec, ...], frame: Frame) -> list[CameraImage]:
+def render_frame(
+    world: RenderWorld, cameras: tuple[CameraSpec, ...], frame: Frame
+) -> list[CameraImage]:
     """Pictures of one frame from each of these cameras, encoded."""
     world.pose(frame)
     out = []
     for spec in cameras:
         eye, target, up = camera_view(spec, frame.pad_pose)
         pixels = world.render(spec, eye, target, up)
-        out.append(CameraImage(spec.name, frame.step, frame.t_ns, spec.format, encode(pixels, spec.format),
-                               optical_pose(eye, target, up)))
+        out.append(
+            CameraImage(
+                spec.name,
+                frame.step,
+                frame.t_ns,
+                spec.format,
+                encode(pixels, spec.format),
+                optical_pose(eye, target, up),
+            )
+        )
     return out
 
 
@@ -77,8 +102,13 @@ class CameraRenderer:
     pictures of LAG_PICTURES later camera frames have been asked for (or at flush and close): always at
     the same point of the run, drawn here or there, so the files are byte-identical."""
 
-    def __init__(self, config: TwinConfig, hand_on: Callable[[CameraImage], None], *,
-                 background: bool | None = None) -> None:
+    def __init__(
+        self,
+        config: TwinConfig,
+        hand_on: Callable[[CameraImage], None],
+        *,
+        background: bool | None = None,
+    ) -> None:
         self.cameras = config.cameras
         self._hand_on = hand_on
         self._every = tuple(c.every_steps(config.dt_ns) for c in config.cameras)
@@ -99,7 +129,9 @@ class CameraRenderer:
         return self._process.pending if self._process is not None else len(self._drawn)
 
     def on_frame(self, frame: Frame) -> None:
-        due = tuple(c for c, every in zip(self.cameras, self._every, strict=True) if frame.step % every == 0)
+        due = tuple(
+            c for c, every in zip(self.cameras, self._every, strict=True) if frame.step % every == 0
+        )
         if not due:
             return
         if self._process is not None:
@@ -156,7 +188,9 @@ class _RenderProcess:
         try:
             reply = self._conn.recv_bytes()
         except (EOFError, OSError) as err:
-            raise HelperError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
+            raise HelperError(
+                f"the camera render process stopped (exit code {self._process.exitcode})"
+            ) from err
         self.pending -= 1
         if reply.startswith(_FAILED):
             raise HelperError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")

@@ -40,7 +40,9 @@ class Suction:
         self._broken_this_period = False  # a broken hold stays broken until the pad is switched off
         self.idle_on: bool | None = False  # the `on` for which update() changes nothing (_idle_on)
 
-    def update(self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]) -> list[SuctionEvent]:
+    def update(
+        self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]
+    ) -> list[SuctionEvent]:
         """Advance the pad's state for the coming step from the latest Frame; returns what happened.
         The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter).
         heading_of(frame): the pad's heading (rad), asked for only when an object is attached."""

@@ -78,11 +78,17 @@ WORKER_CONFIG = {
     # every free and turns off its adaptive threshold; the simulation allocates all the time (and
     # the guarded children that run scenarios keep freed memory: worker.keep_freed_memory). Threads
     # stay at 1.
-    "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
+    "distributed.nanny.pre-spawn-environ": {
+        "OMP_NUM_THREADS": 1,
+        "MKL_NUM_THREADS": 1,
+        "OPENBLAS_NUM_THREADS": 1,
+    },
 }
 
-TLS_ENV = ("DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT=client.pem "
-           "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY=client-key.pem")
+TLS_ENV = (
+    "DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT=client.pem "
+    "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY=client-key.pem"
+)
 _QUIET = ("QuietScheduler", "QuietWorker")
 
 
@@ -91,8 +97,10 @@ def _need_dask():
         import dask
         import distributed
     except ImportError as err:
-        raise ConfigError("--executor dask needs Dask's distributed scheduler; "
-                          "install it with pip install 'twin[dask]'") from err
+        raise ConfigError(
+            "--executor dask needs Dask's distributed scheduler; "
+            "install it with pip install 'twin[dask]'"
+        ) from err
     return dask, distributed
 
 
@@ -106,9 +114,15 @@ def _define_quiet_classes() -> tuple[type, type]:
 
     for name, base in zip(_QUIET, (Scheduler, Worker)):
         if name not in globals():
-            globals()[name] = type(name, (base,), {
-                "__module__": __name__, "start_http_server": _no_http_server,
-                "__doc__": f"Dask's {base.__name__} without its HTTP server (twin.sweep.cluster)."})
+            globals()[name] = type(
+                name,
+                (base,),
+                {
+                    "__module__": __name__,
+                    "start_http_server": _no_http_server,
+                    "__doc__": f"Dask's {base.__name__} without its HTTP server (twin.sweep.cluster).",
+                },
+            )
     return globals()[_QUIET[0]], globals()[_QUIET[1]]
 
 
@@ -124,8 +138,13 @@ def _line(err: BaseException) -> str:
     return f"{type(err).__name__}: {first}" if first else type(err).__name__
 
 
-def start_local(jobs: int, *, dashboard: bool = False, preload: Sequence[str] = ("twin.sweep.worker",),
-                config: Mapping[str, object] = WORKER_CONFIG):
+def start_local(
+    jobs: int,
+    *,
+    dashboard: bool = False,
+    preload: Sequence[str] = ("twin.sweep.worker",),
+    config: Mapping[str, object] = WORKER_CONFIG,
+):
     """A TLS-secured cluster of `jobs` single-threaded worker processes on 127.0.0.1 and this
     process's client of it: (cluster, client, dashboard URL or None). The certificate is made for
     this cluster and held in memory (cluster.security): a client needs it to connect. No HTTP server
@@ -143,43 +162,69 @@ def start_local(jobs: int, *, dashboard: bool = False, preload: Sequence[str] = 
         # a self-signed CA/certificate/key for every role, in memory only
         security = Security.temporary()
     except ImportError as err:
-        raise ConfigError("a local Dask cluster is secured with a throwaway TLS certificate, which needs "
-                          "the cryptography package; install it with pip install 'twin[dask]'") from err
+        raise ConfigError(
+            "a local Dask cluster is secured with a throwaway TLS certificate, which needs "
+            "the cryptography package; install it with pip install 'twin[dask]'"
+        ) from err
     quiet_scheduler, quiet_worker = _define_quiet_classes()
     settings = dict(config)
     # Scheduler.__init__ appends to the routes list it reads from the configuration when bokeh is
     # missing: a copy of it keeps the process's configuration unchanged
-    settings["distributed.scheduler.http.routes"] = list(dask.config.get("distributed.scheduler.http.routes"))
-    scheduler_options = {"host": HOST, "port": 0, "protocol": "tls://", "security": security, "services": {},
-                         "dashboard": dashboard, "dashboard_address": f"{HOST}:0" if dashboard else None}
+    settings["distributed.scheduler.http.routes"] = list(
+        dask.config.get("distributed.scheduler.http.routes")
+    )
+    scheduler_options = {
+        "host": HOST,
+        "port": 0,
+        "protocol": "tls://",
+        "security": security,
+        "services": {},
+        "dashboard": dashboard,
+        "dashboard_address": f"{HOST}:0" if dashboard else None,
+    }
     worker_options = {
-        "host": HOST, "protocol": "tls://", "security": security, "nthreads": 1,
+        "host": HOST,
+        "protocol": "tls://",
+        "security": security,
+        "nthreads": 1,
         # as LocalCluster
         "memory_limit": parse_memory_limit("auto", 1, jobs, logger=logging.getLogger(__name__)),
         # a spawned worker process unpickles it by name: module __getattr__
         "worker_class": quiet_worker,
-        "dashboard": False, "dashboard_address": None, "silence_logs": logging.ERROR,
+        "dashboard": False,
+        "dashboard_address": None,
+        "silence_logs": logging.ERROR,
         "preload": list(preload),
         # a nanny hands its worker processes a shallow copy of the configuration taken as it starts,
         # whose nested dicts dask.config.set's context restores in place as it ends: without
         # `config` here, a worker that the nanny restarts later would get Dask's defaults
-        "config": dict(config)}
+        "config": dict(config),
+    }
     worker = {"cls": Nanny, "options": worker_options}
     cluster = client = None
     try:
         with dask.config.set(settings):
             cluster = SpecCluster(
-                scheduler={"cls": Scheduler if dashboard else quiet_scheduler, "options": scheduler_options},
-                workers={i: worker for i in range(jobs)}, worker=worker, security=security,
-                silence_logs=logging.ERROR, name="twin")
+                scheduler={
+                    "cls": Scheduler if dashboard else quiet_scheduler,
+                    "options": scheduler_options,
+                },
+                workers={i: worker for i in range(jobs)},
+                worker=worker,
+                security=security,
+                silence_logs=logging.ERROR,
+                name="twin",
+            )
             client = Client(cluster, security=security, set_as_default=False)
     # RuntimeError: a worker could not start
     except (OSError, TimeoutError, RuntimeError, ValueError) as err:
         for part in (client, cluster):
             if part is not None:
                 part.close()
-        raise ConfigError(f"cannot start a local Dask cluster of {jobs} workers on {HOST}: {_line(err)} "
-                          "(a script that starts one needs the if __name__ == '__main__': guard)") from err
+        raise ConfigError(
+            f"cannot start a local Dask cluster of {jobs} workers on {HOST}: {_line(err)} "
+            "(a script that starts one needs the if __name__ == '__main__': guard)"
+        ) from err
     url = (cluster.dashboard_link or None) if dashboard else None
     return cluster, client, url
 
@@ -232,13 +277,16 @@ def _security_for(address: str):
             raise ConfigError(
                 f"--scheduler {address!r} speaks TLS: Dask's configuration must name the cluster's CA and this "
                 f"client's certificate (distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and "
-                f".key), e.g. {TLS_ENV}")
+                f".key), e.g. {TLS_ENV}"
+            )
         try:
             # reads the files now: a missing or bad one is named here
             security.get_connection_args("client")
         except (OSError, ValueError) as err:
-            raise ConfigError(f"cannot load the TLS certificates for --scheduler {address!r} "
-                              f"(distributed.comm.tls.ca-file, .client.cert, .client.key): {_line(err)}") from err
+            raise ConfigError(
+                f"cannot load the TLS certificates for --scheduler {address!r} "
+                f"(distributed.comm.tls.ca-file, .client.cert, .client.key): {_line(err)}"
+            ) from err
     return security
 
 
@@ -250,7 +298,9 @@ def _probe(address: str, security, timeout_s: float) -> dict:
     from distributed.core import send_recv
 
     async def identity() -> dict:
-        comm = await comm_connect(address, timeout=timeout_s, **security.get_connection_args("client"))
+        comm = await comm_connect(
+            address, timeout=timeout_s, **security.get_connection_args("client")
+        )
         try:
             return await send_recv(comm, op="identity")
         finally:
@@ -269,36 +319,50 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
     from distributed import Client
 
     if not address.startswith(("tcp://", "tls://")):
-        raise ConfigError(f"--scheduler {address!r} is invalid; expected tcp://HOST:PORT or tls://HOST:PORT")
+        raise ConfigError(
+            f"--scheduler {address!r} is invalid; expected tcp://HOST:PORT or tls://HOST:PORT"
+        )
     security = _security_for(address)
     within = f"{timeout_s:g} s"
     hint = "; a cluster secured with TLS needs tls://" if address.startswith("tcp://") else ""
     try:
         info = _probe(address, security, timeout_s)
     except _Deadline as err:
-        raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: it accepted the connection "
-                          "but did not answer Dask's handshake (expected a Dask scheduler's address, not another "
-                          "server's)") from err
+        raise ConfigError(
+            f"cannot reach the Dask scheduler {address!r} within {within}: it accepted the connection "
+            "but did not answer Dask's handshake (expected a Dask scheduler's address, not another "
+            "server's)"
+        ) from err
     # refused or unreachable (retried for timeout_s), TLS refused, closed mid-handshake
     except OSError as err:
         # Dask's "Timed out trying to connect" names the last attempt's error only here
         cause = err.__cause__
-        why = _line(err) + (f" ({_line(cause)})" if cause is not None and exception_text(cause) else "")
-        raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: {why} "
-                          f"(expected a Dask scheduler's address{hint})") from err
+        why = _line(err) + (
+            f" ({_line(cause)})" if cause is not None and exception_text(cause) else ""
+        )
+        raise ConfigError(
+            f"cannot reach the Dask scheduler {address!r} within {within}: {why} "
+            f"(expected a Dask scheduler's address{hint})"
+        ) from err
     # bytes that are not Dask's protocol (a length of exabytes: MemoryError...)
     except Exception as err:
-        raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: it answered, but not in "
-                          f"Dask's protocol ({_line(err)}); expected a Dask scheduler's address") from err
+        raise ConfigError(
+            f"cannot reach the Dask scheduler {address!r} within {within}: it answered, but not in "
+            f"Dask's protocol ({_line(err)}); expected a Dask scheduler's address"
+        ) from err
     if not isinstance(info, dict) or "workers" not in info:
         kind = str(info.get("type")) if isinstance(info, dict) else ""
         # QuietWorker: a Worker
         kind = next((k for k in ("Worker", "Nanny") if k in kind), "server")
-        raise ConfigError(f"--scheduler {address!r} is a Dask {kind}, not a scheduler; "
-                          "expected the scheduler's address (dask scheduler prints it)")
+        raise ConfigError(
+            f"--scheduler {address!r} is a Dask {kind}, not a scheduler; "
+            "expected the scheduler's address (dask scheduler prints it)"
+        )
     # the Client's own timeout is also its default for later calls (gather, close...): the full one
     try:
         return Client(address, timeout=timeout_s, security=security, set_as_default=False)
     except Exception as err:  # OSError, TimeoutError, a version or TLS refusal
-        raise ConfigError(f"cannot reach the Dask scheduler {address!r} within {within}: {_line(err)} "
-                          f"(expected a Dask scheduler's address{hint})") from err
+        raise ConfigError(
+            f"cannot reach the Dask scheduler {address!r} within {within}: {_line(err)} "
+            f"(expected a Dask scheduler's address{hint})"
+        ) from err

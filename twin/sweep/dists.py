@@ -65,7 +65,9 @@ def parse_dist(text: str, key: str = "") -> Dist:
     shown = _short(text, 80) if isinstance(text, str) else text
     where = f"--vary {key}={shown}" if key else f"distribution {shown!r}"
     if not isinstance(text, str) or not text.strip():
-        raise ConfigError(f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), choice(v1,v2,...) or a value")
+        raise ConfigError(
+            f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), choice(v1,v2,...) or a value"
+        )
     m = _CALL.match(text)
     if m is None:
         return Dist("constant", (_value(text.strip(), where),), text.strip())
@@ -78,17 +80,23 @@ def parse_dist(text: str, key: str = "") -> Dist:
         if kind == "uniform" and not a < b:
             raise ConfigError(f"{where} is invalid; expected uniform(a,b) with a < b")
         if kind == "uniform" and not math.isfinite(b - a):  # numpy draws a + (b - a) * u
-            raise ConfigError(f"{where} is invalid; expected uniform(a,b) with b - a finite (at most +-1.8e308)")
+            raise ConfigError(
+                f"{where} is invalid; expected uniform(a,b) with b - a finite (at most +-1.8e308)"
+            )
         if kind == "normal" and not b > 0:
             raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with sigma > 0")
         # numpy draws mu + sigma * z
         if kind == "normal" and not math.isfinite(abs(a) + NORMAL_REACH * b):
-            raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with mu +- {NORMAL_REACH}*sigma "
-                              "finite (at most +-1.8e308)")
+            raise ConfigError(
+                f"{where} is invalid; expected normal(mu,sigma) with mu +- {NORMAL_REACH}*sigma "
+                "finite (at most +-1.8e308)"
+            )
         return Dist(kind, (a, b), text.strip())
     if kind == "choice":
         if not values or len(values) > MAX_CHOICES:
-            raise ConfigError(f"{where} is invalid; expected choice(v1,v2,...) with 1 to {MAX_CHOICES} values")
+            raise ConfigError(
+                f"{where} is invalid; expected choice(v1,v2,...) with 1 to {MAX_CHOICES} values"
+            )
         return Dist("choice", values, text.strip())
     raise ConfigError(f"{where}: unknown distribution {kind!r}; expected uniform, normal or choice")
 
@@ -144,8 +152,10 @@ def read_value(text: str) -> object:
             return value
         too_deep = True
     if too_deep:
-        raise BadValue(f"{_short(text)}: arrays or tables nest more than {MAX_DEPTH} levels deep; "
-                       f"expected at most {MAX_DEPTH}")
+        raise BadValue(
+            f"{_short(text)}: arrays or tables nest more than {MAX_DEPTH} levels deep; "
+            f"expected at most {MAX_DEPTH}"
+        )
     try:
         number = float(text)
     except ValueError:
@@ -177,7 +187,7 @@ def _not_finite(text: str) -> NoReturn:
 
 def _short(text: str, most: int = 40) -> str:
     """A value as written, cut to fit one line of an error."""
-    return text if len(text) <= most else f"{text[:most - 16]}...({len(text)} characters)"
+    return text if len(text) <= most else f"{text[: most - 16]}...({len(text)} characters)"
 
 
 def _is_number(v: object) -> bool:

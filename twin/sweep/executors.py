@@ -71,7 +71,9 @@ class LocalExecutor:
             return
         todo = dict(enumerate(items))
         for attempt in itertools.count():
-            self._pool = ProcessPoolExecutor(max_workers=min(self.jobs, max(1, len(todo))), initializer=_worker_signals)
+            self._pool = ProcessPoolExecutor(
+                max_workers=min(self.jobs, max(1, len(todo))), initializer=_worker_signals
+            )
             futures = {self._pool.submit(fn, *item): i for i, item in todo.items()}
             try:
                 while futures:
@@ -86,8 +88,10 @@ class LocalExecutor:
             except BrokenProcessPool as err:
                 self.close()
                 if attempt >= POOL_RESTARTS:
-                    raise WorkerLost(f"a local worker process died {attempt + 1} times; "
-                                     f"{len(todo)} batches not done") from err
+                    raise WorkerLost(
+                        f"a local worker process died {attempt + 1} times; "
+                        f"{len(todo)} batches not done"
+                    ) from err
 
     def close(self) -> None:
         """Stop the workers now (also part-way: Ctrl-C), dropping queued work."""
@@ -131,8 +135,9 @@ class DaskExecutor:
     def worker_count(self) -> int:
         return len(self._client.scheduler_info().get("workers", {}))
 
-    def run_scenarios(self, job, batches: Iterator[list[int]],
-                      scenario_timeout_s: float | None = None) -> Iterator[dict]:
+    def run_scenarios(
+        self, job, batches: Iterator[list[int]], scenario_timeout_s: float | None = None
+    ) -> Iterator[dict]:
         """A sweep's rows, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker in flight.
         Each task runs its batch in a guarded child of the Dask worker; a batch whose Dask worker was
         lost anyway (Dask gave up: KilledWorker) is sent again one scenario per task, and a scenario
@@ -146,8 +151,15 @@ class DaskExecutor:
         def submit(batch: list[int]):
             key = f"twin-{token}-{next(counter)}"
             pending[key] = batch
-            return self._client.submit(run_batch_guarded, job, batch, scenario_timeout_s, key=key, pure=False,
-                                       retries=DASK_RETRIES)
+            return self._client.submit(
+                run_batch_guarded,
+                job,
+                batch,
+                scenario_timeout_s,
+                key=key,
+                pure=False,
+                retries=DASK_RETRIES,
+            )
 
         window = max(1, self.jobs * DASK_WINDOW_PER_JOB)
         source = iter(batches)
@@ -165,7 +177,9 @@ class DaskExecutor:
                         for i in batch:
                             done.add(submit([i]))
                         continue
-                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})".splitlines()[0]
+                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})".splitlines()[
+                        0
+                    ]
                     result = [failed_row(job, batch[0], why, 0.0)]
                 nxt = next(source, None)
                 if nxt is not None:
@@ -183,11 +197,17 @@ class DaskExecutor:
         from distributed import as_completed
 
         token = os.urandom(6).hex()
-        futures = [self._client.submit(fn, *item, key=f"twin-{token}-{i}", pure=False, retries=DASK_RETRIES)
-                   for i, item in enumerate(items)]
+        futures = [
+            self._client.submit(
+                fn, *item, key=f"twin-{token}-{i}", pure=False, retries=DASK_RETRIES
+            )
+            for i, item in enumerate(items)
+        ]
         index = {fut.key: i for i, fut in enumerate(futures)}
         try:
-            done = as_completed(futures, loop=self._client.loop, with_results=True, raise_errors=False)
+            done = as_completed(
+                futures, loop=self._client.loop, with_results=True, raise_errors=False
+            )
             for fut, result in done:  # results gathered as they finish, not one round trip each
                 if fut.status == "error":
                     err = fut.exception()
@@ -217,8 +237,16 @@ def make_executor(name: str, jobs: int, scheduler: str | None = None, *, dashboa
     if scheduler and name != "dask":
         raise ConfigError("--scheduler needs --executor dask")
     if dashboard and (name != "dask" or scheduler):
-        raise ConfigError("--dashboard needs --executor dask without --scheduler (a cluster of your own has its own)")
+        raise ConfigError(
+            "--dashboard needs --executor dask without --scheduler (a cluster of your own has its own)"
+        )
     if scheduler and not scheduler.startswith(("tcp://", "tls://")):
-        raise ConfigError(f"--scheduler {scheduler!r} is invalid; expected an address such as tcp://HOST:8786 "
-                          "or tls://HOST:8786")
-    return DaskExecutor(jobs, scheduler, dashboard=dashboard) if name == "dask" else LocalExecutor(jobs)
+        raise ConfigError(
+            f"--scheduler {scheduler!r} is invalid; expected an address such as tcp://HOST:8786 "
+            "or tls://HOST:8786"
+        )
+    return (
+        DaskExecutor(jobs, scheduler, dashboard=dashboard)
+        if name == "dask"
+        else LocalExecutor(jobs)
+    )

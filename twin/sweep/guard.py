@@ -205,7 +205,9 @@ class GuardedPool:
         time limit is marked and returned too."""
         timeout = None
         if self.timeout_s is not None:
-            timeout = max(0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic())
+            timeout = max(
+                0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic()
+            )
         ready = wait([c.conn for c in self.busy], timeout)
         out = [c for c in self.busy if c.conn in ready]
         if self.timeout_s is not None:
@@ -258,7 +260,9 @@ class GuardedPool:
                 child.reap()
 
 
-def run_batch_guarded(job: Job, scenarios: list[int], scenario_timeout_s: float | None = None) -> list[dict]:
+def run_batch_guarded(
+    job: Job, scenarios: list[int], scenario_timeout_s: float | None = None
+) -> list[dict]:
     """A batch's rows, run in a child of this process (what a Dask task runs): a scenario that kills
     its process or hangs is a failed row, the Dask worker lives on."""
     return list(GuardedPool(job, 1, scenario_timeout_s).run([scenarios]))

@@ -44,10 +44,18 @@ def batches(scenarios: Iterable[int], n: int, size: int) -> Iterator[list[int]]:
         yield list(itertools.islice(source, (k + 1) * n // count - k * n // count))
 
 
-def run_sweep(job: Job, scenarios: Iterable[int], executor, *, count: int | None = None,
-              batch_size_n: int | None = None, scenario_timeout_s: float | None = None,
-              on_row: Callable[[dict], None] | None = None, rows: list[dict] | None = None,
-              planned: int | None = None) -> SweepRun:
+def run_sweep(
+    job: Job,
+    scenarios: Iterable[int],
+    executor,
+    *,
+    count: int | None = None,
+    batch_size_n: int | None = None,
+    scenario_timeout_s: float | None = None,
+    on_row: Callable[[dict], None] | None = None,
+    rows: list[dict] | None = None,
+    planned: int | None = None,
+) -> SweepRun:
     """Run the scenarios (count of them: len(scenarios) when not given); on_row is told each finished
     one. rows: those already finished (a resumed sweep); planned: how many the whole sweep has. The
     caller closes the executor (it may run more); an interrupted sweep closes it at once."""
@@ -66,4 +74,6 @@ def run_sweep(job: Job, scenarios: Iterable[int], executor, *, count: int | None
         stopped_by = err
         executor.close()  # stop the workers now; the scenarios that finished are kept
     rows.sort(key=lambda r: r["scenario"])
-    return SweepRun(rows, count if planned is None else planned, time.perf_counter() - t0, stopped_by)
+    return SweepRun(
+        rows, count if planned is None else planned, time.perf_counter() - t0, stopped_by
+    )

@@ -14,8 +14,13 @@ from twin.model.sink import Sink
 from twin.tasks import pick_place, pick_place_vision, seed000, seed001, seed002
 
 TaskFn = Callable[..., None]
-TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run, "seed000": seed000.run, "seed001": seed001.run,
-                             "seed002": seed002.run, "pick_place_vision": pick_place_vision.run}
+TASKS: dict[str, TaskFn] = {
+    "pick_place": pick_place.run,
+    "seed000": seed000.run,
+    "seed001": seed001.run,
+    "seed002": seed002.run,
+    "pick_place_vision": pick_place_vision.run,
+}
 
 
 def resolve(name_or_path: str) -> TaskFn:
@@ -24,7 +29,9 @@ def resolve(name_or_path: str) -> TaskFn:
         return TASKS[name_or_path]
     path = Path(name_or_path)
     if path.suffix != ".py":
-        raise ConfigError(f"unknown task {name_or_path!r}; expected one of {', '.join(TASKS)} or a .py file")
+        raise ConfigError(
+            f"unknown task {name_or_path!r}; expected one of {', '.join(TASKS)} or a .py file"
+        )
     if not path.is_file():
         raise ConfigError(f"task file {name_or_path!r} does not exist")
     spec = importlib.util.spec_from_file_location(f"twin_user_task_{path.stem}", path)
@@ -34,7 +41,9 @@ def resolve(name_or_path: str) -> TaskFn:
         spec.loader.exec_module(module)
     except Exception as err:  # a user's file: report, do not crash
         sys.modules.pop(spec.name, None)
-        raise ConfigError(f"task file {name_or_path!r} failed to import: {type(err).__name__}: {err}") from err
+        raise ConfigError(
+            f"task file {name_or_path!r} failed to import: {type(err).__name__}: {err}"
+        ) from err
     fn = getattr(module, "run", None)
     if not callable(fn):
         raise ConfigError(f"task file {name_or_path!r} has no function run(twin, **params)")
@@ -54,8 +63,11 @@ def task_params(fn: TaskFn) -> dict[str, inspect.Parameter] | None:
     sig = inspect.signature(fn)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return None
-    return {name: p for name, p in list(sig.parameters.items())[1:]
-            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    return {
+        name: p
+        for name, p in list(sig.parameters.items())[1:]
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    }
 
 
 def check_params(fn: TaskFn, params: dict, task: str) -> dict:
@@ -66,7 +78,9 @@ def check_params(fn: TaskFn, params: dict, task: str) -> dict:
         for name in params:
             if name not in known:
                 takes = ", ".join(known) or "none"
-                raise ConfigError(f"task {task!r} takes no parameter {name!r}; its parameters: {takes}")
+                raise ConfigError(
+                    f"task {task!r} takes no parameter {name!r}; its parameters: {takes}"
+                )
     return dict(params)
 
 
@@ -122,5 +136,7 @@ class TimeLimit(Sink):
 
     def on_frame(self, frame) -> None:
         if frame.t_ns > self._limit_ns:
-            raise TaskTimeout(f"task ran past --timeout {self.limit_s:g} s of simulated time "
-                              f"(stopped at t = {frame.t_ns * 1e-9:.3f} s)")
+            raise TaskTimeout(
+                f"task ran past --timeout {self.limit_s:g} s of simulated time "
+                f"(stopped at t = {frame.t_ns * 1e-9:.3f} s)"
+            )

@@ -27,13 +27,22 @@ def perturbed(rec: Recording) -> Recording:
     engine = rec.config.engine
     gx, gy, gz = engine.gravity_m_s2
     nudged = (gx, gy, math.nextafter(gz, -math.inf if gz <= 0 else math.inf))
-    config = dataclasses.replace(rec.config, engine=dataclasses.replace(engine, gravity_m_s2=nudged))
+    config = dataclasses.replace(
+        rec.config, engine=dataclasses.replace(engine, gravity_m_s2=nudged)
+    )
     return dataclasses.replace(rec, config=config)
 
 
-def judge(golden: Recording, candidate: Recording, tolerances: Tolerances, remake: Callable[[Recording], Recording],
-          *, source: Recording | None = None, event_kinds: frozenset[str] | None = None,
-          force: bool = False) -> DiffResult:
+def judge(
+    golden: Recording,
+    candidate: Recording,
+    tolerances: Tolerances,
+    remake: Callable[[Recording], Recording],
+    *,
+    source: Recording | None = None,
+    event_kinds: frozenset[str] | None = None,
+    force: bool = False,
+) -> DiffResult:
     """compare(golden, candidate), against the noise floor of the candidate's inputs when the tolerances ask.
 
     remake(recording) re-runs a recording (its task, or its commands). source: the recording the candidate
@@ -43,17 +52,27 @@ def judge(golden: Recording, candidate: Recording, tolerances: Tolerances, remak
     be measured (nothing to re-run), the verdict is the preset's own tolerances, with a note saying so.
     """
     if tolerances.noise_margin is None:
-        return _where(compare(golden, candidate, tolerances, event_kinds=event_kinds, force=force), golden, candidate)
+        return _where(
+            compare(golden, candidate, tolerances, event_kinds=event_kinds, force=force),
+            golden,
+            candidate,
+        )
     refuse_incomparable(golden, candidate, force)  # before the floor runs, not after
     floor, note = None, ""
     try:
         base = candidate if source is not None else remake(candidate)
         nudged = remake(perturbed(source or candidate))
-        floor = measure(base, nudged, error_series(base, nudged), PERTURBATION, tolerances.noise_margin)
+        floor = measure(
+            base, nudged, error_series(base, nudged), PERTURBATION, tolerances.noise_margin
+        )
     except TwinError as err:
-        note = (f"the noise floor could not be measured ({err}); judged by the {tolerances.preset} preset's "
-                "tolerances alone")
-    result = compare(golden, candidate, tolerances, event_kinds=event_kinds, force=force, floor=floor)
+        note = (
+            f"the noise floor could not be measured ({err}); judged by the {tolerances.preset} preset's "
+            "tolerances alone"
+        )
+    result = compare(
+        golden, candidate, tolerances, event_kinds=event_kinds, force=force, floor=floor
+    )
     if note:
         result.notes.append(note)
     return _where(result, golden, candidate)

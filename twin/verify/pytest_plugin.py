@@ -35,9 +35,17 @@ class GoldenChecker:
     def path(self, name: str) -> Path:
         return self.directory / f"{name}.mcap"
 
-    def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = DEFAULT,
-              tol: Sequence[str] = (), event_window_steps: int | None = None,
-              event_kinds: frozenset[str] | None = None, allow_error: bool = False) -> DiffResult:
+    def check(
+        self,
+        run: Recording | str | os.PathLike,
+        name: str,
+        *,
+        tolerance: str = DEFAULT,
+        tol: Sequence[str] = (),
+        event_window_steps: int | None = None,
+        event_kinds: frozenset[str] | None = None,
+        allow_error: bool = False,
+    ) -> DiffResult:
         """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff. Under
         the default `noise` preset the run is made once more with its math perturbed (its task re-run, or its
         commands replayed) to measure its noise floor."""
@@ -47,7 +55,11 @@ class GoldenChecker:
         from twin.verify.replay import save
 
         candidate = run if isinstance(run, Recording) else load(run)
-        tolerances = Tolerances.from_preset(tolerance).with_overrides(list(tol)).with_event_window(event_window_steps)
+        tolerances = (
+            Tolerances.from_preset(tolerance)
+            .with_overrides(list(tol))
+            .with_event_window(event_window_steps)
+        )
         golden_path = self.path(name)
         obtained = golden_path.with_name(f"{name}.obtained.mcap")
         report = golden_path.with_name(f"{name}.report.md")
@@ -55,12 +67,17 @@ class GoldenChecker:
         if not golden_path.exists():
             # a golden is never made from a failed run unless asked (allow_error)
             if failed is not None:
-                pytest.fail(f"golden {str(golden_path)!r} does not exist, and this run cannot become it: {failed} "
-                            "(pass allow_error=True to keep a failing run as the golden)", pytrace=False)
+                pytest.fail(
+                    f"golden {str(golden_path)!r} does not exist, and this run cannot become it: {failed} "
+                    "(pass allow_error=True to keep a failing run as the golden)",
+                    pytrace=False,
+                )
             golden_path.parent.mkdir(parents=True, exist_ok=True)
             save(candidate, golden_path)
-            pytest.fail(f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
-                        pytrace=False)
+            pytest.fail(
+                f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
+                pytrace=False,
+            )
         golden = load(golden_path)
         result = judge(golden, candidate, tolerances, remade, event_kinds=event_kinds)
         if result.match:
@@ -74,18 +91,32 @@ class GoldenChecker:
             return result
         save(candidate, obtained)
         write_report(result, report)
-        hint = ("if the change is intended, rerun with --update-goldens: it rewrites the golden with this run"
-                if failed is None else f"this run cannot become the golden: {failed}; pass allow_error=True to "
-                "accept a failing run")
-        pytest.fail(f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
-                    f"{report.name}; {hint})\n{render_text(result)}", pytrace=False)
+        hint = (
+            "if the change is intended, rerun with --update-goldens: it rewrites the golden with this run"
+            if failed is None
+            else f"this run cannot become the golden: {failed}; pass allow_error=True to "
+            "accept a failing run"
+        )
+        pytest.fail(
+            f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
+            f"{report.name}; {hint})\n{render_text(result)}",
+            pytrace=False,
+        )
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("twin", "twin golden recordings")
-    group.addoption("--update-goldens", action="store_true", default=False,
-                    help="rewrite golden recordings that differ from the run (twin's `golden` fixture)")
-    parser.addini("twin_goldens_dir", "folder of golden recordings for the `golden` fixture", default="recordings")
+    group.addoption(
+        "--update-goldens",
+        action="store_true",
+        default=False,
+        help="rewrite golden recordings that differ from the run (twin's `golden` fixture)",
+    )
+    parser.addini(
+        "twin_goldens_dir",
+        "folder of golden recordings for the `golden` fixture",
+        default="recordings",
+    )
 
 
 @pytest.fixture

@@ -50,6 +50,7 @@ KEYS = "d*3 k g i wait"
 
 # -- running a reader in its own process -----------------------------------------------------------
 
+
 class Run:
     def __init__(self, code: int, out: str, err: str, rss_mb: float, seconds: float) -> None:
         self.code, self.out, self.err, self.rss_mb, self.seconds = code, out, err, rss_mb, seconds
@@ -97,8 +98,13 @@ def run_forked(argv: list[str], cwd: Path, timeout_s: float = TIMEOUT_S) -> Run:
             sys.stderr.flush()
             os._exit(code if isinstance(code, int) else 98)
     code, usage = _wait(pid, timeout_s)
-    return Run(code, out_path.read_text(errors="replace"), err_path.read_text(errors="replace"),
-               usage.ru_maxrss / 1024 - base_mb, time.monotonic() - t0)
+    return Run(
+        code,
+        out_path.read_text(errors="replace"),
+        err_path.read_text(errors="replace"),
+        usage.ru_maxrss / 1024 - base_mb,
+        time.monotonic() - t0,
+    )
 
 
 def _rss_mb() -> float:
@@ -127,10 +133,22 @@ def run_binary(argv: list[str], cwd: Path, timeout_s: float = TIMEOUT_S) -> Run:
     assert exe.is_file(), exe
     t0 = time.monotonic()
     with open(cwd / ".out", "w") as out, open(cwd / ".err", "w") as err:
-        proc = subprocess.run([sys.executable, "-c", _LAUNCHER, str(cwd / ".rss"), str(AS_LIMIT), str(exe), *argv],
-                              cwd=cwd, stdout=out, stderr=err, stdin=subprocess.DEVNULL, timeout=timeout_s, check=False)
-    return Run(proc.returncode, (cwd / ".out").read_text(errors="replace"), (cwd / ".err").read_text(errors="replace"),
-               int((cwd / ".rss").read_text()) / 1024, time.monotonic() - t0)
+        proc = subprocess.run(
+            [sys.executable, "-c", _LAUNCHER, str(cwd / ".rss"), str(AS_LIMIT), str(exe), *argv],
+            cwd=cwd,
+            stdout=out,
+            stderr=err,
+            stdin=subprocess.DEVNULL,
+            timeout=timeout_s,
+            check=False,
+        )
+    return Run(
+        proc.returncode,
+        (cwd / ".out").read_text(errors="replace"),
+        (cwd / ".err").read_text(errors="replace"),
+        int((cwd / ".rss").read_text()) / 1024,
+        time.monotonic() - t0,
+    )
 
 
 def reader_argv(reader: str, path: Path, good: Path, out_dir: Path) -> list[str]:
@@ -149,25 +167,41 @@ READERS = ("info", "recover", "diff", "replay", "check", "view")
 
 # -- the corpus ------------------------------------------------------------------------------------
 
+
 def _read(path: Path) -> dict:
     """Everything in an MCAP file, through mcap's own reader."""
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
-        messages = [(channel.topic, message) for _, channel, message in reader.iter_messages(log_time_order=False)]
+        messages = [
+            (channel.topic, message)
+            for _, channel, message in reader.iter_messages(log_time_order=False)
+        ]
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-    return {"schemas": summary.schemas, "channels": summary.channels, "messages": messages, "metadata": metadata}
+    return {
+        "schemas": summary.schemas,
+        "channels": summary.channels,
+        "messages": messages,
+        "metadata": metadata,
+    }
 
 
-def rewrite(content: dict, out: Path, *, metadata: dict | None = None, edit=None, raw_chunk: bytes = b"") -> Path:
+def rewrite(
+    content: dict, out: Path, *, metadata: dict | None = None, edit=None, raw_chunk: bytes = b""
+) -> Path:
     """A copy of a recording with its metadata replaced and messages edited (edit(topic, data) -> data)
     by mcap's Writer; raw_chunk is written as is before the messages."""
     with open(out, "wb") as f:
         w = Writer(f, compression=CompressionType.ZSTD)
         w.start(profile="", library=S.LIBRARY)
-        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in content["schemas"].items()}
-        channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id])
-                       for cid, c in content["channels"].items()}
+        schema_ids = {
+            sid: w.register_schema(s.name, s.encoding, s.data)
+            for sid, s in content["schemas"].items()
+        }
+        channel_ids = {
+            cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id])
+            for cid, c in content["channels"].items()
+        }
         for name, record in (metadata if metadata is not None else content["metadata"]).items():
             w.add_metadata(name, record)
         f.write(raw_chunk)
@@ -182,13 +216,20 @@ def _record(opcode: int, body: bytes) -> bytes:
     return struct.pack("<BQ", opcode, len(body)) + body
 
 
-def chunk_record(records: bytes | None, *, compression: str, declared: int, compressed: bytes | None = None) -> bytes:
+def chunk_record(
+    records: bytes | None, *, compression: str, declared: int, compressed: bytes | None = None
+) -> bytes:
     """An MCAP chunk record holding `records` (or an already compressed stream) with a declared size."""
     data = compressed if compressed is not None else records
     crc = 0 if compressed is not None else zlib.crc32(records)
     name = compression.encode()
-    body = (struct.pack("<QQQI", 0, 0, declared, crc) + struct.pack("<I", len(name)) + name
-            + struct.pack("<Q", len(data)) + data)
+    body = (
+        struct.pack("<QQQI", 0, 0, declared, crc)
+        + struct.pack("<I", len(name))
+        + name
+        + struct.pack("<Q", len(data))
+        + data
+    )
     return _record(0x06, body)
 
 
@@ -213,7 +254,11 @@ def config_leaves(value, path: tuple = ()):
     if isinstance(value, dict):
         for k, v in value.items():
             yield from config_leaves(v, (*path, k))
-    elif isinstance(value, list) and value and not all(isinstance(v, (int, float, str)) for v in value):
+    elif (
+        isinstance(value, list)
+        and value
+        and not all(isinstance(v, (int, float, str)) for v in value)
+    ):
         for i, v in enumerate(value):
             yield from config_leaves(v, (*path, i))
     else:
@@ -286,7 +331,10 @@ def corpus(good, tmp_path_factory) -> dict[str, tuple[Path, str]]:
         add(f"bitflip_{i}_at_{pos}", bytes(flipped), "any")
     # trailing zeros after a complete file, and zeros where its end should be (sparse: instant to
     # make)
-    for name, keep in (("trailing_zeros_200MB", len(raw)), ("zeros_over_the_end_200MB", int(len(raw) * 0.6))):
+    for name, keep in (
+        ("trailing_zeros_200MB", len(raw)),
+        ("zeros_over_the_end_200MB", int(len(raw) * 0.6)),
+    ):
         path = d / f"{name}.mcap"
         with open(path, "wb") as f:
             f.write(raw[:keep])
@@ -298,14 +346,28 @@ def corpus(good, tmp_path_factory) -> dict[str, tuple[Path, str]]:
     joints_id = next(cid for cid, c in content["channels"].items() if c.topic == S.JOINTS.topic)
     bomb = zstd_of_zeros(gib, _message_record(joints_id, gib))
     no_messages = {**content, "messages": []}
-    rewrite(no_messages, d / "zstd_bomb_1GiB.mcap",
-            raw_chunk=chunk_record(None, compression="zstd", declared=gib + 31, compressed=bomb))
-    rewrite(no_messages, d / "zstd_bomb_declared_small.mcap",
-            raw_chunk=chunk_record(None, compression="zstd", declared=4096, compressed=bomb))
+    rewrite(
+        no_messages,
+        d / "zstd_bomb_1GiB.mcap",
+        raw_chunk=chunk_record(None, compression="zstd", declared=gib + 31, compressed=bomb),
+    )
+    rewrite(
+        no_messages,
+        d / "zstd_bomb_declared_small.mcap",
+        raw_chunk=chunk_record(None, compression="zstd", declared=4096, compressed=bomb),
+    )
     # 28 MiB of one-byte messages in a chunk (under the chunk cap): ~900k records from a few KB
     tiny = b"".join(_message_record(joints_id, 1, i) + b"\x00" for i in range(4096))
-    rewrite(no_messages, d / "tiny_messages_flood.mcap", raw_chunk=chunk_record(
-        None, compression="zstd", declared=len(tiny) * 224, compressed=zstandard.ZstdCompressor().compress(tiny * 224)))
+    rewrite(
+        no_messages,
+        d / "tiny_messages_flood.mcap",
+        raw_chunk=chunk_record(
+            None,
+            compression="zstd",
+            declared=len(tiny) * 224,
+            compressed=zstandard.ZstdCompressor().compress(tiny * 224),
+        ),
+    )
     for name in ("zstd_bomb_1GiB", "zstd_bomb_declared_small", "tiny_messages_flood"):
         out[name] = (d / f"{name}.mcap", "damaged")
     # corrupted metadata values (the cases the fault campaign hit, and whole records)
@@ -318,34 +380,66 @@ def corpus(good, tmp_path_factory) -> dict[str, tuple[Path, str]]:
     config_case("config_dt_ns_infinity", json.dumps(with_leaf(config, ("dt_ns",), math.inf)))
     config_case("config_objects_1", json.dumps(with_leaf(config, ("objects",), [1])))
     config_case("config_link1_x", json.dumps(with_leaf(config, ("profile", "link1_m"), "x")))
-    config_case("config_mass_nan", json.dumps(with_leaf(config, ("objects", 0, "mass_kg"), math.nan)))
-    config_case("config_gravity_huge", json.dumps(with_leaf(config, ("engine", "gravity_m_s2"), [0, 0, 1e300])))
+    config_case(
+        "config_mass_nan", json.dumps(with_leaf(config, ("objects", 0, "mass_kg"), math.nan))
+    )
+    config_case(
+        "config_gravity_huge",
+        json.dumps(with_leaf(config, ("engine", "gravity_m_s2"), [0, 0, 1e300])),
+    )
     config_case("config_not_json", "{not json")
     config_case("config_deep", "[" * 100_000 + "]" * 100_000)
     config_case("config_profile_empty", json.dumps(with_leaf(config, ("profile",), {})))
-    config_case("config_keymap_bad", json.dumps(with_leaf(config, ("keymap",), {"a": [["jog", "elbow", math.nan]]})))
-    rewrite(content, d / "run_params_nan.mcap", metadata={**meta, S.META_RUN: {**meta[S.META_RUN], "params": "NaN"}})
-    rewrite(content, d / "run_source_bad.mcap", metadata={**meta, S.META_RUN: {**meta[S.META_RUN], "source": "x"}})
+    config_case(
+        "config_keymap_bad",
+        json.dumps(with_leaf(config, ("keymap",), {"a": [["jog", "elbow", math.nan]]})),
+    )
+    rewrite(
+        content,
+        d / "run_params_nan.mcap",
+        metadata={**meta, S.META_RUN: {**meta[S.META_RUN], "params": "NaN"}},
+    )
+    rewrite(
+        content,
+        d / "run_source_bad.mcap",
+        metadata={**meta, S.META_RUN: {**meta[S.META_RUN], "source": "x"}},
+    )
     out["run_params_nan"] = (d / "run_params_nan.mcap", "bad")
     out["run_source_bad"] = (d / "run_source_bad.mcap", "bad")
+
     # corrupted messages
     def message_case(name: str, topic: str, new: bytes) -> None:
         rewrite(content, d / f"{name}.mcap", edit=lambda t, data: new if t == topic else data)
         out[name] = (d / f"{name}.mcap", "messages")
 
     message_case("robot_description_empty", S.ROBOT_DESCRIPTION.topic, b"{}")
-    message_case("command_step_1e30", S.COMMANDS.topic, b'{"args":{"key":"d"},"kind":"key","step":1' + b"0" * 30 + b"}")
-    message_case("command_nan", S.COMMANDS.topic,
-                 b'{"args":{"joint":"MTB_axis1","q":NaN},"kind":"joint_target","step":0}')
+    message_case(
+        "command_step_1e30",
+        S.COMMANDS.topic,
+        b'{"args":{"key":"d"},"kind":"key","step":1' + b"0" * 30 + b"}",
+    )
+    message_case(
+        "command_nan",
+        S.COMMANDS.topic,
+        b'{"args":{"joint":"MTB_axis1","q":NaN},"kind":"joint_target","step":0}',
+    )
     message_case("command_not_object", S.COMMANDS.topic, b"[1]")
-    rewrite(content, d / "block_zero_bytes.mcap",
-            edit=lambda t, data: bytes(len(data)) if t == S.JOINTS.topic else data)
+    rewrite(
+        content,
+        d / "block_zero_bytes.mcap",
+        edit=lambda t, data: bytes(len(data)) if t == S.JOINTS.topic else data,
+    )
     out["block_zero_bytes"] = (d / "block_zero_bytes.mcap", "bad")
     # a valid MCAP file that twin did not write
     with open(d / "foreign.mcap", "wb") as f:
         w = Writer(f)
         w.start(profile="x", library="someone else")
-        w.add_message(w.register_channel("/x", "json", w.register_schema("s", "jsonschema", b"{}")), 0, b"{}", 0)
+        w.add_message(
+            w.register_channel("/x", "json", w.register_schema("s", "jsonschema", b"{}")),
+            0,
+            b"{}",
+            0,
+        )
         w.finish()
     out["foreign_mcap"] = (d / "foreign.mcap", "messages")
     return out
@@ -368,7 +462,9 @@ def _assert_clean(run: Run, expected: set[int], what: str) -> None:
         assert len(lines) == 1, f"{what}: {run!r}"
         # check reports each golden in its table, progress on stderr
         if not lines[0].startswith("twin: error: "):
-            assert what.startswith("check ") and ": error" in lines[0] and "error" in run.out, f"{what}: {run!r}"
+            assert what.startswith("check ") and ": error" in lines[0] and "error" in run.out, (
+                f"{what}: {run!r}"
+            )
 
 
 @pytest.mark.parametrize("reader", READERS)
@@ -384,14 +480,23 @@ def test_every_reader_gives_one_line_and_exit_2_on_the_corpus(corpus, good, tmp_
 
 def test_the_worst_cases_through_the_twin_executable(corpus, good, tmp_path):
     """A fresh `twin` process each: peak memory and time of the bomb, the zeros, a FIFO, a bad config."""
-    for name in ("zstd_bomb_1GiB", "zstd_bomb_declared_small", "tiny_messages_flood", "trailing_zeros_200MB",
-                 "zeros_over_the_end_200MB", "fifo", "config_dt_ns_infinity"):
+    for name in (
+        "zstd_bomb_1GiB",
+        "zstd_bomb_declared_small",
+        "tiny_messages_flood",
+        "trailing_zeros_200MB",
+        "zeros_over_the_end_200MB",
+        "fifo",
+        "config_dt_ns_infinity",
+    ):
         path, kind = corpus[name]
         for reader in ("info", "replay"):
             run = run_binary(reader_argv(reader, path, good, tmp_path), tmp_path)
             _assert_clean(run, _expected_codes(kind, reader), f"{reader} {name} (executable)")
             size = path.stat().st_size if path.is_file() else 0
-            print(f"twin {reader} {name} ({size:,} bytes): {run.rss_mb:.0f} MB peak, {run.seconds:.2f} s")
+            print(
+                f"twin {reader} {name} ({size:,} bytes): {run.rss_mb:.0f} MB peak, {run.seconds:.2f} s"
+            )
 
 
 def test_load_names_every_corrupted_config_field(good, tmp_path):
@@ -413,8 +518,11 @@ def test_load_names_every_corrupted_config_field(good, tmp_path):
             bads += [[math.nan] * len(old), old[:-1]]
         for bad in bads:
             text = json.dumps(with_leaf(config, path, bad))
-            target = rewrite(content, tmp_path / "c.mcap",
-                             metadata={**content["metadata"], S.META_CONFIG: {"json": text}})
+            target = rewrite(
+                content,
+                tmp_path / "c.mcap",
+                metadata={**content["metadata"], S.META_CONFIG: {"json": text}},
+            )
             with pytest.raises(RecordingError) as err:
                 twin.load(target)
             message = str(err.value)
@@ -436,14 +544,19 @@ def test_nan_in_event_data_is_written_as_null(tmp_path):
     from twin.sim.twin import Twin
 
     path = tmp_path / "nan.mcap"
-    with open_recorders(TwinConfig(), {"source": "task", "task": "x", "params": {}}, mcap_path=path) as sinks:
+    with open_recorders(
+        TwinConfig(), {"source": "task", "task": "x", "params": {}}, mcap_path=path
+    ) as sinks:
         t = Twin(TwinConfig(), sinks=sinks)
         t.event("probe", error_m=math.nan, pose=[1.0, math.inf], ok=1.5)
         t.step(1)
         t.close()
     content = _read(path)
-    (event,) = [json.loads(m.data, parse_constant=pytest.fail) for topic, m in content["messages"]
-                if topic == S.EVENTS.topic and b"probe" in m.data]
+    (event,) = [
+        json.loads(m.data, parse_constant=pytest.fail)
+        for topic, m in content["messages"]
+        if topic == S.EVENTS.topic and b"probe" in m.data
+    ]
     assert event["data"] == {"error_m": None, "ok": 1.5, "pose": [1.0, None]}
     assert twin.load(path).events[-1].data == {"error_m": None, "ok": 1.5, "pose": [1.0, None]}
 
@@ -455,6 +568,7 @@ def test_nan_in_event_data_is_written_as_null(tmp_path):
 # traceback (exit 1) from each, and 1.14-1.17 GB for the 9000x9000 PNG (decoded in full: 243 MB of
 # pixels in a 430 KB file). `twin export` on these and more: tests/export/test_export_bad_inputs.py.
 
+
 def _black_png(width: int, height: int, *, pixels: bool = True) -> bytes:
     """An 8-bit RGB PNG of black pixels, compressed row by row; pixels=False: the header and one row only."""
     c = zlib.compressobj(1)
@@ -462,7 +576,9 @@ def _black_png(width: int, height: int, *, pixels: bool = True) -> bytes:
     idat = b"".join([c.compress(row) for _ in range(height if pixels else 1)] + [c.flush()])
 
     def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
 
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
@@ -492,22 +608,35 @@ def bad_picture_runs(camera_run, tmp_path_factory) -> dict[str, Path]:
 
         return edit
 
-    payloads = {"garbage": b"not a picture " * 20, "png_20000x20000": _black_png(20000, 20000, pixels=False),
-                "png_9000x9000": _black_png(9000, 9000)}
-    return {name: rewrite(content, folder / f"{name}.mcap", edit=third_picture(payload))
-            for name, payload in payloads.items()}
+    payloads = {
+        "garbage": b"not a picture " * 20,
+        "png_20000x20000": _black_png(20000, 20000, pixels=False),
+        "png_9000x9000": _black_png(9000, 9000),
+    }
+    return {
+        name: rewrite(content, folder / f"{name}.mcap", edit=third_picture(payload))
+        for name, payload in payloads.items()
+    }
 
 
 @pytest.mark.parametrize("name", ["garbage", "png_20000x20000", "png_9000x9000"])
 @pytest.mark.parametrize("reader", ["diff", "replay", "check"])
-def test_a_bad_camera_picture_is_one_line_exit_2(bad_picture_runs, camera_run, tmp_path, reader, name):
+def test_a_bad_camera_picture_is_one_line_exit_2(
+    bad_picture_runs, camera_run, tmp_path, reader, name
+):
     path = bad_picture_runs[name]
-    argv = {"diff": ["diff", str(path), str(camera_run["mcap"])], "replay": ["replay", str(path)],
-            "check": ["check", str(path)]}[reader]
+    argv = {
+        "diff": ["diff", str(path), str(camera_run["mcap"])],
+        "replay": ["replay", str(path)],
+        "check": ["check", str(path)],
+    }[reader]
     run = run_forked(argv, tmp_path)
     _assert_clean(run, {2}, f"{reader} {name}")
     said = run.err + run.out
-    assert "camera 'overhead' picture at step 32 " in said and "expected a PNG picture of 320x240 px" in said, run
+    assert (
+        "camera 'overhead' picture at step 32 " in said
+        and "expected a PNG picture of 320x240 px" in said
+    ), run
     print(f"{reader} {name}: {run.code} {run.rss_mb:.0f} MB {run.seconds:.2f} s")
 
 
@@ -531,16 +660,27 @@ def test_a_bad_camera_picture_is_one_line_exit_2(bad_picture_runs, camera_run, t
 # messages.
 
 FLOOD_TIMEOUT_S = 10.0
-_FLOOD_RECORD = [("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"), ("log_time", "<u8"),
-                 ("publish_time", "<u8")]  # a message record with no data: 31 bytes
+_FLOOD_RECORD = [
+    ("op", "u1"),
+    ("length", "<u8"),
+    ("channel", "<u2"),
+    ("sequence", "<u4"),
+    ("log_time", "<u8"),
+    ("publish_time", "<u8"),
+]  # a message record with no data: 31 bytes
 
 
 def _channel_record(channel_id: int, schema_id: int, topic: str, encoding: str) -> bytes:
     def text(s: str) -> bytes:
         return struct.pack("<I", len(s.encode())) + s.encode()
 
-    return _record(0x04, struct.pack("<HH", channel_id, schema_id) + text(topic) + text(encoding)
-                   + struct.pack("<I", 0))
+    return _record(
+        0x04,
+        struct.pack("<HH", channel_id, schema_id)
+        + text(topic)
+        + text(encoding)
+        + struct.pack("<I", 0),
+    )
 
 
 def _flood_chunk(channel: bytes, channel_id: int, n: int, *, timed: bool, first: int = 0) -> bytes:
@@ -555,8 +695,12 @@ def _flood_chunk(channel: bytes, channel_id: int, n: int, *, timed: bool, first:
         records["log_time"] = np.arange(first, first + n) * 4_166_667
         records["publish_time"] = np.random.default_rng(first).integers(0, 2**62, n)
     raw = channel + records.tobytes()
-    return chunk_record(None, compression="zstd", declared=len(raw),
-                        compressed=zstandard.ZstdCompressor(level=1).compress(raw))
+    return chunk_record(
+        None,
+        compression="zstd",
+        declared=len(raw),
+        compressed=zstandard.ZstdCompressor(level=1).compress(raw),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -565,34 +709,48 @@ def floods(good, tmp_path_factory) -> dict[str, tuple[Path, int]]:
     messages written before its own (rewrite's Writer numbers schemas and channels 1, 2, ... in order)."""
     folder = tmp_path_factory.mktemp("floods")
     content = _read(good)
-    ids = {c.topic: (i, list(content["schemas"]).index(c.schema_id) + 1)
-           for i, c in enumerate(content["channels"].values(), 1)}
+    ids = {
+        c.topic: (i, list(content["schemas"]).index(c.schema_id) + 1)
+        for i, c in enumerate(content["channels"].values(), 1)
+    }
     out = {}
     for name, topic, encoding, chunks, per_chunk, timed, code in (
-            ("empty_44M_tf", S.TF.topic, "protobuf", 44, 1 << 20, False, 2),
-            ("empty_44M_events", S.EVENTS.topic, "json", 44, 1 << 20, False, 2),
-            ("empty_44M_foreign", "/x", "json", 44, 1 << 20, False, 2),
-            ("empty_3M_tf_timed", S.TF.topic, "protobuf", 3, 1 << 20, True, 0)):
+        ("empty_44M_tf", S.TF.topic, "protobuf", 44, 1 << 20, False, 2),
+        ("empty_44M_events", S.EVENTS.topic, "json", 44, 1 << 20, False, 2),
+        ("empty_44M_foreign", "/x", "json", 44, 1 << 20, False, 2),
+        ("empty_3M_tf_timed", S.TF.topic, "protobuf", 3, 1 << 20, True, 0),
+    ):
         channel_id, schema_id = ids.get(topic, (len(ids) + 1, 0))  # /x: a new channel, no schema
         channel = _channel_record(channel_id, schema_id, topic, encoding)
-        flood = (b"".join(_flood_chunk(channel, channel_id, per_chunk, timed=True, first=i * per_chunk)
-                          for i in range(chunks)) if timed
-                 # the same chunk again
-                 else _flood_chunk(channel, channel_id, per_chunk, timed=False) * chunks)
+        flood = (
+            b"".join(
+                _flood_chunk(channel, channel_id, per_chunk, timed=True, first=i * per_chunk)
+                for i in range(chunks)
+            )
+            if timed
+            # the same chunk again
+            else _flood_chunk(channel, channel_id, per_chunk, timed=False) * chunks
+        )
         path = rewrite(content, folder / f"{name}.mcap", raw_chunk=flood)
         out[name] = (path, code)
     return out
 
 
-@pytest.mark.parametrize("name", ["empty_44M_tf", "empty_44M_events", "empty_44M_foreign", "empty_3M_tf_timed"])
+@pytest.mark.parametrize(
+    "name", ["empty_44M_tf", "empty_44M_events", "empty_44M_foreign", "empty_3M_tf_timed"]
+)
 @pytest.mark.parametrize("reader", ["info", "check"])
-def test_a_flood_of_empty_messages_costs_bounded_memory_and_time(floods, good, tmp_path, reader, name):
+def test_a_flood_of_empty_messages_costs_bounded_memory_and_time(
+    floods, good, tmp_path, reader, name
+):
     path, code = floods[name]
     run = run_binary(reader_argv(reader, path, good, tmp_path), tmp_path, timeout_s=60)
     _assert_clean(run, {code}, f"{reader} {name} (executable)")
     assert run.seconds < FLOOD_TIMEOUT_S, run
-    print(f"twin {reader} {name} ({path.stat().st_size:,} bytes): exit {run.code}, {run.rss_mb:.0f} MB peak, "
-          f"{run.seconds:.2f} s")
+    print(
+        f"twin {reader} {name} ({path.stat().st_size:,} bytes): exit {run.code}, {run.rss_mb:.0f} MB peak, "
+        f"{run.seconds:.2f} s"
+    )
 
 
 def test_a_message_on_a_channel_never_registered_is_refused_at_once(good, tmp_path):
@@ -603,5 +761,8 @@ def test_a_message_on_a_channel_never_registered_is_refused_at_once(good, tmp_pa
     for reader in ("info", "check"):
         run = run_forked(reader_argv(reader, path, good, tmp_path), tmp_path)
         _assert_clean(run, {2}, f"{reader} unregistered")
-        assert "a message on channel 999, which no channel record before it registers" in run.err + run.out, run
+        assert (
+            "a message on channel 999, which no channel record before it registers"
+            in run.err + run.out
+        ), run
         assert run.seconds < FLOOD_TIMEOUT_S, run

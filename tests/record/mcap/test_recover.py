@@ -52,8 +52,12 @@ def test_a_killed_run_is_recovered_but_for_at_most_the_last_second(tmp_path, cap
     task = tmp_path / "loop.py"
     task.write_text(LOOP_TASK)
     broken = tmp_path / "killed.mcap"
-    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "run", str(task), "--record", str(broken)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", "run", str(task), "--record", str(broken)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     reported_s = 0.0
     try:
         for line in proc.stdout:
@@ -139,7 +143,7 @@ def test_a_damaged_chunk_is_reported_and_recovery_stops_before_it(complete, tmp_
     data = bytearray(path.read_bytes())
     middle = len(data) // 2
     # zero 64 bytes inside a chunk: its CRC or its compression fails
-    data[middle:middle + 64] = bytes(64)
+    data[middle : middle + 64] = bytes(64)
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
     with pytest.raises(twin.errors.RecordingError, match="damaged"):
@@ -159,8 +163,13 @@ def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_
     _, collector = complete
     config = TwinConfig()
     live = tmp_path / "live.mcap"
-    recorder = McapRecorder(live, config, {"source": "task", "task": "x", "params": {}},
-                            urdf=urdf_text(config.profile), rate=rate)
+    recorder = McapRecorder(
+        live,
+        config,
+        {"source": "task", "task": "x", "params": {}},
+        urdf=urdf_text(config.profile),
+        rate=rate,
+    )
     for frame in collector.frames:
         recorder.on_frame(frame)
         for event in [e for e in collector.events if e.step == frame.step]:
@@ -183,5 +192,7 @@ def test_recovering_a_run_that_left_no_file_says_so(tmp_path, capsys, monkeypatc
     monkeypatch.chdir(tmp_path)
     assert main(["recover", "runs/killed.mcap"]) == 2
     err = capsys.readouterr().err
-    assert err == ("twin: error: recording 'runs/killed.mcap' does not exist, nor does 'runs/killed.mcap.partial'; "
-                   "expected a recording or the .partial file a killed run left\n")
+    assert err == (
+        "twin: error: recording 'runs/killed.mcap' does not exist, nor does 'runs/killed.mcap.partial'; "
+        "expected a recording or the .partial file a killed run left\n"
+    )

@@ -45,11 +45,15 @@ def test_rrd_holds_every_picture_on_the_cameras_entity(camera_run, tmp_path, cap
         assert live == dict(zip(track.step.tolist(), track.data, strict=True))
     drawn = tmp_path / "drawn.rrd"
     assert main(["view", str(camera_run["mcap"]), "--rrd", str(drawn)]) == 0
-    assert _pictures(drawn, "/world/cameras/wrist") == _pictures(camera_run["rrd"], "/world/cameras/wrist")
+    assert _pictures(drawn, "/world/cameras/wrist") == _pictures(
+        camera_run["rrd"], "/world/cameras/wrist"
+    )
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not glob.glob("/usr/share/vulkan/icd.d/*.json"), reason="the headless viewer needs Vulkan")
+@pytest.mark.skipif(
+    not glob.glob("/usr/share/vulkan/icd.d/*.json"), reason="the headless viewer needs Vulkan"
+)
 def test_viewer_shows_the_pictures_beside_the_3d_view(camera_run, capsys):
     png = camera_run["mcap"].parent / "camera.png"
     # at the attach

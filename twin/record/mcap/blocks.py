@@ -52,7 +52,9 @@ class BlockEncoder:
             if dtype.base.itemsize != np.dtype(f.wire).itemsize:
                 raise ValueError(f"field {f.name}: its row values are not its {f.wire} wire values")
             const(tag(f.number, LEN) + varint(n * dtype.itemsize))
-            parts.append((frame_starts + np.arange(offset, offset + dtype.itemsize, dtype=np.intp)).ravel())
+            parts.append(
+                (frame_starts + np.arange(offset, offset + dtype.itemsize, dtype=np.intp)).ravel()
+            )
 
         for block in F.BLOCKS:
             step, t_ns, *rest = F.block_fields(block)

@@ -18,7 +18,9 @@ def _no_constant(name: str) -> None:
 def _finite(text: str) -> float:
     value = float(text)
     if not math.isfinite(value):
-        raise ValueError(f"{text[:40]} overflows a float: a number in it is not finite (NaN or infinity)")
+        raise ValueError(
+            f"{text[:40]} overflows a float: a number in it is not finite (NaN or infinity)"
+        )
     return value
 
 

@@ -32,10 +32,16 @@ class JointMotion:
     @staticmethod
     def from_urdf_joint(joint: UrdfJoint) -> JointMotion:
         if not joint.moving:
-            raise RecordingError(f"URDF joint {joint.name!r} is {joint.kind!r}; expected one of {MOVING_TYPES}")
+            raise RecordingError(
+                f"URDF joint {joint.name!r} is {joint.kind!r}; expected one of {MOVING_TYPES}"
+            )
         return JointMotion(
-            name=joint.name, joint_type=joint.kind, parent_frame=joint.parent, child_frame=joint.child,
-            origin_xyz=np.asarray(joint.xyz, dtype=np.float64), origin_quat=np.asarray(quat_from_rpy(*joint.rpy)),
+            name=joint.name,
+            joint_type=joint.kind,
+            parent_frame=joint.parent,
+            child_frame=joint.child,
+            origin_xyz=np.asarray(joint.xyz, dtype=np.float64),
+            origin_quat=np.asarray(quat_from_rpy(*joint.rpy)),
             axis=np.asarray(joint.axis, dtype=np.float64),
         )
 
@@ -44,9 +50,13 @@ class JointMotion:
         values = np.asarray(values, dtype=np.float64)
         n = values.shape[0]
         if self.joint_type == "prismatic":
-            translations = self.origin_xyz + values[:, None] * np.asarray(rotate(self.origin_quat, self.axis))
+            translations = self.origin_xyz + values[:, None] * np.asarray(
+                rotate(self.origin_quat, self.axis)
+            )
             quaternions = np.broadcast_to(self.origin_quat, (n, 4))
             return translations, quaternions
         half = 0.5 * values[:, None]
         about_axis = np.concatenate([np.sin(half) * self.axis, np.cos(half)], axis=1)
-        return np.broadcast_to(self.origin_xyz, (n, 3)), quat_mul_columns(self.origin_quat, about_axis)
+        return np.broadcast_to(self.origin_xyz, (n, 3)), quat_mul_columns(
+            self.origin_quat, about_axis
+        )

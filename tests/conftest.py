@@ -22,16 +22,17 @@ FIXTURES = TESTS / "fixtures"
 
 @pytest.fixture(scope="session")
 def pick_place_mcap(tmp_path_factory):
-    """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector of
-    what the twin sent beside it: (path, collector). Read it; copy it before changing it."""
+    """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector
+    of what the twin sent beside it: (path, collector). Read it; copy it before changing it."""
     path = tmp_path_factory.mktemp("pick_place_mcap") / "pick.mcap"
     return path, collect_pick_place(path)
 
 
 @pytest.fixture(scope="session")
 def pick_place_cli(tmp_path_factory):
-    """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own process:
-    {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing them."""
+    """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own
+    process: {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing
+    them."""
     tmp = tmp_path_factory.mktemp("pick_place_cli")
     mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
     # the rerun SDK may write its analytics config under HOME
@@ -62,6 +63,7 @@ def pick_place_cli(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def camera_run(tmp_path_factory):
-    """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (320x240,
-    15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before changing them."""
+    """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras
+    (320x240, 15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before
+    changing them."""
     return record_camera_run(tmp_path_factory.mktemp("camera_run"))

@@ -49,7 +49,8 @@ class BenchContext:
         object.__setattr__(self, "physics_step_us", 1e6 / self.physics_steps_per_s)
 
     def median_rate(self, run: Callable[[], int]) -> float:
-        """Median over `repeats` of count / wall seconds, where `run()` does the work and returns the count."""
+        """Median over `repeats` of count / wall seconds, where `run()` does the work and returns
+        the count."""
         samples = []
         for _ in range(self.repeats):
             t0 = time.perf_counter()
@@ -58,14 +59,16 @@ class BenchContext:
         return statistics.median(samples)
 
     def rate_figures(self, name: str, steps_per_s: float) -> None:
-        """NAME_steps_per_s and its ratios to both baselines (NAME_vs_idle, NAME_vs_motion) for --json."""
+        """NAME_steps_per_s and its ratios to both baselines (NAME_vs_idle, NAME_vs_motion) for
+        --json."""
         self.figures[f"{name}_steps_per_s"] = steps_per_s
         self.figures[f"{name}_vs_idle"] = steps_per_s / self.physics_steps_per_s
         if self.motion_physics_steps_per_s:
             self.figures[f"{name}_vs_motion"] = steps_per_s / self.motion_physics_steps_per_s
 
     def ratio(self, steps_per_s: float) -> str:
-        """A step rate with its ratios to both physics-only baselines, e.g. '31,250 (0.45x idle, 0.78x motion)'."""
+        """A step rate with its ratios to both physics-only baselines, e.g. '31,250 (0.45x idle,
+        0.78x motion)'."""
         text = f"{steps_per_s:,.0f} ({steps_per_s / self.physics_steps_per_s:.2f}x idle"
         if self.motion_physics_steps_per_s:
             text += f", {steps_per_s / self.motion_physics_steps_per_s:.2f}x same motion"
@@ -93,7 +96,8 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
 @functools.cache
 def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
-    targets it set and the holds it made and ended (from one twin run; read it, do not change it)."""
+    targets it set and the holds it made and ended (from one twin run; read it, do not change
+    it)."""
     from twin.sim.twin import Twin
     from twin.tasks import TASKS
     from twin.verify.collectors import FrameCollector

@@ -5,9 +5,9 @@ overhead and the wrist camera at 320x240; and a recorded pick_place run (MCAP) w
 camera at 15 Hz of simulated time, in steps per wall second and as a ratio to the physics-only
 baselines (`record_camera_vs_motion`: pictures drawn in the render process, as twin does;
 `record_camera_in_thread_vs_motion`: drawn in the stepping thread). A picture is rendered every 16
-steps at 240 Hz, so a camera run is bound by its pictures: the "render bound" row is the step rate of
-a renderer doing nothing else, from the picture cost alone.
-`python tools/bench_camera.py` runs it alone (with the baseline).
+steps at 240 Hz, so a camera run is bound by its pictures: the "render bound" row is the step rate
+of a renderer doing nothing else, from the picture cost alone. `python tools/bench_camera.py` runs
+it alone (with the baseline).
 """
 
 from __future__ import annotations
@@ -55,9 +55,9 @@ def picture_ms(name: str) -> tuple[float, float]:
 
 
 def recorded_camera_run(folder: Path, *, background: bool = True) -> tuple[float, int]:
-    """(steps/s, pictures) of pick_place recorded to MCAP with the overhead camera, twin built to files
-    finalized excluded: stepping only, as the physics baselines are timed. background False: the
-    pictures drawn in the stepping thread (Twin(camera_background=False))."""
+    """(steps/s, pictures) of pick_place recorded to MCAP with the overhead camera, twin built to
+    files finalized excluded: stepping only, as the physics baselines are timed. background False:
+    the pictures drawn in the stepping thread (Twin(camera_background=False))."""
     config = TwinConfig(cameras=(camera("overhead"),))
     with open_recorders(config, RUN, mcap_path=folder / "camera.mcap") as sinks:
         twin = Twin(config, sinks=sinks, camera_background=background)

@@ -61,7 +61,8 @@ _REPLAY_AND_REPORT_RSS = (
 
 
 def replay_in_child(path: Path) -> tuple[float, float]:
-    """`twin replay PATH` in a fresh process: (wall seconds, that process's peak resident memory in MB)."""
+    """`twin replay PATH` in a fresh process: (wall seconds, that process's peak resident memory in
+    MB)."""
     t0 = time.perf_counter()
     done = subprocess.run(
         [sys.executable, "-c", _REPLAY_AND_REPORT_RSS, str(path)],

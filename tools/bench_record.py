@@ -11,10 +11,11 @@ Each run is timed twice over: its stepping (first Frame to last, what the physic
 times too: `record_*_vs_motion`) and the whole run (recorders started, twin built, stepping, files
 finalized: `record_*_run_vs_motion`), with the start and finish costs on their own rows. The modes
 take turns, repeat by repeat, so a machine that slows down slows them all; and each repeat first
-takes its own sample of the same motion's physics-only baseline (bench.pick_place_physics_steps_per_s),
-so a `record_*_vs_motion` ratio is the median of each repeat's rate over the baseline measured beside
-it. (On this shared machine the baseline alone moved from 34k to 56k steps/s within one minute: a
-ratio to a baseline taken a minute earlier measured the machine as much as the recorder.)
+takes its own sample of the same motion's physics-only baseline
+(bench.pick_place_physics_steps_per_s), so a `record_*_vs_motion` ratio is the median of each
+repeat's rate over the baseline measured beside it. (On this shared machine the baseline alone moved
+from 34k to 56k steps/s within one minute: a ratio to a baseline taken a minute earlier measured the
+machine as much as the recorder.)
 """
 
 from __future__ import annotations
@@ -252,8 +253,8 @@ def bench(ctx) -> list[tuple[str, str]]:
         )
 
         def paired(name: str, rates_by_repeat: list[float]) -> None:
-            """NAME_steps_per_s, NAME_vs_idle (to the run's idle baseline) and NAME_vs_motion (the median
-            of the repeats' ratios to the baseline taken beside them) for --json."""
+            """NAME_steps_per_s, NAME_vs_idle (to the run's idle baseline) and NAME_vs_motion (the
+            median of the repeats' ratios to the baseline taken beside them) for --json."""
             ctx.rate_figures(name, statistics.median(rates_by_repeat))
             ctx.figures[f"{name}_vs_motion"] = statistics.median(
                 r / m for r, m in zip(rates_by_repeat, motion, strict=True)

@@ -1,8 +1,9 @@
 """Benchmark section: the remote API's request path, measured with the official client.
 
-Round-trip sim.getJointPosition calls per second, and stepped sim.step() steps per second, against
-a `twin serve --stepped` subprocess on a free loopback port (targets on a 2-core machine: 5,000
-calls/s and 2,000 steps/s). tools/bench.py calls bench(ctx); `python tools/bench_remote.py` runs it alone.
+Round-trip sim.getJointPosition calls per second, and stepped sim.step() steps per second, against a
+`twin serve --stepped` subprocess on a free loopback port (targets on a 2-core machine: 5,000
+calls/s and 2,000 steps/s). tools/bench.py calls bench(ctx); `python tools/bench_remote.py` runs it
+alone.
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def measure(port: int, calls: int = CALLS, steps: int = STEPS) -> tuple[float, f
 
 
 def server_side_us(requests: int = 20_000) -> float:
-    """Microseconds the server spends on one getJointPosition request (decode, call, encode), no transport."""
+    """Microseconds the server spends on one getJointPosition request (decode, call, encode), no
+    transport."""
     import cbor2
 
     from twin.model.config import TwinConfig

@@ -93,8 +93,8 @@ def _local_rate(jobs: int) -> float:
 
 
 def _bare_cpu_s(scenarios: int = OVERHEAD_SCENARIOS) -> float:
-    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and the
-    task, the freed memory kept as a sweep's workers keep it (call in a child)."""
+    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and
+    the task, the freed memory kept as a sweep's workers keep it (call in a child)."""
     keep_freed_memory()
     spec = _spec(scenarios)
     prep = prepare(spec)
@@ -137,9 +137,9 @@ def _overhead_ms() -> float:
 
 
 def bench(ctx) -> list[tuple[str, str]]:
-    """Each repeat measures its pair back to back (1 then 2 local workers; a new Dask cluster against
-    the mean of the 2-worker pool's runs just before and just after it) and the figures are medians
-    of the pairs' ratios: a busy moment of the shared machine then spoils one pair, not the
+    """Each repeat measures its pair back to back (1 then 2 local workers; a new Dask cluster
+    against the mean of the 2-worker pool's runs just before and just after it) and the figures are
+    medians of the pairs' ratios: a busy moment of the shared machine then spoils one pair, not the
     comparison, and a load that rises or falls through a pair is seen by both sides alike."""
     repeats = ctx.repeats
     one, two, speedups, overheads = [], [], [], []

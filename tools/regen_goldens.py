@@ -145,7 +145,8 @@ def sessions() -> list[Session]:
 
 
 def make_session(session: Session, out_dir: Path = RECORDINGS) -> Path:
-    """Serve, run the program to its end, stop the run (which finalizes the recording), stop serving."""
+    """Serve, run the program to its end, stop the run (which finalizes the recording), stop
+    serving."""
     from coppeliasim_zmqremoteapi_client import RemoteAPIClient
 
     path = out_dir / f"{session.name}.mcap"

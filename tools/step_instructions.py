@@ -1,15 +1,15 @@
-"""Instructions a step, counted by valgrind's callgrind: the same count every run, where wall time on a
-shared machine moves by a third from one minute to the next.
+"""Instructions a step, counted by valgrind's callgrind: the same count every run, where wall time
+on a shared machine moves by a third from one minute to the next.
 
     python tools/step_instructions.py            # physics-only, twin alone, + MCAP, + MCAP and Rerun
     python tools/step_instructions.py --modes physics alone
 
-Each mode runs pick_place at 2 and at 4 cycles under callgrind; a step's cost is the difference of the
-twin process's totals over the difference of their steps, so the start (imports, the scene, the
+Each mode runs pick_place at 2 and at 4 cycles under callgrind; a step's cost is the difference of
+the twin process's totals over the difference of their steps, so the start (imports, the scene, the
 recorders) cancels out. `physics` replays the same motion on the bare World as tools/bench.py's
-same-motion baseline does (its actions are taken from a twin run outside valgrind). Only the twin's own
-process is counted: the recorder processes (forked, traced too) work on the other core. Needs valgrind
-(`apt-get install valgrind`); takes about ten minutes.
+same-motion baseline does (its actions are taken from a twin run outside valgrind). Only the twin's
+own process is counted: the recorder processes (forked, traced too) work on the other core. Needs
+valgrind (`apt-get install valgrind`); takes about ten minutes.
 """
 
 from __future__ import annotations

@@ -30,10 +30,10 @@ def encode(rgb: np.ndarray, format: str = "png") -> bytes:
 
 
 def png_bytes(rgb: np.ndarray) -> bytes:
-    """A PNG of (h, w, 3) uint8 pixels: 8-bit RGB, every row unfiltered, zlib level PNG_COMPRESS_LEVEL, no
-    other chunks, so the same pixels always give the same bytes. Written here rather than by Pillow,
-    whose filter search took 1.5-3 ms a 320x240 picture; this takes 0.36 ms (the renderer's flat colours
-    compress well without filters: 3.5 KB)."""
+    """A PNG of (h, w, 3) uint8 pixels: 8-bit RGB, every row unfiltered, zlib level
+    PNG_COMPRESS_LEVEL, no other chunks, so the same pixels always give the same bytes. Written here
+    rather than by Pillow, whose filter search took 1.5-3 ms a 320x240 picture; this takes 0.36 ms
+    (the renderer's flat colours compress well without filters: 3.5 KB)."""
     h, w, _ = rgb.shape
     rows = np.empty((h, 1 + 3 * w), dtype=np.uint8)
     rows[:, 0] = 0  # filter type None
@@ -64,9 +64,9 @@ _PNG_HEAD = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR"
 def decode_rgb(
     data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None
 ) -> np.ndarray:
-    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height) the
-    header is checked first and nothing else is decoded: ValueError saying what the bytes are instead,
-    also for pixel data Pillow cannot decode."""
+    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height)
+    the header is checked first and nothing else is decoded: ValueError saying what the bytes are
+    instead, also for pixel data Pillow cannot decode."""
     with _open(data, format, size_px) as image:
         if size_px is not None and image.size != tuple(size_px):
             raise ValueError(f"is {image.size[0]}x{image.size[1]} px")

@@ -1,4 +1,5 @@
-"""--camera for twin teleop and twin serve: their recordings hold the pictures, and replay them exactly."""
+"""--camera for twin teleop and twin serve: their recordings hold the pictures, and replay them
+exactly."""
 
 from __future__ import annotations
 

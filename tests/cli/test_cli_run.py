@@ -1,4 +1,5 @@
-"""`twin run` end to end: the pick-and-place loop on every profile, user task files, bad input, --gui."""
+"""`twin run` end to end: the pick-and-place loop on every profile, user task files, bad input,
+--gui."""
 
 from __future__ import annotations
 
@@ -86,7 +87,8 @@ def test_twin_run_pick_place_prints_each_cycles_attach_release_and_placement(
 
 
 def test_report_001s_loop_reports_an_empty_suction_and_leaves_the_box():
-    """The built-in seed001 task is report 001's Lua loop with its Heron IK as written: it misses."""
+    """The built-in seed001 task is report 001's Lua loop with its Heron IK as written: it
+    misses."""
     sink = FrameCollector()
     twin = Twin(TwinConfig(profile=PROFILES["seed001"]), sinks=[sink])
     start = twin.object_pose("box")
@@ -264,10 +266,11 @@ def test_report_002s_program_as_a_task_misses_and_leaves_the_box(tmp_path):
 
 def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tmp_path):
     """`twin run ... | head -1`: the reader goes away before the twin has printed all of its summary.
-    The run's files are finished before the summary is printed, so they are what an unpiped run writes
-    (byte for byte, the camera's pictures included), and the camera process ends with the twin: exit
-    141 (128 + SIGPIPE). The reader here closes its end before the first line: had it read one line
-    first, the twin could write the whole short summary into the pipe before the close, and exit 0."""
+    The run's files are finished before the summary is printed, so they are what an unpiped run
+    writes (byte for byte, the camera's pictures included), and the camera process ends with the
+    twin: exit 141 (128 + SIGPIPE). The reader here closes its end before the first line: had it
+    read one line first, the twin could write the whole short summary into the pipe before the
+    close, and exit 0."""
     args = ["run", "pick_place", "--cycles", "1", "--camera", "overhead", "--camera-size", "64x48"]
     proc = subprocess.Popen(
         [sys.executable, "-m", "twin.cli", *args, "--record", str(tmp_path / "piped.mcap")],
@@ -319,7 +322,8 @@ def test_a_placed_event_without_an_error_figure_is_summarized(error, tmp_path, m
 
 
 def test_placed_events_with_no_figure_at_all_and_a_failing_task(tmp_path, monkeypatch, capsys):
-    """The exit code follows the task: it raised after saying `placed` (exit 1, its error on one line)."""
+    """The exit code follows the task: it raised after saying `placed` (exit 1, its error on one
+    line)."""
     import twin
 
     monkeypatch.chdir(tmp_path)

@@ -1,6 +1,6 @@
-"""The README's first command, as a new user runs it: in a folder with no runs/ yet (a fresh clone has
-none), it records a pick-and-place session to both files. runs/ is the one folder twin makes when it
-is missing; any other folder named for an output must exist."""
+"""The README's first command, as a new user runs it: in a folder with no runs/ yet (a fresh clone
+has none), it records a pick-and-place session to both files. runs/ is the one folder twin makes
+when it is missing; any other folder named for an output must exist."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""`twin view --web` in a real browser: Debian's chromium (headless, driven by Playwright) opens the URL
-the command prints and shows the recording, its camera pictures beside the 3D view, not Rerun's
+"""`twin view --web` in a real browser: Debian's chromium (headless, driven by Playwright) opens the
+URL the command prints and shows the recording, its camera pictures beside the 3D view, not Rerun's
 welcome page (which the same server shows without the URL's ?url=)."""
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ URL = re.compile(
 
 
 def _colours(png) -> dict[str, int]:
-    """Pixel counts of the recording's colours: the arm's orange links, the blue box, the joint plots' lines."""
+    """Pixel counts of the recording's colours: the arm's orange links, the blue box, the joint
+    plots' lines."""
     image = np.asarray(Image.open(png).convert("RGB")).astype(int)
     r, g, b = image[..., 0], image[..., 1], image[..., 2]
     return {
@@ -47,7 +48,8 @@ def _shows_recording(colours: dict[str, int]) -> bool:
 
 @pytest.fixture
 def web_view(tmp_path):
-    """`twin view CAMERA.rrd --web` as a real process: (its process, the printed URL's page and query)."""
+    """`twin view CAMERA.rrd --web` as a real process: (its process, the printed URL's page and
+    query)."""
     run = record_camera_run(tmp_path)
     env = {**os.environ, "HOME": str(tmp_path), "TMPDIR": str(tmp_path)}
     proc = subprocess.Popen(

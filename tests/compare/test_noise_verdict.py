@@ -1,4 +1,5 @@
-"""The default `noise` verdict and what reports say: full precision, numeric command data, likely causes."""
+"""The default `noise` verdict and what reports say: full precision, numeric command data, likely
+causes."""
 
 from __future__ import annotations
 

@@ -3,9 +3,9 @@ traceback, nothing written and nothing already there lost.
 
 Each damaged recording is a copy of a real run (the session's camera_run and pick_place_mcap) with
 one thing changed: a camera picture (garbage, a 20000x20000 or 9000x9000 PNG, a JPEG, a cut one, a
-smaller one), a command's arguments, a joint position (NaN, or too large for float32), a frame's time.
-The exports that could cost memory run as a real `twin` process of their own, whose own peak RSS
-os.wait4 reports.
+smaller one), a command's arguments, a joint position (NaN, or too large for float32), a frame's
+time. The exports that could cost memory run as a real `twin` process of their own, whose own peak
+RSS os.wait4 reports.
 """
 
 from __future__ import annotations
@@ -62,7 +62,8 @@ sys.exit(os.waitstatus_to_exitcode(status))
 
 
 def run_measured(argv: list, cwd: Path, timeout_s: float = 60.0) -> Run:
-    """`twin ARGV` as a process of its own: exit code, output, its own peak RSS (MB) and wall time."""
+    """`twin ARGV` as a process of its own: exit code, output, its own peak RSS (MB) and wall
+    time."""
     t0 = time.monotonic()
     with open(cwd / ".out", "w") as out, open(cwd / ".err", "w") as err:
         proc = subprocess.run(
@@ -96,7 +97,8 @@ def assert_one_line_exit_2(run: Run, *expected: str) -> str:
 
 
 def assert_nothing_written(folder: Path, *kept: str) -> None:
-    """Only the inputs (and run_measured's .out/.err) are in folder: no dataset, no .partial folder."""
+    """Only the inputs (and run_measured's .out/.err) are in folder: no dataset, no .partial
+    folder."""
     assert sorted(p.name for p in folder.iterdir() if p.name not in (".out", ".err")) == sorted(
         kept
     )
@@ -106,8 +108,8 @@ def assert_nothing_written(folder: Path, *kept: str) -> None:
 
 
 def copy_with(src: Path, dst: Path, edit) -> Path:
-    """A copy of an MCAP file with every message through edit(topic, data) -> data (mcap's own reader and
-    writer, independent of twin's)."""
+    """A copy of an MCAP file with every message through edit(topic, data) -> data (mcap's own
+    reader and writer, independent of twin's)."""
     with open(src, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
@@ -164,8 +166,8 @@ def _chunk(kind: bytes, data: bytes) -> bytes:
 
 
 def black_png(width: int, height: int, *, pixels: bool = True) -> bytes:
-    """An 8-bit RGB PNG of width x height black pixels, compressed row by row (never the whole image in
-    memory); pixels=False: the header only (with one row of data), what Pillow's open reads."""
+    """An 8-bit RGB PNG of width x height black pixels, compressed row by row (never the whole image
+    in memory); pixels=False: the header only (with one row of data), what Pillow's open reads."""
     c = zlib.compressobj(1)
     row = bytes(1 + 3 * width)
     idat = b"".join([c.compress(row) for _ in range(height if pixels else 1)] + [c.flush()])
@@ -185,7 +187,8 @@ def jpeg_320x240() -> bytes:
 
 @pytest.fixture(scope="module")
 def bad_pictures(camera_run, tmp_path_factory) -> dict[str, tuple[Path, str]]:
-    """name -> (copy of the camera run with one bad overhead picture, what the error says about it)."""
+    """name -> (copy of the camera run with one bad overhead picture, what the error says about
+    it)."""
     folder = tmp_path_factory.mktemp("bad_pictures")
     good = twin_pkg.load(camera_run["mcap"]).cameras["overhead"].data[PICTURE_INDEX]
     cases = {
@@ -211,9 +214,9 @@ def bad_pictures(camera_run, tmp_path_factory) -> dict[str, tuple[Path, str]]:
     "name", ["garbage", "png_20000x20000", "png_9000x9000", "jpeg", "png_160x120", "png_cut"]
 )
 def test_a_bad_picture_is_one_line_exit_2_in_bounded_memory(bad_pictures, tmp_path, name):
-    """Was: UnidentifiedImageError or DecompressionBombError tracebacks (exit 1), and 1229 MB, 3.4 s for
-    the 9000x9000 PNG (decoded, then refused for its shape). Now the header is checked against the
-    camera's configured size before anything is decoded."""
+    """Was: UnidentifiedImageError or DecompressionBombError tracebacks (exit 1), and 1229 MB, 3.4 s
+    for the 9000x9000 PNG (decoded, then refused for its shape). Now the header is checked against
+    the camera's configured size before anything is decoded."""
     path, why = bad_pictures[name]
     run = run_measured(
         ["export", path, "--format", "lerobot", "--fps", "15", "-o", tmp_path / "ds"], tmp_path
@@ -230,8 +233,8 @@ def test_a_bad_picture_is_one_line_exit_2_in_bounded_memory(bad_pictures, tmp_pa
 
 
 def test_every_picture_is_checked_before_any_work(bad_pictures, tmp_path, capsys):
-    """A bad picture no dataset frame shows (at 1 fps, picture 2 is skipped) is refused all the same,
-    before --verify's replay (which would call the file 'not replayable', exit 1)."""
+    """A bad picture no dataset frame shows (at 1 fps, picture 2 is skipped) is refused all the
+    same, before --verify's replay (which would call the file 'not replayable', exit 1)."""
     path, _ = bad_pictures["png_9000x9000"]
     code, out, err = twin(
         capsys,
@@ -250,7 +253,8 @@ def test_every_picture_is_checked_before_any_work(bad_pictures, tmp_path, capsys
 
 
 def test_track_rgb_checks_the_header_first(bad_pictures):
-    """CameraTrack.rgb (what diff, replay and check decode with): a RecordingError, never Pillow's."""
+    """CameraTrack.rgb (what diff, replay and check decode with): a RecordingError, never
+    Pillow's."""
     from twin.errors import RecordingError
 
     for path, why in bad_pictures.values():
@@ -376,7 +380,8 @@ def _with_signal_args(src: Path, dst: Path, args: dict) -> Path:
 def test_a_malformed_command_is_exit_2_in_every_format_as_in_replay(
     pick_place_mcap, tmp_path, capsys, args, expected
 ):
-    """Was: KeyError: 'name' (a traceback) from csv, parquet and lerobot export; replay said exit 2."""
+    """Was: KeyError: 'name' (a traceback) from csv, parquet and lerobot export; replay said exit
+    2."""
     bad = _with_signal_args(pick_place_mcap[0], tmp_path / "bad.mcap", args)
     code, _, err = twin(capsys, "replay", bad)
     assert code == 2 and err.count("\n") == 1 and expected in err, err
@@ -392,9 +397,10 @@ def test_a_malformed_command_is_exit_2_in_every_format_as_in_replay(
 def test_a_nan_joint_position_is_refused_for_a_dataset(
     pick_place_mcap, tmp_path, capsys, value, shown
 ):
-    """Was: ValueError 'Out of range float values are not JSON compliant' (a traceback) writing stats.json.
-    LeRobot reads stats.json with Python's json (NaN would load), but normalizes by its mean and std,
-    which one NaN makes NaN: refused, naming the value. The csv table keeps the recorded value."""
+    """Was: ValueError 'Out of range float values are not JSON compliant' (a traceback) writing
+    stats.json. LeRobot reads stats.json with Python's json (NaN would load), but normalizes by its
+    mean and std, which one NaN makes NaN: refused, naming the value. The csv table keeps the
+    recorded value."""
     rec = twin_pkg.load(pick_place_mcap[0])
     rec.frames.joint_q[100, 0] = value
     save(rec, tmp_path / "nan.mcap")
@@ -441,8 +447,8 @@ def test_a_nan_joint_position_is_refused_for_a_dataset(
 
 
 def test_a_killed_exports_partial_folder_is_removed_by_the_next(camera_run, tmp_path, capsys):
-    """A killed export leaves .ds.partial-PID; the next export of ds removes it (its process is gone),
-    keeps a running export's, and removes one whose id a later process reuses."""
+    """A killed export leaves .ds.partial-PID; the next export of ds removes it (its process is
+    gone), keeps a running export's, and removes one whose id a later process reuses."""
     out = tmp_path / "ds"
     proc = subprocess.Popen(
         [
@@ -504,7 +510,8 @@ def test_a_killed_exports_partial_folder_is_removed_by_the_next(camera_run, tmp_
 def test_an_old_dataset_left_by_a_killed_overwrite_is_removed_once_ds_is_whole(
     pick_place_mcap, tmp_path, capsys
 ):
-    """--overwrite renames the old dataset to .ds.old-PID-*; a kill before it is removed leaves it."""
+    """--overwrite renames the old dataset to .ds.old-PID-*; a kill before it is removed leaves
+    it."""
     out = tmp_path / "ds"
     assert (
         twin(capsys, "export", pick_place_mcap[0], "--format", "lerobot", "--fps", "10", "-o", out)[

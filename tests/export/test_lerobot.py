@@ -237,8 +237,8 @@ def test_same_input_gives_the_same_bytes(camera_run, tmp_path, capsys):
 
 
 def test_decimated_run_and_a_golden_at_an_uneven_rate(tmp_path, capsys):
-    """A --rate 4 run and a golden, both without camera, at 7 fps: each dataset frame is the recorded
-    frame nearest its time."""
+    """A --rate 4 run and a golden, both without camera, at 7 fps: each dataset frame is the
+    recorded frame nearest its time."""
     mcap = tmp_path / "rate4.mcap"
     assert (
         twin(capsys, "run", "pick_place", "--cycles", "1", "--rate", "4", "--record", mcap)[0] == 0
@@ -265,7 +265,8 @@ def test_decimated_run_and_a_golden_at_an_uneven_rate(tmp_path, capsys):
 
 
 def _tampered_copy(src: Path, dst: Path) -> None:
-    """A real recording whose frames are not what its commands replay to: one joint target 0.01 rad off."""
+    """A real recording whose frames are not what its commands replay to: one joint target 0.01 rad
+    off."""
     rec = twin_pkg.load(src)
     i = next(i for i, c in enumerate(rec.commands) if c.kind == "joint_target" and c.step > 0)
     c = rec.commands[i]

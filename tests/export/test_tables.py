@@ -21,7 +21,8 @@ GOLDEN = str(Path(__file__).resolve().parents[2] / "recordings" / "pick_place_mt
 
 
 def _frame_values(rec) -> np.ndarray:
-    """Every Frame field of every frame as one float64 matrix, in field order (as the table lays them)."""
+    """Every Frame field of every frame as one float64 matrix, in field order (as the table lays
+    them)."""
     n = len(rec.frames)
     return np.column_stack(
         [getattr(rec.frames, f.name).reshape(n, -1).astype(np.float64) for f in FRAME_FIELDS]

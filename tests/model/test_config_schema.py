@@ -1,6 +1,6 @@
 """The stored configuration's schema and the JSON and TOML files twin reads: every bad value, every
-nesting depth and every degenerate camera is one ConfigError line, never a TypeError, RecursionError or
-ZeroDivisionError traceback."""
+nesting depth and every degenerate camera is one ConfigError line, never a TypeError, RecursionError
+or ZeroDivisionError traceback."""
 
 from __future__ import annotations
 
@@ -36,7 +36,8 @@ WRONG = (7, 1.5, "x", None, True, [7], [[7]], {"a": 1}, [], {})
 
 @pytest.mark.parametrize("schema", sorted(SCHEMAS))
 def test_every_field_kind_says_what_it_expects(schema):
-    """expected() hashed a nested schema (a dict) or a list of one: a TypeError while wording the error."""
+    """expected() hashed a nested schema (a dict) or a list of one: a TypeError while wording the
+    error."""
     for name, spec in SCHEMAS[schema].items():
         text = spec.expected()
         assert isinstance(text, str) and text and "kind" not in text, (schema, name, text)

@@ -1,4 +1,5 @@
-"""Key maps: the seeds' bindings act as the reports describe, user files are checked entry by entry."""
+"""Key maps: the seeds' bindings act as the reports describe, user files are checked entry by
+entry."""
 
 import json
 import math
@@ -71,7 +72,8 @@ def test_seed000_keys_do_what_report_000_s_lua_does():
 
 
 def test_seed001_arrows_do_what_report_001_s_lua_does():
-    """deg3 = deg2 - deg1 after left/right, deg1 - deg2 after up/down: the pad does not keep its heading."""
+    """deg3 = deg2 - deg1 after left/right, deg1 - deg2 after up/down: the pad does not keep its
+    heading."""
     t, _ = _targets_after("seed001", ["left", "left", "up"])
     shoulder, elbow, _z, wrist = t
     assert (shoulder, elbow, wrist) == pytest.approx((2 * DEG, DEG, DEG))  # deg3 = deg1 - deg2
@@ -92,10 +94,11 @@ def test_mtb_map_lowers_and_raises_in_each_scene_s_own_z(name):
 
 
 def test_seed000_keys_take_hold_when_the_stop_sets_the_pad_into_the_box():
-    """Report 000's keys as its Lua does them: 5 sets joint3 to its stop (0.084, 2.4 cm below the loop's
-    0.06 on the box: the pad's sensor starts inside the box) and 8 switches suction on with a lift. With
-    suction on up high, 5 takes hold (the sensor sees the box it starts in, as CoppeliaSim's does) and
-    8 lifts the box; 5 before 8 leaves the box where it is (suction comes on only as the pad lifts)."""
+    """Report 000's keys as its Lua does them: 5 sets joint3 to its stop (0.084, 2.4 cm below the
+    loop's 0.06 on the box: the pad's sensor starts inside the box) and 8 switches suction on with a
+    lift. With suction on up high, 5 takes hold (the sensor sees the box it starts in, as
+    CoppeliaSim's does) and 8 lifts the box; 5 before 8 leaves the box where it is (suction comes on
+    only as the pad lifts)."""
     p = PROFILES["seed000"]
     for keys, held in (("d*47 q*126 8 5 8", 0), ("d*47 q*126 5 8", -1)):
         twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))

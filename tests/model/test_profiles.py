@@ -1,4 +1,5 @@
-"""Robot profiles: every variant's joint names resolve; each built-in URDF loads with its real dynamics."""
+"""Robot profiles: every variant's joint names resolve; each built-in URDF loads with its real
+dynamics."""
 
 from __future__ import annotations
 
@@ -73,7 +74,8 @@ def test_malformed_profile_dict_raises_config_error():
 
 
 def _urdf_links(text: str) -> dict[str, dict]:
-    """Mass, diagonal inertia and inertial origin of every link, read straight from the URDF text."""
+    """Mass, diagonal inertia and inertial origin of every link, read straight from the URDF
+    text."""
     out = {}
     for link in ET.fromstring(text).iter("link"):
         inertial = link.find("inertial")
@@ -116,7 +118,8 @@ def test_urdf_loads_with_its_real_masses_and_inertias(profile_name):
 
 
 def test_without_the_inertia_flag_pybullet_would_invent_inertias(tmp_path):
-    """Guards the test above: PyBullet's default load replaces the URDF's inertias, so it can fail."""
+    """Guards the test above: PyBullet's default load replaces the URDF's inertias, so it can
+    fail."""
     profile = PROFILES["mtb"]
     path = tmp_path / "mtb.urdf"
     path.write_text(urdf_from_profile(profile))

@@ -94,7 +94,8 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
 
 
 def twin_seconds(_path) -> float:
-    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run shows."""
+    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run
+    shows."""
     twin = Twin()
     twin.move_to(0.3, 0.3)
     twin.wait(5.0)
@@ -112,7 +113,8 @@ def _wait_until_settled(path, timeout_s: float = 10.0) -> None:
 
 
 def test_a_writer_error_mid_run_is_one_line_and_keeps_what_came_before(tmp_path):
-    """A full disk, for real: the recorder may write only so many bytes (RLIMIT_FSIZE), then gets EFBIG."""
+    """A full disk, for real: the recorder may write only so many bytes (RLIMIT_FSIZE), then gets
+    EFBIG."""
     path = tmp_path / "full.mcap"
     script = textwrap.dedent(f"""
         import resource, signal, sys

@@ -75,7 +75,8 @@ def _started(tmp_path: Path, *args: str) -> subprocess.Popen:
 
 @pytest.mark.parametrize(("signum", "to_group"), [(signal.SIGTERM, False), (signal.SIGHUP, True)])
 def test_a_stop_signal_finalizes_the_run_as_interrupted(tmp_path, signum, to_group):
-    """SIGTERM to the twin alone (docker stop, timeout), SIGHUP to the whole group (a closed terminal)."""
+    """SIGTERM to the twin alone (docker stop, timeout), SIGHUP to the whole group (a closed
+    terminal)."""
     mcap, rrd = tmp_path / "s.mcap", tmp_path / "s.rrd"
     proc = _started(tmp_path, "--record", str(mcap), "--rrd", str(rrd))
     (os.killpg if to_group else os.kill)(proc.pid, signum)
@@ -155,8 +156,8 @@ def test_an_exception_whose_str_raises_is_one_line(tmp_path):
 
 
 def test_kill_9_of_the_group_with_both_writers_loses_under_a_second(tmp_path):
-    """The bound holds by construction (< 0.5 s unflushed + at most 0.4 s not taken in from the ring), wherever the
-    kill lands; one kill at a wall-clock moment of no importance checks it."""
+    """The bound holds by construction (< 0.5 s unflushed + at most 0.4 s not taken in from the
+    ring), wherever the kill lands; one kill at a wall-clock moment of no importance checks it."""
     task, progress = tmp_path / "progress_task.py", tmp_path / "progress"
     task.write_text(PROGRESS)
     progress.write_bytes(bytes(8))

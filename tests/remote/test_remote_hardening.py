@@ -1,6 +1,7 @@
-"""`twin serve` against hostile and broken peers: each case of the fault campaign, on the real server
-process, with raw sockets (bytes the official client cannot produce) and the official client (whose
-calls must keep getting their replies). No request may end the server or cost another client its reply.
+"""`twin serve` against hostile and broken peers: each case of the fault campaign, on the real
+server process, with raw sockets (bytes the official client cannot produce) and the official client
+(whose calls must keep getting their replies). No request may end the server or cost another client
+its reply.
 """
 
 from __future__ import annotations
@@ -300,8 +301,8 @@ def test_the_number_of_clients_is_bounded_per_connection_and_in_all():
 
 def test_idle_clients_cannot_lock_the_official_client_out():
     """16 connections x 4 uuids took all 64 slots and held them while open (the official client got
-    "too many clients" until they closed). Now, with all slots taken, a new client takes the slot of the
-    least recently seen one silent for EVICT_IDLE_S or more."""
+    "too many clients" until they closed). Now, with all slots taken, a new client takes the slot of
+    the least recently seen one silent for EVICT_IDLE_S or more."""
     with ServerProcess("--stepped") as server:
         idle = [RawClient(server.port) for _ in range(MAX_CLIENTS // MAX_CLIENTS_PER_CONNECTION)]
         try:
@@ -347,7 +348,8 @@ def test_idle_clients_cannot_lock_the_official_client_out():
 
 
 class PeakRss:
-    """The highest resident set size of a process while in the block, sampled every 2 ms (psutil)."""
+    """The highest resident set size of a process while in the block, sampled every 2 ms
+    (psutil)."""
 
     def __init__(self, pid: int) -> None:
         self.proc = psutil.Process(pid)
@@ -391,9 +393,10 @@ def keep_calling(sim, stop: threading.Event, errors: list) -> threading.Thread:
 
 
 def test_a_multipart_flood_is_cut_off_after_one_frames_worth():
-    """ZMQ hands a message over only once all its parts are in (12 x 200 MiB parts: 2.48 GB in the old
-    server before its "12 message parts" reply). Now a connection whose unfinished message exceeds one
-    frame's worth (MAX_UNREAD_BYTES) is shut down; the server frees it and goes on serving."""
+    """ZMQ hands a message over only once all its parts are in (12 x 200 MiB parts: 2.48 GB in the
+    old server before its "12 message parts" reply). Now a connection whose unfinished message
+    exceeds one frame's worth (MAX_UNREAD_BYTES) is shut down; the server frees it and goes on
+    serving."""
     assert FLOOD_PART_BYTES < MAX_FRAME_BYTES < FLOOD_PARTS * FLOOD_PART_BYTES
     with ServerProcess("--stepped") as server:
         sim = server.client().require("sim")
@@ -460,8 +463,8 @@ ZMTP31_REQ_HANDSHAKE = (
 
 
 def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
-    """A hostile peer speaking ZMTP itself goes on sending parts after the server closes its side: the
-    server reads end of file regardless, drops the message, and the peer's writes fail."""
+    """A hostile peer speaking ZMTP itself goes on sending parts after the server closes its side:
+    the server reads end of file regardless, drops the message, and the peer's writes fail."""
     with ServerProcess("--stepped") as server:
         with (
             PeakRss(server.proc.pid) as rss,
@@ -493,7 +496,8 @@ def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
 
 
 def zmtp3_req_with_frame_header(size: int) -> bytes:
-    """A ZMTP 3.0 REQ peer's greeting and READY, then a delimiter and the head of a `size`-byte frame."""
+    """A ZMTP 3.0 REQ peer's greeting and READY, then a delimiter and the head of a `size`-byte
+    frame."""
     greeting = (
         b"\xff"
         + b"\x00" * 8
@@ -560,7 +564,8 @@ def test_step_grace_is_an_option():
 
 
 def test_a_cyclic_joint_reads_back_in_minus_pi_to_pi_as_coppeliasim_reports_it():
-    """The seeds' CoppeliaSim joints are cyclic: report 000's shoulder goes to +218 deg, read back -142."""
+    """The seeds' CoppeliaSim joints are cyclic: report 000's shoulder goes to +218 deg, read back
+    -142."""
     import math
 
     with ServerProcess("--stepped", "--robot", "seed000") as server:
@@ -601,8 +606,9 @@ def test_a_stopped_simulation_holds_a_bounded_number_of_commands_then_refuses_wi
 
 
 def test_the_eviction_rule_in_detail():
-    """In process, at chosen times: only when all slots are taken, only a client silent for EVICT_IDLE_S,
-    least recently seen first, a stepping one only after --step-grace, the per-connection cap first."""
+    """In process, at chosen times: only when all slots are taken, only a client silent for
+    EVICT_IDLE_S, least recently seen first, a stepping one only after --step-grace, the
+    per-connection cap first."""
     from twin.model.config import TwinConfig
     from twin.remote.server import Server
     from twin.remote.session import Scene

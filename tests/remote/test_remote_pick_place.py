@@ -22,7 +22,8 @@ MAX_STEPS = 2400  # 10 s of simulated time per move
 
 
 class Arm:
-    """Client-side motion over the remote API: joint targets, then sim.step() until they are reached."""
+    """Client-side motion over the remote API: joint targets, then sim.step() until they are
+    reached."""
 
     def __init__(self, sim) -> None:
         self.sim = sim

@@ -1,13 +1,15 @@
-"""The reports' step-5 programs, as their authors wrote them, against `twin serve --realtime` at speed 1.
+"""The reports' step-5 programs, as their authors wrote them, against `twin serve --realtime` at
+speed 1.
 
-tests/fixtures/seed_clients/ holds each report's Python program verbatim but for two lines: the import
-(`from twin.remote import legacy as vrep` for `import sim as vrep`) and a bound on the endless loop
-(`for _pass in range(1):` for `while True:`). The programs keep their own addresses (the environment's
-TWIN_REMOTE_HOST points them at the server), their sleeps and their errors: 000's and 003's loops are
-followed by a stray Lua `end` (NameError once the bounded loop ends), and 002's IK sends to names it
-never defines (NameError at its first move). Each runs against its own server on its own seed
-profile, whose joint conventions are its report's scene's (docs/seed-conventions.md), all four at
-once; they take as long as their sleeps (11 s for the longest).
+tests/fixtures/seed_clients/ holds each report's Python program verbatim but for two lines: the
+import (`from twin.remote import legacy as vrep` for `import sim as vrep`) and a bound on the
+endless loop (`for _pass in range(1):` for `while True:`). The programs keep their own addresses
+(the environment's TWIN_REMOTE_HOST points them at the server), their sleeps and their errors: 000's
+and 003's loops are followed by a stray Lua `end` (NameError once the bounded loop ends), and 002's
+IK sends to names it never defines (NameError at its first move). Each runs against its own server
+on its own seed profile, whose joint conventions are its report's scene's
+(docs/seed-conventions.md), all four at once; they take as long as their sleeps (11 s for the
+longest).
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ SEEDS = ("seed000", "seed001", "seed002", "seed003")
 
 
 def run_seed(seed: str, folder: Path, *server_args: str):
-    """Serve, run the seed's program to its end, read the box, stop the run: (recording, box, program)."""
+    """Serve, run the seed's program to its end, read the box, stop the run: (recording, box,
+    program)."""
     record = folder / f"{seed}.mcap"
     with ServerProcess(
         "--realtime", "--speed", "1", "--robot", seed, "--record", str(record), *server_args
@@ -59,7 +62,8 @@ def run_seed(seed: str, folder: Path, *server_args: str):
 
 @pytest.fixture(scope="module")
 def seed_runs(tmp_path_factory) -> dict:
-    """All four programs at once (each with its own server): seed -> (recording, box, program, folder)."""
+    """All four programs at once (each with its own server): seed -> (recording, box, program,
+    folder)."""
     folder = tmp_path_factory.mktemp("seeds")
     results: dict = {}
 

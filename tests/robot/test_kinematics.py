@@ -1,4 +1,5 @@
-"""Kinematics properties over the whole workspace of every built-in profile (pure math, no physics)."""
+"""Kinematics properties over the whole workspace of every built-in profile (pure math, no
+physics)."""
 
 from __future__ import annotations
 
@@ -183,7 +184,8 @@ def test_choose_prefers_the_branch_nearest_the_current_pose():
 
 
 def _report000_ik(x, y):
-    """Report 000's ik(x, y) (links 0.8/0.8): degrees, q2 = -acos(...), q1 = atan2(y, x) + atan2(...)."""
+    """Report 000's ik(x, y) (links 0.8/0.8): degrees, q2 = -acos(...), q1 = atan2(y, x) +
+    atan2(...)."""
     q2 = -math.acos((x**2 + y**2 - 0.8**2 - 0.8**2) / (2 * 0.8 * 0.8))
     q1 = math.atan2(y, x) + math.atan2(0.8 * math.sin(q2), 0.8 + 0.8 * math.cos(q2))
     return round(math.degrees(q1), 4), round(math.degrees(q2), 4)
@@ -191,7 +193,8 @@ def _report000_ik(x, y):
 
 @pytest.mark.parametrize("box", [(0.2, 0.7), (-0.3, -0.55)])
 def test_report000_program_lands_on_its_box_in_the_seed000_frame(box):
-    """The report calls ik(y, x) and sends joint1 = -q1, joint2 = q2: seed000's frame makes that exact."""
+    """The report calls ik(y, x) and sends joint1 = -q1, joint2 = q2: seed000's frame makes that
+    exact."""
     q1, q2 = _report000_ik(box[1], box[0])
     pose = k.fk(PROFILES["seed000"], (math.radians(-q1), math.radians(q2), 0.06, 0.0))
     assert math.hypot(pose.x_m - box[0], pose.y_m - box[1]) < 1e-5  # the 4-place rounding
@@ -224,7 +227,8 @@ def test_heron_ik_misses_the_box_in_its_own_frame_and_keeps_the_heading(name, li
 
 
 def test_report003_ik_is_the_mtb_frame():
-    """Report 003's ik(0.2, 0.7) (q2 = +acos, q1 = atan2 - atan2) lands on the box in the MTB frame."""
+    """Report 003's ik(0.2, 0.7) (q2 = +acos, q1 = atan2 - atan2) lands on the box in the MTB
+    frame."""
     a1, a2 = 0.468, 0.4
     q2 = math.acos((0.2**2 + 0.7**2 - a1**2 - a2**2) / (2 * a1 * a2))
     q1 = math.atan2(0.7, 0.2) - math.atan2(a2 * math.sin(q2), a1 + a2 * math.cos(q2))
@@ -251,7 +255,8 @@ def test_each_scene_s_down_puts_the_pad_on_a_50_mm_box(name, down, up):
 @settings(max_examples=300, deadline=None)
 @given(name=st.sampled_from(sorted(PROFILES)), q=st.tuples(*[st.floats(-7.0, 7.0)] * 4))
 def test_the_per_step_pad_pose_is_fk_bit_for_bit(name, q):
-    """The twin's per-step pad pose (pad_pose_function) and fk give the same bits: recordings depend on it."""
+    """The twin's per-step pad pose (pad_pose_function) and fk give the same bits: recordings depend
+    on it."""
     profile = PROFILES[name]
     pose = k.fk(profile, q)
     half = 0.5 * pose.heading_rad

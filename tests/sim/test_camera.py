@@ -133,8 +133,8 @@ def test_a_jpeg_camera_gives_jpeg_pictures():
 def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(
     pick_place_with_cameras, tmp_path
 ):
-    """A daemon process (a pool's worker) may not fork, so it draws the pictures itself: it hands them
-    on at the same points of the run, so its MCAP file is the one the render process gives."""
+    """A daemon process (a pool's worker) may not fork, so it draws the pictures itself: it hands
+    them on at the same points of the run, so its MCAP file is the one the render process gives."""
     from twin.record.mcap.writer import McapRecorder
     from twin.robot.urdf import urdf_text
 

@@ -1,4 +1,5 @@
-"""The suction pad in real PyBullet: attach, release, the measured hold wrench and when a hold breaks."""
+"""The suction pad in real PyBullet: attach, release, the measured hold wrench and when a hold
+breaks."""
 
 from __future__ import annotations
 
@@ -138,9 +139,9 @@ def test_a_fast_swing_breaks_a_weak_hold_on_shear():
 
 
 def test_peel_is_the_torque_at_the_cup_face():
-    """A box held 15 mm off its centre pulls with a peel torque of d·m·g·(1 + a/g) at the pad tip (0 at
-    its centre of mass, where the constraint acts): the jerk of lifting it breaks the stock 0.1 N·m limit,
-    while a centred box has almost none."""
+    """A box held 15 mm off its centre pulls with a peel torque of d·m·g·(1 + a/g) at the pad tip (0
+    at its centre of mass, where the constraint acts): the jerk of lifting it breaks the stock 0.1
+    N·m limit, while a centred box has almost none."""
     limits = {"infinite_strength": False, "max_pull_force_n": HIGH, "max_shear_force_n": HIGH}
     centred, sink_c = _twin(**limits)
     _pick(centred, gentle=True)
@@ -184,8 +185,9 @@ def test_pressing_the_held_box_down_is_not_pull():
 
 @pytest.mark.parametrize("depth_m", [0.002, 0.010, 0.020])
 def test_a_pad_set_into_a_box_senses_it_as_coppeliasims_ray_sensor_does(depth_m):
-    """sim.setJointPosition can put the pad into a box (report 000's key 5): PyBullet's ray sees no body it
-    starts inside, CoppeliaSim's ray sensor sees the back face; the twin's pad senses and takes the box."""
+    """sim.setJointPosition can put the pad into a box (report 000's key 5): PyBullet's ray sees no
+    body it starts inside, CoppeliaSim's ray sensor sees the back face; the twin's pad senses and
+    takes the box."""
     from twin.robot.kinematics import z_joint_for_height
 
     twin, sink = _twin(robot="seed000")  # its Z stop (report 000's 0.084) reaches 19 mm into a box

@@ -1,4 +1,5 @@
-"""A pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (MCAP and .rrd)."""
+"""A pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (MCAP and
+.rrd)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ from pathlib import Path
 
 
 def record_camera_run(folder: Path, *extra: str) -> dict[str, Path]:
-    """`twin run pick_place --cycles 1 --camera overhead --camera wrist` into folder, in its own process:
-    {"mcap": path, "rrd": path}."""
+    """`twin run pick_place --cycles 1 --camera overhead --camera wrist` into folder, in its own
+    process: {"mcap": path, "rrd": path}."""
     mcap, rrd = folder / "camera.mcap", folder / "camera.rrd"
     # the rerun SDK may write its analytics config under HOME
     env = {**os.environ, "HOME": str(folder)}

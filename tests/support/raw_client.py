@@ -1,5 +1,5 @@
-"""A bare ZeroMQ REQ client for `twin serve`: sends any bytes, for malformed requests the official client
-never sends (protocol and hardening tests)."""
+"""A bare ZeroMQ REQ client for `twin serve`: sends any bytes, for malformed requests the official
+client never sends (protocol and hardening tests)."""
 
 from __future__ import annotations
 

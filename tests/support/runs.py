@@ -32,8 +32,9 @@ def record_pick_place(
     background: bool = True,
     sinks=(),
 ) -> Recording:
-    """pick_place on a fresh twin in real PyBullet, recorded to `path` (every `rate`th step, by a recorder
-    process unless background=False) when a path is given; returns the run in memory. `sinks` see it too."""
+    """pick_place on a fresh twin in real PyBullet, recorded to `path` (every `rate`th step, by a
+    recorder process unless background=False) when a path is given; returns the run in memory.
+    `sinks` see it too."""
     config = config or TwinConfig()
     if path is None:
         return record_task(config, "pick_place", params, sinks=sinks)
@@ -51,7 +52,8 @@ def record_pick_place(
 def collect_pick_place(
     path: Path | None = None, config: TwinConfig | None = None, params: dict = ONE_CYCLE, **options
 ) -> FrameCollector:
-    """record_pick_place, returning a FrameCollector of the frames, commands and events the twin sent."""
+    """record_pick_place, returning a FrameCollector of the frames, commands and events the twin
+    sent."""
     collector = FrameCollector()
     record_pick_place(path, config, params, sinks=[collector], **options)
     return collector

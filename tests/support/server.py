@@ -1,5 +1,6 @@
 """`twin serve` as a subprocess for tests: ServerProcess starts `twin serve --port 0` on loopback,
-reads the port the server bound from its first line, and always terminates it (used by every remote test)."""
+reads the port the server bound from its first line, and always terminates it (used by every remote
+test)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
-"""Key plans for teleop tests: each built-in key map's jog keys, and the whole-degree key-grid points for a
-pick and a place chosen from the kinematics (the teleop and tmux tests drive the same plan)."""
+"""Key plans for teleop tests: each built-in key map's jog keys, and the whole-degree key-grid
+points for a pick and a place chosen from the kinematics (the teleop and tmux tests drive the same
+plan)."""
 
 from __future__ import annotations
 
@@ -39,8 +40,9 @@ def _pad_xy_heading(profile, deg, wrist_deg=0.0):
 
 
 def _wrist_deg(profile_name, frm, to, before=0.0):
-    """Where report 001's map leaves the wrist after the jog keys from frm to to (shoulder keys first,
-    then elbow keys): deg2 - deg1 after a left/right key, deg1 - deg2 after up/down; 0 for seed000."""
+    """Where report 001's map leaves the wrist after the jog keys from frm to to (shoulder keys
+    first, then elbow keys): deg2 - deg1 after a left/right key, deg1 - deg2 after up/down; 0 for
+    seed000."""
     if profile_name != "seed001":
         return 0.0
     if to[1] != frm[1]:
@@ -49,7 +51,8 @@ def _wrist_deg(profile_name, frm, to, before=0.0):
 
 
 def _grid_points(profile, target_m, span_deg=3):
-    """Whole-degree (shoulder, elbow) pairs around each IK branch for target_m, within the joint limits."""
+    """Whole-degree (shoulder, elbow) pairs around each IK branch for target_m, within the joint
+    limits."""
     lim = [tuple(math.degrees(v) for v in pair) for pair in profile.joint_limits()[:2]]
     for sol in ik(profile, *target_m):
         c1, c2 = round(math.degrees(sol.shoulder_rad)), round(math.degrees(sol.elbow_rad))
@@ -65,9 +68,9 @@ def _rot(v, angle):
 
 
 def plan(profile_name, keeps_heading=None, pick_tolerance_m=0.005):
-    """The key grid points (whole degrees) for the pick and the place, chosen from the kinematics: among the
-    picks within pick_tolerance_m of the box, the pick and place that put the box (carried at its offset from
-    the pad) nearest the place point; ties go to the fewest key presses."""
+    """The key grid points (whole degrees) for the pick and the place, chosen from the kinematics:
+    among the picks within pick_tolerance_m of the box, the pick and place that put the box (carried
+    at its offset from the pad) nearest the place point; ties go to the fewest key presses."""
     profile = PROFILES[profile_name]
     keeps = MAPS[profile_name]["keeps_heading"] if keeps_heading is None else keeps_heading
     best = None

@@ -1,5 +1,6 @@
-"""A user's robot for tests: an MTB-like SCARA made of binary STL meshes in millimetres plus a profile file
-naming its joints (the URDF tests build it; record, replay, rerun and verdict tests load it)."""
+"""A user's robot for tests: an MTB-like SCARA made of binary STL meshes in millimetres plus a
+profile file naming its joints (the URDF tests build it; record, replay, rerun and verdict tests
+load it)."""
 
 from __future__ import annotations
 

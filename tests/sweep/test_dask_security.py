@@ -1,8 +1,8 @@
-"""twin.sweep.cluster on real Dask: a local cluster that only this process's client can use (TLS with
-a throwaway certificate; a foreign client, plain or with its own certificate, is refused) and that
-serves no HTTP unless asked; connect() failing in bounded time on a port that is not Dask's; and a
-cluster secured with the user's own certificates (`dask scheduler` / `dask worker` with --tls-*)
-reached through Dask's configuration in environment variables."""
+"""twin.sweep.cluster on real Dask: a local cluster that only this process's client can use (TLS
+with a throwaway certificate; a foreign client, plain or with its own certificate, is refused) and
+that serves no HTTP unless asked; connect() failing in bounded time on a port that is not Dask's;
+and a cluster secured with the user's own certificates (`dask scheduler` / `dask worker` with
+--tls-*) reached through Dask's configuration in environment variables."""
 
 from __future__ import annotations
 
@@ -148,7 +148,8 @@ def _worker_state(dask_worker):
 
 def test_a_worker_the_nanny_restarts_is_the_same():
     """Killed, a worker process is started again by its nanny: still TLS, no HTTP server, the
-    configuration start_local set (a nanny's copy of it was reverted with dask.config.set's context)."""
+    configuration start_local set (a nanny's copy of it was reverted with dask.config.set's
+    context)."""
     cluster, client, _ = start_local(1, preload=())
     try:
         (first,) = client.run(_worker_state).values()
@@ -172,7 +173,8 @@ def test_a_worker_the_nanny_restarts_is_the_same():
 
 @pytest.fixture
 def mute_port():
-    """A TCP port that accepts connections and never answers, or answers bytes that are not Dask's."""
+    """A TCP port that accepts connections and never answers, or answers bytes that are not
+    Dask's."""
     servers = []
 
     def make(answer: bytes = b"") -> str:

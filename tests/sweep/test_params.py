@@ -1,5 +1,6 @@
 """`twin run --param`: task parameters checked against the task function's signature and recorded,
-so `twin check` re-runs them; an unknown one (also `--cycles` for a task without cycles) is exit 2."""
+so `twin check` re-runs them; an unknown one (also `--cycles` for a task without cycles) is exit
+2."""
 
 from __future__ import annotations
 

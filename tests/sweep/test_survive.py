@@ -41,7 +41,8 @@ def run(twin, k: float = 0.0):
 def _task(
     tmp_path, *, crash: int | None = None, hang: int | None = None, name: str = "task.py"
 ) -> list[str]:
-    """A task file whose scenario `crash` kills its process and `hang` hangs; the sweep's arguments."""
+    """A task file whose scenario `crash` kills its process and `hang` hangs; the sweep's
+    arguments."""
     path = tmp_path / name
     path.write_text(TASK.format(crash=None, hang=None))
     args = [

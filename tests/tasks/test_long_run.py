@@ -130,7 +130,8 @@ def test_a_box_set_on_the_floor_stays_where_it_lands(drop_m):
 
 
 def _moved_box_twin(sink) -> Twin:
-    """The default scene but the box 60 mm off pick_place's first pick point (out of the pad's ray)."""
+    """The default scene but the box 60 mm off pick_place's first pick point (out of the pad's
+    ray)."""
     box = SceneObject("box", pos_m=(POINT_A_M[0] + 0.06, POINT_A_M[1], 0.025))
     return Twin(TwinConfig(objects=(box,)), sinks=[sink])
 

@@ -1,5 +1,5 @@
-"""Scripted teleop (--keys): a pick and a place on the seeds' 1-degree key grid, recorded and replayed
-exactly; unknown keys, joint limits and bad options."""
+"""Scripted teleop (--keys): a pick and a place on the seeds' 1-degree key grid, recorded and
+replayed exactly; unknown keys, joint limits and bad options."""
 
 import math
 import re
@@ -210,7 +210,8 @@ def test_teleop_config_carries_the_keymap():
 
 
 def test_paced_script_runs_in_real_time_with_the_same_commands():
-    """With a window (--gui) a script is paced to wall-clock time; the Commands and Frames are the same."""
+    """With a window (--gui) a script is paced to wall-clock time; the Commands and Frames are the
+    same."""
     _, fast = _scripted("mtb", "d k wait", interval_s=0.1)
     config = teleop_config(TeleopOptions(robot="mtb"))
     collector = FrameCollector()

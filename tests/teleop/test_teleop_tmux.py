@@ -1,5 +1,6 @@
-"""The curses teleop screen driven in a real terminal (tmux): a pick and a place with the mtb map, the screen
-read back at every stage, then quit and `twin replay` the recording with an exact match."""
+"""The curses teleop screen driven in a real terminal (tmux): a pick and a place with the mtb map,
+the screen read back at every stage, then quit and `twin replay` the recording with an exact
+match."""
 
 import math
 import os
@@ -111,7 +112,8 @@ def arrived(text: str) -> bool:
 
 
 def arrived_at(text: str, deg: tuple[int, int]) -> bool:
-    """Arrived, with the shoulder and elbow targets at these whole degrees (every key sent has been read)."""
+    """Arrived, with the shoulder and elbow targets at these whole degrees (every key sent has been
+    read)."""
     return arrived(text) and all(
         abs(t - d) < 0.01 for t, d in zip(_joints(text)[1][:2], deg, strict=True)
     )
@@ -122,7 +124,8 @@ def box_xyz(text: str) -> tuple[float, float, float]:
 
 
 def mtb_keys(delta_deg: tuple[int, int]) -> list[str]:
-    """The mtb map's keys for a shoulder/elbow move: 5-degree steps (a/d, j/l), then 1-degree steps (A/D, J/L)."""
+    """The mtb map's keys for a shoulder/elbow move: 5-degree steps (a/d, j/l), then 1-degree steps
+    (A/D, J/L)."""
     keys = []
     for delta, (minus, plus) in zip(delta_deg, (("a", "d"), ("j", "l")), strict=True):
         coarse, fine = divmod(abs(delta), 5)

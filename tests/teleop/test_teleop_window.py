@@ -1,6 +1,6 @@
-"""Keys typed into the PyBullet window (--gui) under Xvfb, injected with the X server's XTEST extension:
-each becomes a recorded key Command, Shift gives capitals, Esc (which closes PyBullet's window) ends the
-session cleanly, and the recording replays exactly."""
+"""Keys typed into the PyBullet window (--gui) under Xvfb, injected with the X server's XTEST
+extension: each becomes a recorded key Command, Shift gives capitals, Esc (which closes PyBullet's
+window) ends the session cleanly, and the recording replays exactly."""
 
 import ctypes
 import os

@@ -1,4 +1,5 @@
-"""tools/bench.py: the framework runs a section against the measured baseline and prints one table."""
+"""tools/bench.py: the framework runs a section against the measured baseline and prints one
+table."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""`twin diff` and `twin check` on real MCAP recordings: exit codes, reports, sensitivity, bad input."""
+"""`twin diff` and `twin check` on real MCAP recordings: exit codes, reports, sensitivity, bad
+input."""
 
 from __future__ import annotations
 
@@ -185,7 +186,8 @@ def test_rrd_diff_view_shows_both_runs_and_the_error(files, capsys, tmp_path):
 
 
 def tamper(src, dst, step: int, dx_m: float) -> None:
-    """A golden whose box drifts dx_m from `step` on: what a behaviour change looks like to check."""
+    """A golden whose box drifts dx_m from `step` on: what a behaviour change looks like to
+    check."""
     rec = load(src)
     rec.frames.object_poses[step:, 0, 0] += dx_m
     save(rec, dst)

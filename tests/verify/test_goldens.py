@@ -1,5 +1,5 @@
-"""Every golden in recordings/ re-runs and replays to a match under the default verdict (bits here, or within
-the measured noise floor on another machine); the `golden` pytest fixture works."""
+"""Every golden in recordings/ re-runs and replays to a match under the default verdict (bits here,
+or within the measured noise floor on another machine); the `golden` pytest fixture works."""
 
 from __future__ import annotations
 
@@ -43,7 +43,8 @@ def test_every_golden_rerun_matches():
 
 @pytest.mark.parametrize("path", GOLDENS, ids=lambda p: p.stem)
 def test_every_golden_replays_to_a_match_with_every_event(path, tmp_path):
-    """Replay feeds the file's commands (what the task said included) back: nothing may differ beyond noise."""
+    """Replay feeds the file's commands (what the task said included) back: nothing may differ
+    beyond noise."""
     from twin.verify.noise import judge
     from twin.verify.replay import replay, replayed_event_kinds
 

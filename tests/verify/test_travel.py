@@ -1,8 +1,10 @@
-"""Verdicts that travel: goldens check on simulated other machines, and real changes are still caught there.
+"""Verdicts that travel: goldens check on simulated other machines, and real changes are still
+caught there.
 
-Other machines are simulated on this one: OPENBLAS_CORETYPE picks numpy's BLAS/LAPACK kernel (as another
-CPU does), NPY_DISABLE_CPU_FEATURES switches numpy's SIMD dispatch, and GLIBC_TUNABLES takes glibc's libm
-off its FMA code paths (as on a CPU without FMA). Each runs `twin` in a child process with that setting.
+Other machines are simulated on this one: OPENBLAS_CORETYPE picks numpy's BLAS/LAPACK kernel (as
+another CPU does), NPY_DISABLE_CPU_FEATURES switches numpy's SIMD dispatch, and GLIBC_TUNABLES takes
+glibc's libm off its FMA code paths (as on a CPU without FMA). Each runs `twin` in a child process
+with that setting.
 """
 
 from __future__ import annotations
@@ -44,7 +46,8 @@ def twin_cli(
 
 @pytest.fixture(scope="module")
 def local_goldens(tmp_path_factory) -> Path:
-    """The committed goldens remade on this machine (twin check --update --tolerance exact on copies)."""
+    """The committed goldens remade on this machine (twin check --update --tolerance exact on
+    copies)."""
     d = tmp_path_factory.mktemp("local_goldens")
     for p in GOLDENS:
         shutil.copy(p, d / p.name)

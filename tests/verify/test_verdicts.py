@@ -217,8 +217,8 @@ def run(twin, cycles=1):
 def pick_place_and(
     task_text: str, folder: Path, exit_code: int, pick_place: Path
 ) -> tuple[Path, Path]:
-    """One pick_place cycle recorded as a.mcap (a copy of the recording pick_place), and the task file
-    task_text recorded as b.mcap."""
+    """One pick_place cycle recorded as a.mcap (a copy of the recording pick_place), and the task
+    file task_text recorded as b.mcap."""
     (folder / "other.py").write_text(task_text)
     a, b = folder / "a.mcap", folder / "b.mcap"
     shutil.copy(pick_place, a)

@@ -34,7 +34,8 @@ def twin_config(args: argparse.Namespace) -> TwinConfig:
 
 
 def add_camera_options(p: argparse.ArgumentParser) -> None:
-    """--camera NAME (repeatable), --camera-size WxH, --camera-hz HZ: cameras rendered into the recordings."""
+    """--camera NAME (repeatable), --camera-size WxH, --camera-hz HZ: cameras rendered into the
+    recordings."""
     default_w, default_h = DEFAULT_SIZE_PX
     p.add_argument(
         "--camera",
@@ -91,7 +92,8 @@ def size_px(text: str) -> tuple[int, int]:
 
 
 def add_param_option(p: argparse.ArgumentParser) -> None:
-    """--param NAME=VALUE (repeatable): a task parameter, checked against the task function's signature."""
+    """--param NAME=VALUE (repeatable): a task parameter, checked against the task function's
+    signature."""
     p.add_argument(
         "--param",
         action="append",
@@ -106,8 +108,8 @@ def add_param_option(p: argparse.ArgumentParser) -> None:
 
 def param_pair(text: str) -> tuple[str, object]:
     """An argparse type: NAME=VALUE, VALUE parsed as JSON when it parses (numbers, true/false, null,
-    lists), else kept as a string; NaN, infinities (also a bare nan or inf) and integers outside int64
-    are refused, anywhere in the value."""
+    lists), else kept as a string; NaN, infinities (also a bare nan or inf) and integers outside
+    int64 are refused, anywhere in the value."""
     name, sep, raw = text.partition("=")
     if not sep or not name.isidentifier():
         raise argparse.ArgumentTypeError(
@@ -157,7 +159,8 @@ def whole_number(minimum: int = 1) -> Callable[[str], int]:
 
 
 def seconds(name: str, *, allow_zero: bool) -> Callable[[str], float]:
-    """An argparse type: a finite number of seconds of simulated time, > 0 (or >= 0 with allow_zero)."""
+    """An argparse type: a finite number of seconds of simulated time, > 0 (or >= 0 with
+    allow_zero)."""
 
     def parse(text: str) -> float:
         try:

@@ -1,4 +1,5 @@
-"""`twin export`: recordings out as Parquet, CSV or a LeRobot v3.0 dataset (the work is in twin.export).
+"""`twin export`: recordings out as Parquet, CSV or a LeRobot v3.0 dataset (the work is in
+twin.export).
 
 Exit codes: 0 written; 1 with --verify, a recording whose replay is not exact was left out (the rest
 is written; nothing is written if none is left); 2 bad input, checked before any work.

@@ -142,7 +142,8 @@ def _print_summary(twin: Twin, summary: _Summary, wall_s: float) -> None:
 
 
 def _error_m(event) -> float | None:
-    """A `placed` event's error_m when it is a finite number of metres, else None (missing, null, text)."""
+    """A `placed` event's error_m when it is a finite number of metres, else None (missing, null,
+    text)."""
     value = event.data.get("error_m") if isinstance(event.data, dict) else None
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
@@ -207,7 +208,8 @@ def _add_teleop_parser(sub) -> None:
 
 
 class _OneLineErrors(argparse.ArgumentParser):
-    """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit it."""
+    """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit
+    it."""
 
     def error(self, message: str):
         self.exit(2, f"twin: error: {message} (see `{self.prog} --help`)\n")

@@ -1,5 +1,5 @@
-"""Recording options shared by `twin run`, `teleop` and `serve`, and the `twin info` and `twin recover`
-commands: argument parsing and printing only."""
+"""Recording options shared by `twin run`, `teleop` and `serve`, and the `twin info` and `twin
+recover` commands: argument parsing and printing only."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The `twin serve` subcommand's arguments (the `twin` CLI registers it; the server lives in server.py)."""
+"""The `twin serve` subcommand's arguments (the `twin` CLI registers it; the server lives in
+server.py)."""
 
 from __future__ import annotations
 

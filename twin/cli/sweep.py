@@ -1,4 +1,5 @@
-"""The `twin sweep` command: argument parsing, progress and printing only (the work is twin.sweep)."""
+"""The `twin sweep` command: argument parsing, progress and printing only (the work is
+twin.sweep)."""
 
 from __future__ import annotations
 
@@ -332,8 +333,8 @@ class Worse(TwinError):
 
 
 def sweep_spec(args: argparse.Namespace):
-    """The definition the arguments ask for: TASK.toml's (with --scenarios/--seed overriding it), or one
-    built from --robot, --scenarios, --seed, --vary and --param."""
+    """The definition the arguments ask for: TASK.toml's (with --scenarios/--seed overriding it), or
+    one built from --robot, --scenarios, --seed, --vary and --param."""
     from twin.sweep.spec import SweepSpec, load_spec, parse_vary
 
     if args.task.endswith(".toml"):
@@ -460,8 +461,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _out_dir(path: str, *, clear: bool) -> Path:
-    """The output folder, created (its parent must exist, or be runs/); a full sweep removes the recordings an
-    earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is mistaken for its own."""
+    """The output folder, created (its parent must exist, or be runs/); a full sweep removes the
+    recordings an earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is
+    mistaken for its own."""
     from twin.record.outputs import make_default_folder
     from twin.sweep.worker import FAILURES, SCENARIOS
 

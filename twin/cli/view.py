@@ -1,4 +1,5 @@
-"""`twin view`: argument parsing and printing for showing a recording in Rerun (the work is in record.rerun.viewer)."""
+"""`twin view`: argument parsing and printing for showing a recording in Rerun (the work is in
+record.rerun.viewer)."""
 
 from __future__ import annotations
 

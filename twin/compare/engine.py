@@ -189,7 +189,8 @@ def comparable(golden: Recording, candidate: Recording) -> list[str]:
 
 
 def refuse_incomparable(golden: Recording, candidate: Recording, force: bool) -> list[str]:
-    """NotComparable unless the runs compare (or force); with force, the notes on what was compared despite."""
+    """NotComparable unless the runs compare (or force); with force, the notes on what was compared
+    despite."""
     why = comparable(golden, candidate)
     if why and not force:
         raise NotComparable(
@@ -207,10 +208,11 @@ def compare(
     event_kinds: frozenset[str] | None = None,
     floor: NoiseFloor | None = None,
 ) -> DiffResult:
-    """Compare candidate with golden; raises NotComparable for structurally different runs unless force.
+    """Compare candidate with golden; raises NotComparable for structurally different runs unless
+    force.
 
-    event_kinds: the event kinds to pair one by one (None: all). floor: the candidate's measured noise
-    floor; each field then allows the larger of its tolerance and the floor at that step.
+    event_kinds: the event kinds to pair one by one (None: all). floor: the candidate's measured
+    noise floor; each field then allows the larger of its tolerance and the floor at that step.
     """
     tol = tolerances or Tolerances()
     notes = refuse_incomparable(golden, candidate, force)
@@ -353,8 +355,8 @@ def _field_arrays(
     g_obj: np.ndarray,
     c_obj: np.ndarray,
 ):
-    """Per field: (name, golden (n, k, c), candidate (n, k, c), metric, element names) on aligned steps;
-    common, g_obj, c_obj as _common_objects gives them."""
+    """Per field: (name, golden (n, k, c), candidate (n, k, c), metric, element names) on aligned
+    steps; common, g_obj, c_obj as _common_objects gives them."""
     g, c = golden.frames, candidate.frames
     g_names = [o.name for o in golden.config.objects]
     c_names = [o.name for o in candidate.config.objects]
@@ -372,7 +374,8 @@ def _field_arrays(
 def error_series(
     golden: Recording, candidate: Recording
 ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """On the steps both runs have: (steps, t_ns, {field: largest error over its elements}), FIELDS units."""
+    """On the steps both runs have: (steps, t_ns, {field: largest error over its elements}), FIELDS
+    units."""
     gi, ci = align(golden.frames.step, candidate.frames.step)
     out = {}
     for name, a, b, metric, _elements in _field_arrays(
@@ -412,7 +415,8 @@ def _field_stat(
     t_ns: np.ndarray,
     floor: np.ndarray | None = None,
 ) -> FieldStat:
-    """One field over the aligned steps; floor: the noise floor per step (allowed where above tolerance)."""
+    """One field over the aligned steps; floor: the noise floor per step (allowed where above
+    tolerance)."""
     unit = FIELDS[name][0]
     n = a.shape[0]
     if n == 0 or a.shape[1] == 0:
@@ -567,8 +571,8 @@ def _command_text(c: Command) -> str:
 
 
 def _split_annotations(commands: list[Command]) -> tuple[list[Command], list[Command]]:
-    """(commands that act, annotations): an `event` Command acts on nothing, so the two sequences are
-    paired apart and an extra annotation does not shift the pairing of the commands that act."""
+    """(commands that act, annotations): an `event` Command acts on nothing, so the two sequences
+    are paired apart and an extra annotation does not shift the pairing of the commands that act."""
     return [c for c in commands if c.kind != "event"], [c for c in commands if c.kind == "event"]
 
 
@@ -581,7 +585,8 @@ def _command_stat(
     name: str = "commands.sequence",
 ) -> FieldStat:
     """Two command sequences, entry by entry: step, kind and text exactly, the numbers in their
-    arguments within tolerance (0: equal; inf: the field is off); entries from until_step on are not judged."""
+    arguments within tolerance (0: equal; inf: the field is off); entries from until_step on are not
+    judged."""
     if until_step is not None:
         g, c = [x for x in g if x.step < until_step], [x for x in c if x.step < until_step]
     n = max(len(g), len(c))
@@ -630,8 +635,9 @@ def _commands_agree(a: Command, b: Command, tolerance: float) -> bool:
 
 
 def on_path(command: Command, d: Divergence, joint_names: tuple[str, ...] | list[str]) -> bool:
-    """Whether a command acts on the diverging field: a joint's command on that joint's fields, any joint,
-    suction or key command on the pad, the hold and the objects; an annotation (`event`) on nothing."""
+    """Whether a command acts on the diverging field: a joint's command on that joint's fields, any
+    joint, suction or key command on the pad, the hold and the objects; an annotation (`event`) on
+    nothing."""
     if command.kind == "event":
         return False
     if d.channel == "joints":
@@ -658,7 +664,8 @@ def on_path(command: Command, d: Divergence, joint_names: tuple[str, ...] | list
 def likely_cause(
     commands: list[Command], d: Divergence, joint_names: tuple[str, ...] | list[str] = ()
 ) -> str:
-    """The golden's last command at or before the divergence that acts on the diverging field, or ""."""
+    """The golden's last command at or before the divergence that acts on the diverging field, or
+    ""."""
     if d.channel == "commands":
         return ""
     before = [c for c in commands if c.step <= d.step and on_path(c, d, joint_names)]
@@ -714,9 +721,9 @@ def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) 
 
 
 def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns: int) -> FieldStat:
-    """Each camera's pictures, paired by step: the mean absolute difference of their pixels (levels 0..255),
-    inf for a picture only one run has. Identical bytes are 0 without decoding; others are decoded by the
-    model (CameraTrack.rgb). Not looked at when the tolerance is inf."""
+    """Each camera's pictures, paired by step: the mean absolute difference of their pixels (levels
+    0..255), inf for a picture only one run has. Identical bytes are 0 without decoding; others are
+    decoded by the model (CameraTrack.rgb). Not looked at when the tolerance is inf."""
     unit = FIELDS["images.pixels"][0]
     if tolerance == INF:
         return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
@@ -776,7 +783,8 @@ def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns
 
 
 def _picture_error(g, i: int, c, j: int) -> float:
-    """Mean absolute pixel difference of picture i of track g and picture j of track c (inf: other sizes)."""
+    """Mean absolute pixel difference of picture i of track g and picture j of track c (inf: other
+    sizes)."""
     if g.data[i] == c.data[j]:
         return 0.0
     a, b = g.rgb(i), c.rgb(j)

@@ -72,8 +72,8 @@ class NoiseFloor:
 
 
 def command_number_difference(a: Command, b: Command) -> float | None:
-    """The largest difference between the numbers of two commands' arguments; None when they differ in
-    anything else (step, kind, argument names, strings, booleans, list lengths)."""
+    """The largest difference between the numbers of two commands' arguments; None when they differ
+    in anything else (step, kind, argument names, strings, booleans, list lengths)."""
     if a.step != b.step or a.kind != b.kind:
         return None
     return _value_difference(a.args, b.args)
@@ -151,8 +151,8 @@ def measure(
 
 
 def _event_drift(a: list, b: list) -> tuple[int, int | None]:
-    """Events of a and b paired by (kind, body) in order, as compare.events pairs them: the largest step
-    shift of a pair, and the first step of an event left without a pair (None: all paired)."""
+    """Events of a and b paired by (kind, body) in order, as compare.events pairs them: the largest
+    step shift of a pair, and the first step of an event left without a pair (None: all paired)."""
     ka, kb = by_key(a), by_key(b)
     shift, unpaired = 0, []
     for xs, ys in ((ka.get(k, []), kb.get(k, [])) for k in ka.keys() | kb.keys()):

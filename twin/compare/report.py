@@ -20,8 +20,8 @@ FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}
 
 
 def fmt(x: float, unit: str = "") -> str:
-    """A number for people: inf/nan spelled out, 4 significant digits (an exact 0 only for a true zero:
-    2.85e-51 stays 2.85e-51), unit appended."""
+    """A number for people: inf/nan spelled out, 4 significant digits (an exact 0 only for a true
+    zero: 2.85e-51 stays 2.85e-51), unit appended."""
     if isinstance(x, float) and math.isinf(x):
         text = "inf"
     elif isinstance(x, float) and math.isnan(x):
@@ -75,8 +75,8 @@ def first_detail(d: Divergence) -> str:
 
 
 def allowance_text(d: Divergence) -> str:
-    """How far a divergence passed what was allowed there: "3.2x the allowance (noise floor F, tolerance T)";
-    "" for a field without a unit (commands, outcome) or an allowance of 0."""
+    """How far a divergence passed what was allowed there: "3.2x the allowance (noise floor F,
+    tolerance T)"; "" for a field without a unit (commands, outcome) or an allowance of 0."""
     limit = max(d.tolerance, d.floor)
     if not d.unit or not limit > 0:
         return ""
@@ -87,9 +87,9 @@ def allowance_text(d: Divergence) -> str:
 
 
 def noise_summary(result: DiffResult) -> str:
-    """One line on how the candidate stands to the golden: bit-identical; within numerical noise (the
-    largest difference against what was allowed there); or changed (how much, where, how many times the
-    allowance: the larger of the tolerance and the measured noise floor)."""
+    """One line on how the candidate stands to the golden: bit-identical; within numerical noise
+    (the largest difference against what was allowed there); or changed (how much, where, how many
+    times the allowance: the larger of the tolerance and the measured noise floor)."""
     if result.first is not None:
         d = result.first
         if not d.unit:
@@ -189,7 +189,8 @@ def _event_lines(result: DiffResult, dt_s: float) -> list[str]:
 
 
 def _cause_lines(result: DiffResult) -> list[str]:
-    """The first command difference (when it is not itself the first divergence) and the likely cause."""
+    """The first command difference (when it is not itself the first divergence) and the likely
+    cause."""
     lines = []
     fc = result.first_command
     if fc is not None and fc is not result.first:
@@ -316,7 +317,8 @@ def render_json(result: DiffResult) -> str:
 
 
 def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
-    """One testcase per field (the final poses among them), one for the events; failures carry the details."""
+    """One testcase per field (the final poses among them), one for the events; failures carry the
+    details."""
     cases = []
     for f in result.fields:
         msg = None if f.ok else f"{first_line(f.first)}: {first_detail(f.first)}"
@@ -357,7 +359,8 @@ def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
 
 
 def render_check_junit(outcomes: list, suite: str = "twin check") -> str:
-    """JUnit XML for `twin check`: one testcase per golden (check.Outcome), the text report on failure."""
+    """JUnit XML for `twin check`: one testcase per golden (check.Outcome), the text report on
+    failure."""
     suite_el = ET.Element(
         "testsuite",
         name=suite,

@@ -3,10 +3,11 @@
 Names are `channel.field`. Joint values are rad for the revolute joints and m for the prismatic Z
 joint (one number covers both: 2.5e-4 means 0.25 mrad or 0.25 mm). A tolerance of 0 means
 bit-identical; `inf` switches a field off. Discrete fields (suction state, run length, the command
-sequence, the task outcome) compare exactly unless off; the numbers in commands' arguments compare within
-the commands.sequence tolerance; event counts allow that many events more or fewer. Events pair within a
-window of steps; a window of None (the `outcome` preset) leaves them out. The `noise` preset, the default,
-is `tight` that also allows each field the candidate's measured noise floor (compare.noise).
+sequence, the task outcome) compare exactly unless off; the numbers in commands' arguments compare
+within the commands.sequence tolerance; event counts allow that many events more or fewer. Events
+pair within a window of steps; a window of None (the `outcome` preset) leaves them out. The `noise`
+preset, the default, is `tight` that also allows each field the candidate's measured noise floor
+(compare.noise).
 """
 
 from __future__ import annotations

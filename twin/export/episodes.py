@@ -2,8 +2,8 @@
 
 An episode is a span of one recording's steps: the whole recording, or one pick-place cycle (from
 the task's `cycle N: ...` phase event to the next cycle's, the last to the end of the recording).
-Resampling takes the nearest recorded frame: dataset frame k of an episode starting at time t0 is the
-recorded frame whose t_ns is nearest t0 + k / fps (the earlier of two as near; exact integer
+Resampling takes the nearest recorded frame: dataset frame k of an episode starting at time t0 is
+the recorded frame whose t_ns is nearest t0 + k / fps (the earlier of two as near; exact integer
 arithmetic), so every value in a dataset is one the twin recorded, never an interpolation. Nearest,
 not the last before: a step's t_ns is rounded to whole nanoseconds (240 Hz: 4166667 ns), so step 8k
 lies 2.7k ns after k / 30 s, and "the last before" would take step 8k - 1.
@@ -47,8 +47,8 @@ class Episode:
 
 
 def spans(rec: Recording, mode: str) -> list[tuple[int, int, int]]:
-    """(first step, end step exclusive, cycle) of each episode in rec: one for mode "recording",
-    one per pick-place cycle for mode "cycles" (ConfigError if the recording has no cycle phases)."""
+    """(first step, end step exclusive, cycle) of each episode in rec: one for mode "recording", one
+    per pick-place cycle for mode "cycles" (ConfigError if the recording has no cycle phases)."""
     if len(rec.frames) == 0:
         raise ConfigError(f"recording {rec.path!r} has no frames; expected at least one to export")
     last = int(rec.frames.step[-1]) + 1
@@ -70,13 +70,14 @@ def spans(rec: Recording, mode: str) -> list[tuple[int, int, int]]:
 
 
 def max_fps(rec: Recording) -> int:
-    """The highest --fps for rec: its physics rate (steps per second, rounded: 240 for 4166667 ns)."""
+    """The highest --fps for rec: its physics rate (steps per second, rounded: 240 for 4166667
+    ns)."""
     return max(1, round(NS_PER_S / rec.config.dt_ns))
 
 
 def check_fps(rec: Recording, fps: int) -> None:
-    """ConfigError unless 1 <= fps <= rec's physics rate: faster, dataset frames would only repeat steps
-    (and their number, memory and time grow with fps, not with the recording)."""
+    """ConfigError unless 1 <= fps <= rec's physics rate: faster, dataset frames would only repeat
+    steps (and their number, memory and time grow with fps, not with the recording)."""
     top = max_fps(rec)
     if isinstance(fps, bool) or not isinstance(fps, int) or fps < 1:
         raise ConfigError(f"--fps {fps!r:.30} is invalid; expected a whole number 1..{top}")
@@ -101,8 +102,8 @@ def check_times(rec: Recording) -> None:
 
 
 def frame_count(rec: Recording, first_step: int, end_step: int, fps: int) -> tuple[int, int, int]:
-    """(first row, last row, dataset frames) of the episode of rec's frames with first_step <= step <
-    end_step at fps: frames k with k / fps <= its span. Nothing allocated."""
+    """(first row, last row, dataset frames) of the episode of rec's frames with first_step <= step
+    < end_step at fps: frames k with k / fps <= its span. Nothing allocated."""
     steps = rec.frames.step
     lo = int(np.searchsorted(steps, first_step, side="left"))
     hi = int(np.searchsorted(steps, end_step, side="left")) - 1
@@ -124,8 +125,8 @@ def resample(rec: Recording, first_step: int, end_step: int, fps: int, cycle: in
 
 
 def nearest(times: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """For each wanted time, the index of the nearest of the sorted times (the earlier of two as near).
-    Both in the same integer unit (here ns × fps), so the choice is exact."""
+    """For each wanted time, the index of the nearest of the sorted times (the earlier of two as
+    near). Both in the same integer unit (here ns × fps), so the choice is exact."""
     after = np.clip(np.searchsorted(times, wanted, side="left"), 0, len(times) - 1)
     before = np.maximum(after - 1, 0)
     take_before = np.abs(wanted - times[before]) <= np.abs(times[after] - wanted)
@@ -134,7 +135,8 @@ def nearest(times: np.ndarray, wanted: np.ndarray) -> np.ndarray:
 
 def episodes(recordings: list[Recording], fps: int, mode: str) -> list[Episode]:
     """Every episode of the recordings, in order (mode "recording" or "cycles"). Checks the bounds
-    first (fps, frame times, MAX_DATASET_FRAMES in all): ConfigError or RecordingError, nothing allocated."""
+    first (fps, frame times, MAX_DATASET_FRAMES in all): ConfigError or RecordingError, nothing
+    allocated."""
     for rec in recordings:
         check_fps(rec, fps)
         check_times(rec)

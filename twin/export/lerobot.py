@@ -72,7 +72,8 @@ def episode_arrays(ep: Episode, command: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def camera_names(episodes: list[Episode]) -> list[str]:
-    """The cameras every episode's recording has (the same set in each, each of one size, else ConfigError)."""
+    """The cameras every episode's recording has (the same set in each, each of one size, else
+    ConfigError)."""
     sets = {tuple(sorted(getattr(ep.rec, "cameras", None) or {})) for ep in episodes}
     if len(sets) > 1:
         raise ConfigError(
@@ -93,9 +94,10 @@ def camera_names(episodes: list[Episode]) -> list[str]:
 
 
 def check_finite(episodes: list[Episode]) -> None:
-    """RecordingError (exit 2) for a NaN or infinite value among the exported frames' state and action:
-    LeRobot normalizes features by their stats.json mean and std, which one NaN makes NaN (and strict
-    JSON has no NaN), so such a recording is refused, naming the value; the csv and parquet tables keep it."""
+    """RecordingError (exit 2) for a NaN or infinite value among the exported frames' state and
+    action: LeRobot normalizes features by their stats.json mean and std, which one NaN makes NaN
+    (and strict JSON has no NaN), so such a recording is refused, naming the value; the csv and
+    parquet tables keep it."""
     for ep in episodes:
         f, rows = ep.rec.frames, ep.rows
         state_of, action_of = state_names(ep.rec)
@@ -114,7 +116,8 @@ def check_finite(episodes: list[Episode]) -> None:
 
 
 def camera_picks(ep: Episode, name: str, fps: int) -> np.ndarray:
-    """Which of the camera's pictures each dataset frame shows: the one taken nearest its time (episodes.nearest)."""
+    """Which of the camera's pictures each dataset frame shows: the one taken nearest its time
+    (episodes.nearest)."""
     track = ep.rec.cameras[name]
     if len(track.t_ns) == 0:
         raise ConfigError(f"recording {ep.rec.path!r}: camera {name!r} has no images")
@@ -134,8 +137,8 @@ def write_dataset(
     """Write the episodes (with one task text each) as a LeRobot v3.0 dataset in folder `out`.
 
     Written in a temporary folder beside `out` and renamed into place when complete, so `out` is
-    either what it was or the whole new dataset. Such folders left by killed exports (their process is
-    gone) are removed first."""
+    either what it was or the whole new dataset. Such folders left by killed exports (their process
+    is gone) are removed first."""
     if not episodes:
         raise ConfigError("no episode to export")
     cameras = camera_names(episodes)
@@ -164,10 +167,10 @@ def write_dataset(
 
 
 def remove_stale(out: Path) -> list[Path]:
-    """Remove what killed exports of `out` left beside it: `.NAME.partial-PID` folders, and `.NAME.old-PID-*`
-    folders (an overwritten dataset) once `out` holds a complete dataset again. Only those whose process
-    PID is gone, or is a later process that reused the id (it started after the folder last changed):
-    a running export's folders are kept. Returns the folders removed."""
+    """Remove what killed exports of `out` left beside it: `.NAME.partial-PID` folders, and
+    `.NAME.old-PID-*` folders (an overwritten dataset) once `out` holds a complete dataset again.
+    Only those whose process PID is gone, or is a later process that reused the id (it started after
+    the folder last changed): a running export's folders are kept. Returns the folders removed."""
     removed = []
     try:
         entries = list(out.parent.iterdir())
@@ -193,8 +196,8 @@ def remove_stale(out: Path) -> list[Path]:
 
 
 def _writing(pid: int, folder: Path) -> bool:
-    """Whether process pid may still be writing folder: it is alive and started before the folder last
-    changed (a process started later only reuses a dead export's id). Alive when unsure."""
+    """Whether process pid may still be writing folder: it is alive and started before the folder
+    last changed (a process started later only reuses a dead export's id). Alive when unsure."""
     if not 0 < pid <= 2**31:
         return False
     try:
@@ -212,7 +215,8 @@ def _writing(pid: int, folder: Path) -> bool:
 
 
 def _start_time(pid: int) -> float | None:
-    """When process pid started (seconds since the epoch), from /proc; None where there is no /proc."""
+    """When process pid started (seconds since the epoch), from /proc; None where there is no
+    /proc."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
             fields = f.read().rsplit(b")", 1)[1].split()
@@ -353,10 +357,10 @@ def _camera_images(
     ep_rows: list[dict],
     stats_out: list[dict],
 ):
-    """Each episode's images of one camera in turn, decoded one picture at a time (a picture shown by
-    several dataset frames is decoded once: they come in order); records each episode's video span in
-    its row and, once its images are through, its image statistics in stats_out (from the sampled
-    frames' subsampled copies, image_stats's sample)."""
+    """Each episode's images of one camera in turn, decoded one picture at a time (a picture shown
+    by several dataset frames is decoded once: they come in order); records each episode's video
+    span in its row and, once its images are through, its image statistics in stats_out (from the
+    sampled frames' subsampled copies, image_stats's sample)."""
     key, at = f"observation.images.{name}", 0
     stride = image_stride(shape)
     for ep, row in zip(episodes, ep_rows, strict=True):
@@ -446,8 +450,8 @@ def _write_episodes(root: Path, ep_rows: list[dict], ep_stats: list[dict]) -> No
 
 
 def _write_tasks(root: Path, task_index: dict[str, int]) -> None:
-    """tasks.parquet as pandas writes LeRobot's DataFrame (task_index, indexed by the task text): the
-    pandas metadata is written by hand, so pandas is not needed to write it."""
+    """tasks.parquet as pandas writes LeRobot's DataFrame (task_index, indexed by the task text):
+    the pandas metadata is written by hand, so pandas is not needed to write it."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -498,8 +502,8 @@ def _write_json(path: Path, value: dict) -> None:
 
 
 def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
-    """Move the finished dataset into place: as a new folder, into an empty one, or (overwrite) over an
-    old dataset, which is renamed aside first and removed only once the new one is in place."""
+    """Move the finished dataset into place: as a new folder, into an empty one, or (overwrite) over
+    an old dataset, which is renamed aside first and removed only once the new one is in place."""
     for path in sorted(tmp.rglob("*")):
         if path.is_file():
             fsync_file(path)

@@ -49,7 +49,8 @@ def export_lerobot(
     say: Callable[[str], None] = lambda line: None,
 ) -> tuple[Written | None, list[Source]]:
     """Export the recordings at paths as a LeRobot dataset in out; returns what was written (None
-    when --verify left every recording out: then nothing is written) and every source, verified or not."""
+    when --verify left every recording out: then nothing is written) and every source, verified or
+    not."""
     check_folder(out, paths, overwrite)
     sources = [load_source(path) for path in paths]
     # a damaged file is exit 2 before any work, also before --verify's replay

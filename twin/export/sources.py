@@ -17,8 +17,9 @@ from twin.model.types import COMMAND_ARGS
 
 @dataclass
 class Source:
-    """One input recording and what is known of it: `replay` is "exact", "within numerical noise (...)", "differs: ...", or
-    "not checked" (no --verify); `verified` True, False or None (not checked)."""
+    """One input recording and what is known of it: `replay` is "exact", "within numerical noise
+    (...)", "differs: ...", or "not checked" (no --verify); `verified` True, False or None (not
+    checked)."""
 
     path: str
     rec: Recording
@@ -55,9 +56,10 @@ def load_source(path: str) -> Source:
 
 
 def check_commands(rec: Recording) -> None:
-    """RecordingError (exit 2) for a command `twin replay` refuses (Twin.apply): an unknown kind, other
-    arguments than the kind's (model.types.COMMAND_ARGS), or, for what an export reads of them (the
-    suction.command column), a signal name or key that is no dictionary key or a value int() refuses."""
+    """RecordingError (exit 2) for a command `twin replay` refuses (Twin.apply): an unknown kind,
+    other arguments than the kind's (model.types.COMMAND_ARGS), or, for what an export reads of them
+    (the suction.command column), a signal name or key that is no dictionary key or a value int()
+    refuses."""
     for c in rec.commands:
         expected = COMMAND_ARGS.get(c.kind)
         if expected is None:
@@ -93,8 +95,8 @@ def check_pictures(rec: Recording) -> None:
 
 
 def check_recording(rec: Recording, fps: int | None = None) -> None:
-    """What an export refuses in a recording before any work: malformed commands, bad pictures, frame
-    times that are not their steps', and (for a dataset at fps) fps above its physics rate."""
+    """What an export refuses in a recording before any work: malformed commands, bad pictures,
+    frame times that are not their steps', and (for a dataset at fps) fps above its physics rate."""
     from twin.export.episodes import check_fps, check_times
 
     check_commands(rec)
@@ -105,8 +107,8 @@ def check_recording(rec: Recording, fps: int | None = None) -> None:
 
 
 def verify(source: Source) -> Source:
-    """Replay the recording and compare it as `twin replay` does (the default `noise` verdict: bits, or
-    within the replay's measured noise floor on another machine); sets replay and verified."""
+    """Replay the recording and compare it as `twin replay` does (the default `noise` verdict: bits,
+    or within the replay's measured noise floor on another machine); sets replay and verified."""
     from twin.compare.report import first_line, noise_summary
     from twin.compare.tolerances import DEFAULT, Tolerances
     from twin.verify.noise import judge

@@ -1,4 +1,5 @@
-"""LeRobot's feature statistics: min, max, mean, std, count and the quantiles q01, q10, q50, q90, q99.
+"""LeRobot's feature statistics: min, max, mean, std, count and the quantiles q01, q10, q50, q90,
+q99.
 
 Numeric features are reduced over frames (one value per component); images per colour channel in
 [0, 1], shaped (3, 1, 1) as LeRobot keeps them. The quantiles here are exact (numpy's linear
@@ -34,7 +35,8 @@ def feature_stats(values: np.ndarray) -> dict[str, list]:
 
 
 def image_sample(count: int) -> range:
-    """Which of an episode's `count` frames image_stats looks at: evenly spaced, at most IMAGE_SAMPLE_FRAMES."""
+    """Which of an episode's `count` frames image_stats looks at: evenly spaced, at most
+    IMAGE_SAMPLE_FRAMES."""
     return range(0, count, max(1, count // IMAGE_SAMPLE_FRAMES))[:IMAGE_SAMPLE_FRAMES]
 
 

@@ -87,7 +87,8 @@ class TwinConfig:
         return self.dt_ns * 1e-9
 
     def to_dict(self) -> dict:
-        """As stored in a recording; without cameras the record has no `cameras` field (as before cameras)."""
+        """As stored in a recording; without cameras the record has no `cameras` field (as before
+        cameras)."""
         out = asdict(self)
         if not self.cameras:
             del out["cameras"]
@@ -161,7 +162,8 @@ MAX_TEXT = 4096  # characters in a name, path or description
 @dataclass(frozen=True)
 class Field:
     """One field: kind "int", "float", "bool", "str", "floats" (count numbers), "strs", "dict", a
-    nested schema (dict) or a list of one (list[dict]); numbers in lo..hi (lo excluded if open_lo)."""
+    nested schema (dict) or a list of one (list[dict]); numbers in lo..hi (lo excluded if
+    open_lo)."""
 
     kind: object
     lo: float = -math.inf
@@ -170,8 +172,8 @@ class Field:
     count: int = 0  # floats/strs: exactly this many (0: one to 64)
 
     def expected(self) -> str:
-        """What a value of this field must be, in words (for every kind: a nested schema and a list of
-        them are a dict and a list, which are not hashable, so they are told apart first)."""
+        """What a value of this field must be, in words (for every kind: a nested schema and a list
+        of them are a dict and a list, which are not hashable, so they are told apart first)."""
         kind = self.kind
         if isinstance(kind, dict):
             return "a JSON object"
@@ -299,7 +301,8 @@ def _bad(where: str, value: object, spec: Field) -> ConfigError:
 
 
 def _record(value: object, schema: dict, where: str) -> dict:
-    """A JSON object checked field by field against schema; missing fields with defaults are filled in."""
+    """A JSON object checked field by field against schema; missing fields with defaults are filled
+    in."""
     if not isinstance(value, dict):
         raise ConfigError(
             f"twin.config {where or 'record'} = {shown(value)} is invalid; expected a JSON object"

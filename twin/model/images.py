@@ -1,5 +1,5 @@
-"""Cameras: where a camera sits and what it sees (CameraSpec), one rendered picture (CameraImage, what
-sinks get through on_image) and all of one camera's pictures in a recording (CameraTrack).
+"""Cameras: where a camera sits and what it sees (CameraSpec), one rendered picture (CameraImage,
+what sinks get through on_image) and all of one camera's pictures in a recording (CameraTrack).
 
 A camera is part of the scene's configuration (TwinConfig.cameras), so a replay renders it again.
 Pictures are stored encoded (twin.pictures) and decoded only when asked (CameraTrack.rgb). A picture
@@ -31,9 +31,9 @@ CAMERA_FRAME_PREFIX = "camera_"  # a camera's frame_id in /tf: the prefix, then 
 
 @dataclass(frozen=True)
 class CameraSpec:
-    """A pinhole camera: image size, rate in simulated time, vertical field of view, clip planes, and
-    its eye, target and up direction, in world axes (mount "world") or in the pad tip's frame (mount
-    "pad": it moves and turns with the pad)."""
+    """A pinhole camera: image size, rate in simulated time, vertical field of view, clip planes,
+    and its eye, target and up direction, in world axes (mount "world") or in the pad tip's frame
+    (mount "pad": it moves and turns with the pad)."""
 
     name: str
     width_px: int = DEFAULT_SIZE_PX[0]
@@ -91,7 +91,8 @@ class CameraSpec:
         return (f, 0.0, self.width_px / 2, 0.0, f, self.height_px / 2, 0.0, 0.0, 1.0)
 
     def projection(self) -> tuple[float, ...]:
-        """The 3x4 projection matrix P of this undistorted camera (K and a zero fourth column), row-major."""
+        """The 3x4 projection matrix P of this undistorted camera (K and a zero fourth column),
+        row-major."""
         k = self.intrinsics()
         return (*k[0:3], 0.0, *k[3:6], 0.0, *k[6:9], 0.0)
 
@@ -178,8 +179,9 @@ class CameraImage(NamedTuple):
 @dataclass
 class CameraTrack:
     """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]),
-    taken from pose[i] (x, y, z, qx, qy, qz, qw: the camera's /tf in the file; empty when a file holds
-    none). source: the file they were read from ("" in memory), named when a picture is bad."""
+    taken from pose[i] (x, y, z, qx, qy, qz, qw: the camera's /tf in the file; empty when a file
+    holds none). source: the file they were read from ("" in memory), named when a picture is
+    bad."""
 
     name: str
     width_px: int
@@ -195,16 +197,18 @@ class CameraTrack:
         return len(self.data)
 
     def rgb(self, i: int) -> np.ndarray:
-        """Picture i decoded: (height, width, 3) uint8. Its header is checked first (check): a picture
-        that is not the camera's format and size is a RecordingError, and is never decoded."""
+        """Picture i decoded: (height, width, 3) uint8. Its header is checked first (check): a
+        picture that is not the camera's format and size is a RecordingError, and is never
+        decoded."""
         try:
             return decode_rgb(self.data[i], self.format, (self.width_px, self.height_px))
         except ValueError as err:
             raise self._bad(i, str(err)) from None
 
     def check(self, i: int | None = None) -> None:
-        """Picture i's header (every picture's with i None) against the camera: RecordingError unless it
-        is a picture of the camera's format and configured size. Reads headers only: microseconds each."""
+        """Picture i's header (every picture's with i None) against the camera: RecordingError
+        unless it is a picture of the camera's format and configured size. Reads headers only:
+        microseconds each."""
         for k in range(len(self.data)) if i is None else (i,):
             try:
                 checked_header(self.data[k], self.format, (self.width_px, self.height_px))
@@ -248,9 +252,9 @@ def recorded_images(
     frame_steps: np.ndarray,
     pad_poses: np.ndarray,
 ) -> list[CameraImage]:
-    """A recording's pictures as CameraImages in step order (camera order within a step), each with the
-    pose its track holds (the file's /tf). A track without poses (a file that holds none) has them
-    worked out from the recorded frame at (or, in a decimated file, just before) its step."""
+    """A recording's pictures as CameraImages in step order (camera order within a step), each with
+    the pose its track holds (the file's /tf). A track without poses (a file that holds none) has
+    them worked out from the recorded frame at (or, in a decimated file, just before) its step."""
     out = []
     for spec in cameras:
         track = by_name.get(spec.name)

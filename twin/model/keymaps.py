@@ -7,7 +7,8 @@ way): key name -> list of actions, in SI units (rad for revolute joints, m for Z
   ["target", joint, value|"min"|"max"|"down"|"up"]   ("down"/"up": the scene's Z values, profile.z_down/z_up)
   ["position", joint, value]          set at once (a jump, like sim.setJointPosition)
   ["add", joint, delta, "target"|"position"]  the map's own variable for the joint (from 0, as the
-                                      reports' scripts keep one) moves by delta; the joint is sent there
+                                      reports' scripts keep one) moves by delta; the joint is sent
+                                      there
   ["diff", joint, a, b]               the joint's variable becomes a's minus b's; its target goes there
   ["signal", name, value]             an integer signal
   ["suction", 0|1]                    the profile's suction signal
@@ -148,8 +149,9 @@ MAX_REPEAT = 100_000  # presses per token: ample for any session, and no runaway
 
 
 def parse_keys(text: str) -> list[str]:
-    """A --keys script: whitespace-separated tokens, each a key name or `wait` (no key for one interval),
-    optionally `*N` to repeat it N times ("d*30 e 8 wait*4 s"). Quit keys end the session there."""
+    """A --keys script: whitespace-separated tokens, each a key name or `wait` (no key for one
+    interval), optionally `*N` to repeat it N times ("d*30 e 8 wait*4 s"). Quit keys end the session
+    there."""
     keys: list[str] = []
     for token in text.split():
         name, count = token, 1
@@ -286,8 +288,8 @@ def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in
 
 
 def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
-    """A user's key map file (.toml or .json): a table `keys` of key = list of actions, and optionally
-    `extends = "mtb"|"seed000"|...` to start from a built-in map."""
+    """A user's key map file (.toml or .json): a table `keys` of key = list of actions, and
+    optionally `extends = "mtb"|"seed000"|...` to start from a built-in map."""
     p = Path(path)
     src = repr(str(p))
     if p.suffix not in (".toml", ".json"):

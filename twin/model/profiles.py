@@ -73,7 +73,8 @@ class RobotProfile:
     z_up_m: float | None = None  # the Z value the scene travels at (None: the stroke's high end)
 
     def __post_init__(self) -> None:
-        """Fill in z_down_m / z_up_m from the stroke's ends (so a profile's dict always holds numbers)."""
+        """Fill in z_down_m / z_up_m from the stroke's ends (so a profile's dict always holds
+        numbers)."""
         lo, hi = self.z_lower_m, self.z_lower_m + self.z_stroke_m
         lowering = self.axis_signs[2] > 0
         if self.z_down_m is None:
@@ -95,7 +96,8 @@ class RobotProfile:
 
     def joint_limits(self) -> tuple[tuple[float, float], ...]:
         """(lower, upper) per joint in role order: rad, rad, m, rad. A cyclic revolute joint has no
-        limit; it reports +-2 pi (one turn either way of zero), which its short-way targets never pass."""
+        limit; it reports +-2 pi (one turn either way of zero), which its short-way targets never
+        pass."""
         turn = CYCLIC_RANGE_RAD
         return (
             (-turn, turn)

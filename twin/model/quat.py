@@ -1,5 +1,5 @@
-"""Quaternion arithmetic on (x, y, z, w): tuples, and numpy columns of them (quat_mul_columns). The one
-place for rotation math, shared by the recorders, the viewer and the remote API."""
+"""Quaternion arithmetic on (x, y, z, w): tuples, and numpy columns of them (quat_mul_columns). The
+one place for rotation math, shared by the recorders, the viewer and the remote API."""
 
 from __future__ import annotations
 

@@ -52,8 +52,9 @@ class Recording:
         return outcome
 
     def to_arrow(self, table: str = "frames"):
-        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per scalar,
-        units in the names), "events" or "commands"; the columns are described in model.tables."""
+        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per
+        scalar, units in the names), "events" or "commands"; the columns are described in
+        model.tables."""
         from twin.model import tables
 
         builders = {

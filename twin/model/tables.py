@@ -12,9 +12,11 @@ Frame columns, in field order:
   pad.x_m, pad.y_m, pad.z_m, pad.qx, pad.qy, pad.qz, pad.qw     float64 (pad tip, world frame)
   <object>.x_m .. <object>.qw                       float64 (each scene object by name)
   suction.command                                   bool: a suction signal was on for the physics step
-                                                    that made this frame (Commands stamped before it)
+                                                    that made this frame (Commands stamped before
+                                                    it)
 
-pyarrow is imported when a table is built, not with the module: importing the model needs only numpy.
+pyarrow is imported when a table is built, not with the module: importing the model needs only
+numpy.
 """
 
 from __future__ import annotations
@@ -52,7 +54,8 @@ _RESERVED = {"step", "t_ns", "joint", "suction", "hold", "pad"}
 
 
 def _unit(field, *, prismatic: bool = False) -> str:
-    """The field's unit as a column suffix: "rad|m" picks by joint type, "N·m" becomes Nm, "/" becomes _."""
+    """The field's unit as a column suffix: "rad|m" picks by joint type, "N·m" becomes Nm, "/"
+    becomes _."""
     unit = field.compared[0].unit.split("|")[1 if prismatic else 0]
     return unit.replace("·", "").replace("/", "_")
 
@@ -84,7 +87,8 @@ def frame_column_names(object_names: list[str]) -> list[str]:
 
 
 def frames_table(rec):
-    """One row per recorded frame of a model.recording.Recording, one column per scalar (see module doc)."""
+    """One row per recorded frame of a model.recording.Recording, one column per scalar (see module
+    doc)."""
     import pyarrow as pa
 
     cols = rec.frames

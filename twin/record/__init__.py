@@ -1,4 +1,5 @@
-"""Recording a run: `open_recorders(...)` gives the sinks (MCAP, optionally Rerun) and ends them cleanly."""
+"""Recording a run: `open_recorders(...)` gives the sinks (MCAP, optionally Rerun) and ends them
+cleanly."""
 
 from __future__ import annotations
 
@@ -24,10 +25,10 @@ def open_recorders(
     background: bool = True,
     engine: dict[str, str] | None = None,
 ) -> Iterator[list]:
-    """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file is
-    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised
-    (interrupted: Ctrl-C, SIGTERM or SIGHUP). Files are written as NAME.partial and renamed into place
-    when finalized; the folders must exist.
+    """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file
+    is finalized with run_outcome ok, or error/interrupted (and the message) when the block raised
+    (interrupted: Ctrl-C, SIGTERM or SIGHUP). Files are written as NAME.partial and renamed into
+    place when finalized; the folders must exist.
 
     background: the writers run in a recorder process on the other core (the same files, byte for
     byte, at a fraction of the stepping thread's time); False keeps them in this process.

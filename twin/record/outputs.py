@@ -18,8 +18,8 @@ DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no 
 
 
 def make_default_folder(folder: str | os.PathLike) -> bool:
-    """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so the
-    README's first command works in a fresh clone; any other folder is the user's to create.
+    """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so
+    the README's first command works in a fresh clone; any other folder is the user's to create.
     True if `folder` exists (now). OutputError if runs/ cannot be made."""
     folder = Path(folder)
     if folder.is_dir() or folder != Path(DEFAULT_FOLDER):
@@ -36,7 +36,8 @@ def make_default_folder(folder: str | os.PathLike) -> bool:
 
 
 def partial_path(path: str | os.PathLike) -> Path:
-    """Where a recording of `path` is written until it is finalized: `runs/x.mcap` -> `runs/x.mcap.partial`."""
+    """Where a recording of `path` is written until it is finalized: `runs/x.mcap` ->
+    `runs/x.mcap.partial`."""
     p = Path(path)
     return p.with_name(p.name + PARTIAL_SUFFIX)
 
@@ -54,9 +55,9 @@ def check_output(
     inputs: Iterable[str | os.PathLike] = (),
     option: str = "output",
 ) -> Path:
-    """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder exists
-    (runs/ is made if missing: make_default_folder), and it is none of `inputs` (nor the same file
-    through a link). ConfigError (exit 2) otherwise."""
+    """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder
+    exists (runs/ is made if missing: make_default_folder), and it is none of `inputs` (nor the same
+    file through a link). ConfigError (exit 2) otherwise."""
     p = Path(path)
     if p.suffix != suffix:
         raise ConfigError(f"{option} {str(path)!r} should end in {suffix}")

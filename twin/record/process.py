@@ -5,13 +5,13 @@ The stepping thread packs each Frame into a ring of rows in shared memory (twin.
 microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
 events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
 timer (every millisecond while rows come), takes in what was published and says how far it read. The
-twin wakes a recorder through the pipe when it has used half its slack, and waits for it only when it
-has used all of it (the MCAP writer's: 0.4 s of simulated time, which bounds what a kill -9 loses; the
-Rerun writer's: the ring). Files are byte-for-byte what the
-in-process writers make, since the same writer code sees the same stream. If the twin's process dies,
-the recorder sees the pipe close, takes in every row that was published and leaves the MCAP file
-unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it
-then finalizes the files): the recorder ignores them.
+twin wakes a recorder through the pipe when it has used half its slack, and waits for it only when
+it has used all of it (the MCAP writer's: 0.4 s of simulated time, which bounds what a kill -9
+loses; the Rerun writer's: the ring). Files are byte-for-byte what the in-process writers make,
+since the same writer code sees the same stream. If the twin's process dies, the recorder sees the
+pipe close, takes in every row that was published and leaves the MCAP file unfinalized (and
+recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it then
+finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
@@ -153,8 +153,9 @@ class RecorderProcess(Sink):
         )
 
     def _publish(self) -> None:
-        """The others down the pipes, then the rows up to here published; then room for the next ones
-        (the others first: a recorder that sees the rows must find every message that came before them)."""
+        """The others down the pipes, then the rows up to here published; then room for the next
+        ones (the others first: a recorder that sees the rows must find every message that came
+        before them)."""
         self._send_others()
         written = self._written
         reads = self._ring.publish(written)
@@ -199,7 +200,8 @@ class RecorderProcess(Sink):
 
 class _Child:
     """One recorder process, the twin's end of its pipe, and how far ahead of it the twin may go
-    (`ahead` rows: for the MCAP file that bounds what a kill -9 loses; the view gets the whole ring)."""
+    (`ahead` rows: for the MCAP file that bounds what a kill -9 loses; the view gets the whole
+    ring)."""
 
     def __init__(
         self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple
@@ -289,8 +291,8 @@ def _serve(
     rate: int,
     engine: dict[str, str] | None,
 ) -> None:
-    """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes, finish
-    on request.
+    """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes,
+    finish on request.
 
     A writer that fails stops the recording there (what was written is kept, unfinalized, as after a
     crash); the process goes on reading (so the twin never waits for it) until the close request and
@@ -345,7 +347,8 @@ def _serve(
 
 def _take_messages(conn, feed: _Feed):
     """Read every message waiting in the pipe: the others go to the feed's queue. Returns None, the
-    close request's (outcome, error), or "died" when the pipe has closed (the twin's process died)."""
+    close request's (outcome, error), or "died" when the pipe has closed (the twin's process
+    died)."""
     while conn.poll(0):
         try:
             message = conn.recv_bytes()
@@ -360,7 +363,8 @@ def _take_messages(conn, feed: _Feed):
 
 
 class _Feed:
-    """Rows from the ring and the others from the pipe, to the writers in the order the twin made them."""
+    """Rows from the ring and the others from the pipe, to the writers in the order the twin made
+    them."""
 
     def __init__(self, ring: FrameRing, sinks: list) -> None:
         self.ring, self.sinks = ring, sinks
@@ -370,7 +374,8 @@ class _Feed:
         self.failure = ""
 
     def take(self, written: int, *, final: bool) -> None:
-        """Rows [read, written) and the others that come before row `written` (all of them when final)."""
+        """Rows [read, written) and the others that come before row `written` (all of them when
+        final)."""
         try:
             while self.queue and (final or self.queue[0][0] <= written):
                 before, kind, data = self.queue.popleft()

@@ -38,7 +38,8 @@ class FrameRing:
         self._lock = multiprocessing.get_context("fork").Lock()
 
     def offset(self, frame: int) -> int:
-        """Where the row of frame number `frame` (counted from the run's first) lives in `memory`."""
+        """Where the row of frame number `frame` (counted from the run's first) lives in
+        `memory`."""
         return self._header + (frame % self.capacity) * self.rows.size
 
     # -- the twin's side ------------------------------------------------------------------------
@@ -68,8 +69,8 @@ class FrameRing:
             _COUNTER.pack_into(self.memory, _COUNTER.size * (1 + reader), read)
 
     def runs(self, start: int, end: int) -> list[memoryview]:
-        """Rows [start, end) as views into the ring: one run, or two where they wrap around. Valid until
-        `release` passes them."""
+        """Rows [start, end) as views into the ring: one run, or two where they wrap around. Valid
+        until `release` passes them."""
         view, runs = memoryview(self.memory), []
         while start < end:
             # the ring's end, or `end`

@@ -80,8 +80,8 @@ class FrameRows:
         return np.frombuffer(buf, dtype=self.dtype)
 
     def columns(self, buf, *, copy: bool = True) -> FrameColumns:
-        """A buffer of rows as FrameColumns: each column a contiguous copy, or (copy=False) a strided
-        view into the buffer, for a reader that copies the values out at once."""
+        """A buffer of rows as FrameColumns: each column a contiguous copy, or (copy=False) a
+        strided view into the buffer, for a reader that copies the values out at once."""
         records = self.records(buf)
         if not copy:
             return FrameColumns(**{f.name: records[f.name] for f in FRAME_FIELDS})

@@ -1,4 +1,5 @@
-"""How much a connection may make `twin serve` hold before it has sent a whole request: one frame's worth.
+"""How much a connection may make `twin serve` hold before it has sent a whole request: one frame's
+worth.
 
 ZMQ hands a message to the server only once every part of it is in, and ZMQ_MAXMSGSIZE bounds each
 part (frame) alone. So a peer sending one multipart message of many large parts, or request after
@@ -12,8 +13,8 @@ plus the handshake's few bytes: a request is one frame, and a REQ client sends t
 its reply), the server shuts the connection down. ZMQ then reads end of file, drops the unfinished
 message and frees it; the peer sees its connection close (there is no reply to give: its message
 never ended). The measure is taken each time data arrives on a connection (edge-triggered epoll, in
-a thread of its own: the server's loop does not wake for it), so what one connection makes the server
-hold stays within about MAX_UNREAD_BYTES.
+a thread of its own: the server's loop does not wake for it), so what one connection makes the
+server hold stays within about MAX_UNREAD_BYTES.
 
 Where TCP_INFO or epoll is missing (not Linux), nothing is measured: each frame is still bounded by
 MAX_FRAME_BYTES, a multipart message is not.
@@ -35,7 +36,8 @@ _TCP_INFO_LEN = _BYTES_RECEIVED_AT + 8
 
 
 def wire_bytes(frames: Iterable) -> int:
-    """Bytes these frames took on the wire: each its body and a ZMTP header (2 bytes up to 255, else 9)."""
+    """Bytes these frames took on the wire: each its body and a ZMTP header (2 bytes up to 255, else
+    9)."""
     return sum(len(f) + (2 if len(f) <= 255 else 9) for f in frames)
 
 
@@ -49,12 +51,13 @@ class _Connection:
 
 
 class Intake:
-    """Unread bytes per connection; over `limit`, the connection is shut down (see the module docstring).
+    """Unread bytes per connection; over `limit`, the connection is shut down (see the module
+    docstring).
 
-    The server reports, in order, each connection ZMQ accepted (its descriptor, from the socket monitor),
-    each one that closed, and each message it received (the descriptor it came over, ZMQ_SRCFD); a thread
-    of ours measures a connection whenever data arrives on it. Its status lines wait in `lines()` for the
-    server's loop to print them (one writer: lines never interleave)."""
+    The server reports, in order, each connection ZMQ accepted (its descriptor, from the socket
+    monitor), each one that closed, and each message it received (the descriptor it came over,
+    ZMQ_SRCFD); a thread of ours measures a connection whenever data arrives on it. Its status lines
+    wait in `lines()` for the server's loop to print them (one writer: lines never interleave)."""
 
     def __init__(self, limit: int) -> None:
         self.limit = limit

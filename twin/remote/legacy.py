@@ -1,8 +1,8 @@
 """CoppeliaSim's legacy remote API (`import sim as vrep`, CoppeliaSim <= 4.2), in pure Python.
 
-Same call signatures, return conventions and simx_* constants as the old module, implemented over the
-ZeroMQ remote API (protocol v2) with the official client, so an old program runs against
-`twin serve` after changing only its import line:
+Same call signatures, return conventions and simx_* constants as the old module, implemented over
+the ZeroMQ remote API (protocol v2) with the official client, so an old program runs against `twin
+serve` after changing only its import line:
 
     from twin.remote import legacy as vrep      # or: import twin.remote.legacy as sim
 
@@ -128,7 +128,8 @@ def simxStart(
     timeOutInMs: int,
     commThreadCycleInMs: int,
 ) -> int:
-    """Connect; the client id (>= 0), or -1 when no server answers within timeOutInMs (5000 if <= 0)."""
+    """Connect; the client id (>= 0), or -1 when no server answers within timeOutInMs (5000 if <=
+    0)."""
     global _next_id
     host, port = _endpoint(connectionAddress, int(connectionPort))
     timeout_ms = int(timeOutInMs) if timeOutInMs and timeOutInMs > 0 else 5000

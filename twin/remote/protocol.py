@@ -55,8 +55,8 @@ class Request:
 def decode(raw: bytes) -> Request:
     """Parse one raw request; raises RequestError naming what is wrong with it.
 
-    Error messages show a client's values in brief (brief_value()), never format them whole: a value can
-    be an integer of a million digits, which repr() refuses.
+    Error messages show a client's values in brief (brief_value()), never format them whole: a value
+    can be an integer of a million digits, which repr() refuses.
     """
     if len(raw) > MAX_REQUEST_BYTES:
         raise RequestError(
@@ -120,7 +120,8 @@ def decode(raw: bytes) -> Request:
 
 
 def _refuse_tag(*args: Any) -> Any:
-    """cbor2's hook for tags it does not know (called with the CBORTag; the order differs by version)."""
+    """cbor2's hook for tags it does not know (called with the CBORTag; the order differs by
+    version)."""
     number = next((a.tag for a in args if isinstance(a, cbor2.CBORTag)), "")
     raise RequestError(f"CBOR tag {number} is not accepted (only 2 and 3, big integers)")
 

@@ -12,11 +12,12 @@ once every stepping client has asked for its next step. Wall-clock time never en
 every call that changes it is a Command stamped with the step it took effect at.
 
 Bounds on what peers can make the server hold:
-- Bytes: each frame is at most MAX_FRAME_BYTES (ZMQ closes a connection announcing a bigger one), and
-  each connection may have sent at most MAX_UNREAD_BYTES that the server has not yet taken as whole
-  messages (one frame's worth). Over that, the server shuts the connection down (intake.py): ZMQ hands
-  a multipart message over only once all its parts are in, so this is what stops a peer from making it
-  buffer an endless multipart message (or requests sent without waiting for the replies).
+- Bytes: each frame is at most MAX_FRAME_BYTES (ZMQ closes a connection announcing a bigger one),
+  and each connection may have sent at most MAX_UNREAD_BYTES that the server has not yet taken as
+  whole messages (one frame's worth). Over that, the server shuts the connection down (intake.py):
+  ZMQ hands a multipart message over only once all its parts are in, so this is what stops a peer
+  from making it buffer an endless multipart message (or requests sent without waiting for the
+  replies).
 - Clients: at most MAX_CLIENTS uuids at once, MAX_CLIENTS_PER_CONNECTION per connection. A client is
   forgotten when its connection closes or after its own timeout; and when all MAX_CLIENTS slots are
   taken, a new uuid takes the slot of the least recently seen client that has been silent for at
@@ -93,8 +94,9 @@ class Server:
 
     What a peer can make it hold is bounded (module docstring): MAX_FRAME_BYTES per frame and
     MAX_UNREAD_BYTES per connection (a connection over it is shut down); MAX_CLIENTS clients,
-    MAX_CLIENTS_PER_CONNECTION per connection, and when all slots are taken a new client takes the slot
-    of the least recently seen one silent for EVICT_IDLE_S or more (step_grace_s if it is stepping).
+    MAX_CLIENTS_PER_CONNECTION per connection, and when all slots are taken a new client takes the
+    slot of the least recently seen one silent for EVICT_IDLE_S or more (step_grace_s if it is
+    stepping).
     """
 
     def __init__(
@@ -285,8 +287,8 @@ class Server:
                     )
 
     def _drain_monitor(self) -> None:
-        """Connections ZMQ accepted (measured from now on) and closed (a client's program ended or closed
-        its socket: forget its clients), in the order they happened."""
+        """Connections ZMQ accepted (measured from now on) and closed (a client's program ended or
+        closed its socket: forget its clients), in the order they happened."""
         while self._monitor.get(zmq.EVENTS) & zmq.POLLIN:
             event = parse_monitor_message(self._monitor.recv_multipart())
             fd = int(event["value"])
@@ -364,12 +366,14 @@ class Server:
             return encode_err(f"{func}: internal error: {message}")
 
     def _make_room(self, peer: bytes, now: float) -> str:
-        """Why a new uuid cannot be served now, or '' if it can (having forgotten an idle client if need be).
+        """Why a new uuid cannot be served now, or '' if it can (having forgotten an idle client if
+        need be).
 
-        At most MAX_CLIENTS_PER_CONNECTION uuids per connection and MAX_CLIENTS in all. When all slots are
-        taken, the least recently seen client silent for EVICT_IDLE_S or more (step_grace_s if it is in
-        stepping mode, which would hold the others' sim.step() back that long anyway) is forgotten: its
-        slot goes to the new one. If it calls again it is served as a new client."""
+        At most MAX_CLIENTS_PER_CONNECTION uuids per connection and MAX_CLIENTS in all. When all
+        slots are taken, the least recently seen client silent for EVICT_IDLE_S or more
+        (step_grace_s if it is in stepping mode, which would hold the others' sim.step() back that
+        long anyway) is forgotten: its slot goes to the new one. If it calls again it is served as a
+        new client."""
         if (
             peer
             and sum(1 for c in self.clients.values() if c.peer == peer)

@@ -1,4 +1,5 @@
-"""The scene a remote server exposes: stopped, running or paused, one Twin and one recording per run.
+"""The scene a remote server exposes: stopped, running or paused, one Twin and one recording per
+run.
 
 As in CoppeliaSim, the scene waits stopped until a client starts the simulation; stopping ends the
 run, finalizes its recording and resets the scene (a fresh Twin). Calls made while stopped act on
@@ -81,7 +82,8 @@ def run_path(base: Path, run_index: int) -> Path:
 
 
 class Scene:
-    """A Twin behind CoppeliaSim's simulation states, recording each start..stop run to its own file."""
+    """A Twin behind CoppeliaSim's simulation states, recording each start..stop run to its own
+    file."""
 
     def __init__(
         self,
@@ -173,11 +175,12 @@ class Scene:
             self.log(f"simulation paused at t={self.twin.t_s:.3f} s")
 
     def stop(self, *, reset: bool = True) -> None:
-        """End the run: finalize its recording, then reset the scene (which releases what the pad held);
-        reset=False at shutdown, where no next run needs a fresh twin.
+        """End the run: finalize its recording, then reset the scene (which releases what the pad
+        held); reset=False at shutdown, where no next run needs a fresh twin.
 
-        The recording ends with the run's last step as simulated; the release is the reset's doing, not
-        an event of the run, so `twin replay` (which feeds the Commands back) reproduces the file exactly.
+        The recording ends with the run's last step as simulated; the release is the reset's doing,
+        not an event of the run, so `twin replay` (which feeds the Commands back) reproduces the
+        file exactly.
         """
         if self.state == SIMULATION_STOPPED:
             return

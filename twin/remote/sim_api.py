@@ -84,7 +84,8 @@ REL = Param("relativeToObjectHandle", "int", HANDLE_WORLD)
 
 
 class SimApi:
-    """sim.* calls that act on the scene. The server handles step, setStepping and the protocol's own."""
+    """sim.* calls that act on the scene. The server handles step, setStepping and the protocol's
+    own."""
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene

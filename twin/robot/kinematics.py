@@ -56,8 +56,8 @@ def heading(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> float:
 
 
 def elbow_and_wrist_xy(profile: RobotProfile, q) -> tuple[tuple, tuple]:
-    """Where the elbow and the wrist axis stand in the plane (m), for joint values q: a tuple, or numpy
-    columns (q[j] an array over frames), which give arrays."""
+    """Where the elbow and the wrist axis stand in the plane (m), for joint values q: a tuple, or
+    numpy columns (q[j] an array over frames), which give arrays."""
     t1, t12 = link_angles(profile, q)
     ex, ey = profile.link1_m * np.cos(t1), profile.link1_m * np.sin(t1)
     return (ex, ey), (ex + profile.link2_m * np.cos(t12), ey + profile.link2_m * np.sin(t12))
@@ -73,7 +73,8 @@ def fk(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> PadPose:
 def pad_pose_function(profile: RobotProfile):
     """q -> the pad tip's pose (x, y, z, qx, qy, qz, qw) for joint values q, the pad pointing down
     about z by its heading (half of heading()'s angle in the quaternion): the one statement of the
-    arm's forward kinematics, with the profile's numbers bound once; the twin calls it every physics step."""
+    arm's forward kinematics, with the profile's numbers bound once; the twin calls it every physics
+    step."""
     l1, l2, z0 = profile.link1_m, profile.link2_m, profile.tip_z0_m
     zero, (s1, s2, s3, s4) = profile.shoulder_zero_rad, profile.axis_signs
     cos, sin = math.cos, math.sin

@@ -77,9 +77,9 @@ def _combined(
     float, tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
 ]:
     """Mass, centre of mass, principal moments and the rpy of the principal axes of rigid parts
-    given as (mass, centre, principal moments about that centre, axes along the link frame's).
-    Plain float arithmetic and Jacobi rotations, no BLAS or LAPACK (whose kernel numpy picks by CPU),
-    and moments and angles rounded to URDF_DIGITS: every x86-64 CPU writes the same URDF."""
+    given as (mass, centre, principal moments about that centre, axes along the link frame's). Plain
+    float arithmetic and Jacobi rotations, no BLAS or LAPACK (whose kernel numpy picks by CPU), and
+    moments and angles rounded to URDF_DIGITS: every x86-64 CPU writes the same URDF."""
     mass = sum(m for m, _c, _i in parts)
     com = [sum(m * c[k] for m, c, _i in parts) / mass for k in range(3)]
     tensor = [[0.0] * 3 for _ in range(3)]
@@ -329,7 +329,8 @@ def urdf_text(profile: RobotProfile) -> str:
 
 
 def mesh_paths(profile: RobotProfile) -> list[Path]:
-    """The mesh files a user URDF references (resolved next to the URDF), sorted; [] for built-ins."""
+    """The mesh files a user URDF references (resolved next to the URDF), sorted; [] for
+    built-ins."""
     if not profile.urdf_path:
         return []
     base = Path(profile.urdf_path).parent
@@ -365,7 +366,8 @@ class UrdfJoint:
     transforms (one value at a time) and the Rerun drawing (many at once) both turn into poses.
 
     The child frame sits at `xyz`, rotated by `rpy`, from the parent's; a revolute or continuous
-    joint then turns it about `axis` (a unit vector in the joint frame), a prismatic one slides it."""
+    joint then turns it about `axis` (a unit vector in the joint frame), a prismatic one slides
+    it."""
 
     name: str
     kind: str  # revolute | continuous | prismatic | fixed | ...
@@ -390,7 +392,8 @@ def parse_urdf(urdf: str) -> ET.Element:
 
 def urdf_joints(urdf: str | ET.Element) -> list[UrdfJoint]:
     """Every joint of a URDF (its text, or parse_urdf's root of it), in document order; ConfigError
-    when it does not parse or a joint lacks its parent or child, or a moving joint has no direction."""
+    when it does not parse or a joint lacks its parent or child, or a moving joint has no
+    direction."""
     root = parse_urdf(urdf) if isinstance(urdf, str) else urdf
     joints = []
     for elem in root.iter("joint"):

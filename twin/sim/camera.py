@@ -5,8 +5,8 @@ to its sinks (on_image).
 The pictures are drawn in a world of their own (a DIRECT client holding the robot and the scene's
 objects, never stepped), posed from the frame's joint positions and object poses: rendering never
 touches the physics of the run, so a run with cameras moves exactly as one without, and the same
-frames give the same pixels. The floor is left out of that world: it fills the picture and cost 12 of
-the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
+frames give the same pixels. The floor is left out of that world: it fills the picture and cost 12
+of the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
 """
 
 from __future__ import annotations
@@ -97,10 +97,11 @@ class CameraRenderer:
     hand_on (the twin's fan-out to its sinks).
 
     background (the default, unless this process is a daemon, which may not fork: a worker of a
-    pool): the pictures are drawn in a render process of their own (forked, with its own render world),
-    so the stepping goes on while they are drawn. Either way a frame's pictures are handed on when the
-    pictures of LAG_PICTURES later camera frames have been asked for (or at flush and close): always at
-    the same point of the run, drawn here or there, so the files are byte-identical."""
+    pool): the pictures are drawn in a render process of their own (forked, with its own render
+    world), so the stepping goes on while they are drawn. Either way a frame's pictures are handed
+    on when the pictures of LAG_PICTURES later camera frames have been asked for (or at flush and
+    close): always at the same point of the run, drawn here or there, so the files are
+    byte-identical."""
 
     def __init__(
         self,
@@ -147,7 +148,8 @@ class CameraRenderer:
             self._hand_on(image)
 
     def flush(self) -> None:
-        """Hand on the pictures not handed on yet (before the recorders close: a run's last pictures)."""
+        """Hand on the pictures not handed on yet (before the recorders close: a run's last
+        pictures)."""
         while self.pending:
             self._emit_next()
 
@@ -171,7 +173,8 @@ _FAILED = b"!"
 
 
 class _RenderProcess:
-    """A forked child with its own render world: gets (cameras, frame), answers with the pictures."""
+    """A forked child with its own render world: gets (cameras, frame), answers with the
+    pictures."""
 
     def __init__(self, config: TwinConfig) -> None:
         self.pending = 0
@@ -206,8 +209,8 @@ class _RenderProcess:
 
 
 def _render_loop(conn, config: TwinConfig) -> None:
-    """The render process (twin.helpers): draw each frame it is sent with the cameras named, until told
-    to close or the twin's end of the pipe closes."""
+    """The render process (twin.helpers): draw each frame it is sent with the cameras named, until
+    told to close or the twin's end of the pipe closes."""
     specs = {c.name: c for c in config.cameras}
     world = RenderWorld(config)
     while True:

@@ -44,8 +44,9 @@ class Suction:
         self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]
     ) -> list[SuctionEvent]:
         """Advance the pad's state for the coming step from the latest Frame; returns what happened.
-        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter).
-        heading_of(frame): the pad's heading (rad), asked for only when an object is attached."""
+        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot
+        matter). heading_of(frame): the pad's heading (rad), asked for only when an object is
+        attached."""
         p = self.params
         # holding on: nothing changes
         if on and self.on and self.held != NO_BODY and p.infinite_strength:
@@ -85,9 +86,9 @@ class Suction:
         return events
 
     def _idle_on(self) -> bool | None:
-        """The one `on` that leaves the pad as it is: False while it is off, True while it holds on with
-        infinite strength (sensed stays held), else None. The twin calls update() only for another `on`
-        (pick_place: 198 calls instead of 1495 in 2517 steps)."""
+        """The one `on` that leaves the pad as it is: False while it is off, True while it holds on
+        with infinite strength (sensed stays held), else None. The twin calls update() only for
+        another `on` (pick_place: 198 calls instead of 1495 in 2517 steps)."""
         if not self.on:
             return False
         return True if self.held != NO_BODY and self.params.infinite_strength else None

@@ -40,8 +40,9 @@ class Twin:
         sinks: list[Sink] = (),
         camera_background: bool | None = None,
     ) -> None:
-        """camera_background: draw the cameras' pictures in a render process (None: unless this process
-        is a daemon, which may not fork), or False in the stepping thread (twin.sim.camera)."""
+        """camera_background: draw the cameras' pictures in a render process (None: unless this
+        process is a daemon, which may not fork), or False in the stepping thread
+        (twin.sim.camera)."""
         self.config = config or TwinConfig()
         self.profile = self.config.profile
         self._world = World(self.config, gui=gui)
@@ -206,8 +207,8 @@ class Twin:
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
         """Say something now (a task's phase, a placement report, a client's log line): an `event`
-        Command, so a replay says it again at the same step. Data must be JSON data (numpy values are
-        turned into numbers and lists)."""
+        Command, so a replay says it again at the same step. Data must be JSON data (numpy values
+        are turned into numbers and lists)."""
         if not isinstance(kind, str) or not kind:
             raise ConfigError(f"event kind {kind!r:.40} is invalid; expected a non-empty string")
         args = {
@@ -346,7 +347,8 @@ class Twin:
             self.settle()
 
     def lower(self) -> None:
-        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z stroke)."""
+        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z
+        stroke)."""
         self.set_joint_target(Z, self.profile.z_down())
         self.settle()
 
@@ -462,8 +464,8 @@ class Twin:
     )
 
     def _add_cameras(self, background: bool | None):
-        """The configuration's cameras' renderer (twin.sim.camera), or None: it sees each frame after
-        every sink, and the twin hands its pictures to the sinks (_send_image)."""
+        """The configuration's cameras' renderer (twin.sim.camera), or None: it sees each frame
+        after every sink, and the twin hands its pictures to the sinks (_send_image)."""
         if not self.config.cameras:
             return None
         from twin.sim.camera import CameraRenderer
@@ -471,8 +473,8 @@ class Twin:
         return CameraRenderer(self.config, self._send_image, background=background)
 
     def finish_pictures(self) -> None:
-        """Hand the cameras' pictures still being drawn to the sinks now (close does it too): for a caller
-        that closes its recorders before the twin."""
+        """Hand the cameras' pictures still being drawn to the sinks now (close does it too): for a
+        caller that closes its recorders before the twin."""
         if self._camera_renderer is not None:
             self._camera_renderer.flush()
 

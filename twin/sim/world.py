@@ -91,7 +91,8 @@ class World:
 
     # -- building ---------------------------------------------------------------------------
     def build(self) -> None:
-        """Build the scene in its fixed order: reset, engine parameters, floor, robot, objects (once, at start)."""
+        """Build the scene in its fixed order: reset, engine parameters, floor, robot, objects
+        (once, at start)."""
         c = self.client
         pb.resetSimulation(physicsClientId=c)
         self._constraint = NO_CONSTRAINT
@@ -242,7 +243,8 @@ class World:
         return (q0, q1, q2, q3), (v0, v1, v2, v3), (e0, e1, e2, e3), poses, force, torque
 
     def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> int:
-        """The scene object (index) a vertical ray going down from z_from_m hits first, or NO_BODY."""
+        """The scene object (index) a vertical ray going down from z_from_m hits first, or
+        NO_BODY."""
         body = pb.rayTest(
             (x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client
         )[0][0]
@@ -319,12 +321,13 @@ class World:
         self, object_poses: tuple[tuple[float, ...], ...]
     ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
-        object in the last step, world frame (state() asks only while something is held). A box hanging
-        still gets +m·g in z.
-        object_poses: this step's object poses (the held object's orientation turns the torque).
+        object in the last step, world frame (state() asks only while something is held). A box
+        hanging still gets +m·g in z. object_poses: this step's object poses (the held object's
+        orientation turns the torque).
 
         getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
-        along world axes, the torque along the constraint frame's axes, which are rigid with the object.
+        along world axes, the torque along the constraint frame's axes, which are rigid with the
+        object.
         """
         s = pb.getConstraintState(self._constraint, self.client)
         orn = object_poses[self._held_index][3:7]
@@ -338,8 +341,9 @@ class World:
         return (-s[0], -s[1], -s[2]), torque
 
     def _frame_workspace(self) -> None:
-        """Open the window on the arm's reach with PyBullet's side panels and camera previews hidden:
-        by default it shows the whole floor, the robot small in its middle, between debug panels."""
+        """Open the window on the arm's reach with PyBullet's side panels and camera previews
+        hidden: by default it shows the whole floor, the robot small in its middle, between debug
+        panels."""
         c = self.client
         for flag in (
             pb.COV_ENABLE_GUI,
@@ -433,9 +437,9 @@ _KEY_NAMES = {
 
 
 def decode_key_events(events: dict[int, int], keys_down: set[int]) -> list[str]:
-    """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or when
-    only its release arrives (a quick tap may show up only as released). Shift+letter gives the capital
-    when Shift is down, or was pressed, in the same poll."""
+    """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or
+    when only its release arrives (a quick tap may show up only as released). Shift+letter gives the
+    capital when Shift is down, or was pressed, in the same poll."""
     shift = bool(events.get(pb.B3G_SHIFT, 0) & (pb.KEY_IS_DOWN | pb.KEY_WAS_TRIGGERED))
     names = []
     for code, state in sorted(events.items()):

@@ -109,7 +109,8 @@ def _no_http_server(self, routes, dashboard_address, default_port=0, ssl_options
 
 
 def _define_quiet_classes() -> tuple[type, type]:
-    """(QuietScheduler, QuietWorker): Dask's Scheduler and Worker without an HTTP server, made once."""
+    """(QuietScheduler, QuietWorker): Dask's Scheduler and Worker without an HTTP server, made
+    once."""
     from distributed import Scheduler, Worker
 
     for name, base in zip(_QUIET, (Scheduler, Worker)):
@@ -148,9 +149,9 @@ def start_local(
     """A TLS-secured cluster of `jobs` single-threaded worker processes on 127.0.0.1 and this
     process's client of it: (cluster, client, dashboard URL or None). The certificate is made for
     this cluster and held in memory (cluster.security): a client needs it to connect. No HTTP server
-    runs unless `dashboard` (then the scheduler's, on 127.0.0.1 on a free port). `preload` is imported
-    in each worker as it starts; `config` is Dask configuration set while the cluster starts.
-    Close the client, then the cluster."""
+    runs unless `dashboard` (then the scheduler's, on 127.0.0.1 on a free port). `preload` is
+    imported in each worker as it starts; `config` is Dask configuration set while the cluster
+    starts. Close the client, then the cluster."""
     dask, _ = _need_dask()
     from distributed import Client, Nanny, Scheduler, SpecCluster
     from distributed.security import Security
@@ -293,7 +294,8 @@ def _security_for(address: str):
 def _probe(address: str, security, timeout_s: float) -> dict:
     """The identity a Dask server at `address` gives after the handshake. Dask's connect retries a
     refused or failed connection for timeout_s, then raises OSError; the handshake and the reply
-    that follow have no bound of their own, so the whole probe stops PROBE_GRACE_S later (_Deadline)."""
+    that follow have no bound of their own, so the whole probe stops PROBE_GRACE_S later
+    (_Deadline)."""
     from distributed.comm import connect as comm_connect
     from distributed.core import send_recv
 
@@ -310,10 +312,10 @@ def _probe(address: str, security, timeout_s: float) -> dict:
 
 
 def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
-    """A Client of the Dask scheduler at `address` (tcp://HOST:PORT, tls://HOST:PORT), reached within
-    about timeout_s or ConfigError (one line: the address, what was expected, why). For tls:// the
-    certificates come from Dask's configuration: distributed.comm.tls.ca-file, .client.cert and
-    .client.key (in ~/.config/dask/*.yaml or DASK_DISTRIBUTED__COMM__TLS__CA_FILE,
+    """A Client of the Dask scheduler at `address` (tcp://HOST:PORT, tls://HOST:PORT), reached
+    within about timeout_s or ConfigError (one line: the address, what was expected, why). For
+    tls:// the certificates come from Dask's configuration: distributed.comm.tls.ca-file,
+    .client.cert and .client.key (in ~/.config/dask/*.yaml or DASK_DISTRIBUTED__COMM__TLS__CA_FILE,
     DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT, DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY)."""
     _need_dask()
     from distributed import Client

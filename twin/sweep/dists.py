@@ -24,14 +24,15 @@ WHOLE = "a whole number -2**63..2**63-1 (int64)"
 
 
 class BadValue(ValueError):
-    """A number a value cannot carry (an integer outside int64, NaN, an infinity, 1e400); the message
-    names the number and what was expected."""
+    """A number a value cannot carry (an integer outside int64, NaN, an infinity, 1e400); the
+    message names the number and what was expected."""
 
 
 @dataclass(frozen=True)
 class Dist:
     """One distribution: kind "uniform" (args a, b), "normal" (mu, sigma), "choice" (the values) or
-    "constant" (one value). `text` is how the user wrote it (kept for the results and the summary)."""
+    "constant" (one value). `text` is how the user wrote it (kept for the results and the
+    summary)."""
 
     kind: str
     args: tuple
@@ -61,7 +62,8 @@ class Dist:
 
 
 def parse_dist(text: str, key: str = "") -> Dist:
-    """A distribution from its text; ConfigError (one line, naming the key and what was expected)."""
+    """A distribution from its text; ConfigError (one line, naming the key and what was
+    expected)."""
     shown = _short(text, 80) if isinstance(text, str) else text
     where = f"--vary {key}={shown}" if key else f"distribution {shown!r}"
     if not isinstance(text, str) or not text.strip():

@@ -109,11 +109,11 @@ class LocalExecutor:
 
 class DaskExecutor:
     """Dask distributed: `cluster.connect(scheduler)` for a running cluster (workers there need twin
-    installed), else `cluster.start_local`: `jobs` single-threaded worker processes on 127.0.0.1 that
-    speak TLS with a certificate made for the run, and no HTTP server unless `dashboard`. Batches
-    are submitted as tasks from a bounded window and streamed back as they finish; a worker that
-    dies has its tasks rescheduled on the others by Dask (the results stay the same: a scenario's
-    run depends on its inputs alone)."""
+    installed), else `cluster.start_local`: `jobs` single-threaded worker processes on 127.0.0.1
+    that speak TLS with a certificate made for the run, and no HTTP server unless `dashboard`.
+    Batches are submitted as tasks from a bounded window and streamed back as they finish; a worker
+    that dies has its tasks rescheduled on the others by Dask (the results stay the same: a
+    scenario's run depends on its inputs alone)."""
 
     name = "dask"
     # a task costs Dask a few round trips: fewer, longer ones (measured: 2 per worker kept
@@ -138,10 +138,10 @@ class DaskExecutor:
     def run_scenarios(
         self, job, batches: Iterator[list[int]], scenario_timeout_s: float | None = None
     ) -> Iterator[dict]:
-        """A sweep's rows, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker in flight.
-        Each task runs its batch in a guarded child of the Dask worker; a batch whose Dask worker was
-        lost anyway (Dask gave up: KilledWorker) is sent again one scenario per task, and a scenario
-        that loses its worker alone is a failed row."""
+        """A sweep's rows, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker in
+        flight. Each task runs its batch in a guarded child of the Dask worker; a batch whose Dask
+        worker was lost anyway (Dask gave up: KilledWorker) is sent again one scenario per task, and
+        a scenario that loses its worker alone is a failed row."""
         from distributed import as_completed
 
         token = os.urandom(6).hex()

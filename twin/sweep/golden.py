@@ -124,7 +124,8 @@ def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
 
 
 def _not_a_definition(path: Path) -> str | None:
-    """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why not."""
+    """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why
+    not."""
     try:
         data = load_toml_text(_regular_text(path), "is not valid TOML")  # also too deep: one line
     except (ConfigError, ValueError) as err:
@@ -136,8 +137,9 @@ def _not_a_definition(path: Path) -> str | None:
 
 
 def _regular_text(path: Path) -> str:
-    """path's text when it is a regular file of at most MAX_BYTES, else ValueError saying why. A FIFO,
-    device or folder is refused before it is opened (reading a FIFO waits for a writer for ever)."""
+    """path's text when it is a regular file of at most MAX_BYTES, else ValueError saying why. A
+    FIFO, device or folder is refused before it is opened (reading a FIFO waits for a writer for
+    ever)."""
     try:
         st = os.stat(path)
         if not S_ISREG(st.st_mode):

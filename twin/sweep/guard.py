@@ -4,11 +4,11 @@ A `Child` is a forked process that runs the batches of scenarios sent to it, one
 scenario, in order, so the parent always knows which scenario is running. It dies with its parent
 (PR_SET_PDEATHSIG) and leaves Ctrl-C to it. `GuardedPool` keeps `jobs` children busy with batches
 taken from an iterator (only as many as it has children: the window is bounded whatever the sweep's
-size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs past the wall-clock
-limit into a failed scenario: that scenario is run once more, alone in a fresh child and recorded per
-the job's --save; if it dies or hangs again, its row says why, the rest of its batch goes on in
-another child and so does the sweep. The local executor runs a pool of `jobs` children; a Dask task
-runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
+size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs past the
+wall-clock limit into a failed scenario: that scenario is run once more, alone in a fresh child and
+recorded per the job's --save; if it dies or hangs again, its row says why, the rest of its batch
+goes on in another child and so does the sweep. The local executor runs a pool of `jobs` children; a
+Dask task runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
 """
 
 from __future__ import annotations
@@ -110,7 +110,8 @@ class Child:
 
 
 def _serve(conn: Connection, job: Job, parent_pid: int) -> None:
-    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop", error)."""
+    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop",
+    error)."""
     libc = ctypes.CDLL(None, use_errno=True)
     prctl = getattr(libc, "prctl", None)
     if prctl is not None:

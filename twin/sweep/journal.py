@@ -31,8 +31,9 @@ def identity(spec: SweepSpec) -> dict:
 
 
 class Journal:
-    """The journal of one sweep in out_dir. resume=False starts it afresh; resume=True keeps the rows
-    of an earlier run of the same definition (`rows`; `done(i)` says whether scenario i has one)."""
+    """The journal of one sweep in out_dir. resume=False starts it afresh; resume=True keeps the
+    rows of an earlier run of the same definition (`rows`; `done(i)` says whether scenario i has
+    one)."""
 
     def __init__(self, out_dir: str | os.PathLike, spec: SweepSpec, *, resume: bool) -> None:
         self.path = Path(out_dir) / JOURNAL

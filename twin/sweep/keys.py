@@ -44,9 +44,9 @@ PAD_FIELDS = tuple(SUCTION_SCHEMA)
 
 @dataclass(frozen=True)
 class Key:
-    """A varied key: `name` as written; `part` is "object", "pad", "robot", "engine" or "task"; `owner`
-    the object's name (objects only); `field` the dataclass field or task parameter; `index` the
-    component of a tuple field (pos_m) or None."""
+    """A varied key: `name` as written; `part` is "object", "pad", "robot", "engine" or "task";
+    `owner` the object's name (objects only); `field` the dataclass field or task parameter; `index`
+    the component of a tuple field (pos_m) or None."""
 
     name: str
     part: str
@@ -108,7 +108,8 @@ def check_dist(key: Key, dist: Dist, config: TwinConfig, fn: TaskFn) -> None:
 
 
 def _check_task_values(key: Key, dist: Dist, fn: TaskFn) -> None:
-    """A task parameter with a default takes values of the default's type (bool, int, float, str)."""
+    """A task parameter with a default takes values of the default's type (bool, int, float,
+    str)."""
     param = (task_params(fn) or {}).get(key.field)
     default = None if param is None or param.default is inspect.Parameter.empty else param.default
     if default is None:

@@ -45,7 +45,8 @@ def table(spec: SweepSpec, rows: list[dict]) -> pa.Table:
 
 
 def _varied(values: list) -> pa.Array:
-    """A varied key's column: numbers, booleans or text as they come; mixed kinds as their JSON text."""
+    """A varied key's column: numbers, booleans or text as they come; mixed kinds as their JSON
+    text."""
     try:
         return pa.array(values)
     except (pa.ArrowInvalid, pa.ArrowTypeError):
@@ -84,8 +85,8 @@ def write_results(
 
 
 def write_definition(out_dir: str | os.PathLike, spec: SweepSpec) -> None:
-    """DIR/sweep.toml: the definition that made the results (copy it to recordings/sweeps/ as a golden).
-    A task or profile file is named relative to DIR, as load_spec finds it."""
+    """DIR/sweep.toml: the definition that made the results (copy it to recordings/sweeps/ as a
+    golden). A task or profile file is named relative to DIR, as load_spec finds it."""
     for name in ("task", "robot"):
         path = getattr(spec, name)
         if path.endswith((".py", ".toml")) and Path(path).is_file():

@@ -36,8 +36,9 @@ def batch_size(count: int, jobs: int, per_job: int = BATCHES_PER_JOB) -> int:
 
 
 def batches(scenarios: Iterable[int], n: int, size: int) -> Iterator[list[int]]:
-    """The n scenarios cut into batches of at most `size`, all of nearly one length (a short last batch
-    would leave a worker idle at the end), made as they are asked for: 10M planned cost nothing."""
+    """The n scenarios cut into batches of at most `size`, all of nearly one length (a short last
+    batch would leave a worker idle at the end), made as they are asked for: 10M planned cost
+    nothing."""
     source = iter(scenarios)
     count = math.ceil(n / size)
     for k in range(count):
@@ -56,9 +57,10 @@ def run_sweep(
     rows: list[dict] | None = None,
     planned: int | None = None,
 ) -> SweepRun:
-    """Run the scenarios (count of them: len(scenarios) when not given); on_row is told each finished
-    one. rows: those already finished (a resumed sweep); planned: how many the whole sweep has. The
-    caller closes the executor (it may run more); an interrupted sweep closes it at once."""
+    """Run the scenarios (count of them: len(scenarios) when not given); on_row is told each
+    finished one. rows: those already finished (a resumed sweep); planned: how many the whole sweep
+    has. The caller closes the executor (it may run more); an interrupted sweep closes it at
+    once."""
     t0 = time.perf_counter()
     rows = list(rows or [])
     count = len(scenarios) if count is None else count

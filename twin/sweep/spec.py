@@ -256,14 +256,16 @@ def _not_json_like(value: object) -> str | None:
 
 
 def _beside(name: str, folder: Path, suffix: str) -> str:
-    """A file named relative to the definition's folder, when it is one; a built-in name as it is."""
+    """A file named relative to the definition's folder, when it is one; a built-in name as it
+    is."""
     if name.endswith(suffix) and not Path(name).is_absolute() and (folder / name).is_file():
         return str(folder / name)
     return name
 
 
 def dump_spec(spec: SweepSpec) -> str:
-    """The definition as TOML (the format load_spec reads), e.g. DIR/sweep.toml of a sweep's output."""
+    """The definition as TOML (the format load_spec reads), e.g. DIR/sweep.toml of a sweep's
+    output."""
     lines = [
         f"task = {_toml(spec.task)}",
         f"robot = {_toml(spec.robot)}",

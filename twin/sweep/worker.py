@@ -221,7 +221,8 @@ def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) ->
 
 
 def _task(config, fn, params: dict, tally: _Tally, sinks: list) -> None:
-    """Run the task on a fresh twin (tally first among its sinks, which keeps the simulated time)."""
+    """Run the task on a fresh twin (tally first among its sinks, which keeps the simulated
+    time)."""
     twin = Twin(config, sinks=[tally, *sinks])
     try:
         run_task(twin, fn, params)

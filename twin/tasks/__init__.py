@@ -51,7 +51,8 @@ def resolve(name_or_path: str) -> TaskFn:
 
 
 def accepted_params(fn: TaskFn, params: dict) -> dict:
-    """The subset of params the task's signature accepts (so --cycles only reaches tasks that take it)."""
+    """The subset of params the task's signature accepts (so --cycles only reaches tasks that take
+    it)."""
     sig = inspect.signature(fn)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return dict(params)
@@ -59,7 +60,8 @@ def accepted_params(fn: TaskFn, params: dict) -> dict:
 
 
 def task_params(fn: TaskFn) -> dict[str, inspect.Parameter] | None:
-    """The keyword parameters a task takes after `twin` (name -> Parameter); None when it takes **params."""
+    """The keyword parameters a task takes after `twin` (name -> Parameter); None when it takes
+    **params."""
     sig = inspect.signature(fn)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return None
@@ -91,8 +93,8 @@ def source_sha256(path: str | Path) -> str:
 
 
 def task_identity(fn: TaskFn) -> str:
-    """What a recording names a task by: the content of its source file (`sha256:<hex>`), so the same
-    task run by name, from its file or from a renamed copy is the same task. A function with no
+    """What a recording names a task by: the content of its source file (`sha256:<hex>`), so the
+    same task run by name, from its file or from a renamed copy is the same task. A function with no
     source file is named by its module and name."""
     try:
         path = inspect.getsourcefile(fn)
@@ -125,10 +127,10 @@ def run_task(twin, fn: TaskFn, params: dict) -> None:
 
 
 class TimeLimit(Sink):
-    """A sink that ends a task run at the first frame past `limit_s` of simulated time (`--timeout`):
-    an endless task would otherwise record until the disk is full. Put it after the recorders, so
-    they hold that frame too; it raises again on every later frame, so a task that catches the
-    error cannot run on."""
+    """A sink that ends a task run at the first frame past `limit_s` of simulated time
+    (`--timeout`): an endless task would otherwise record until the disk is full. Put it after the
+    recorders, so they hold that frame too; it raises again on every later frame, so a task that
+    catches the error cannot run on."""
 
     def __init__(self, limit_s: float) -> None:
         self.limit_s = limit_s

@@ -1,8 +1,10 @@
-"""The teleop terminal screen (curses): the twin's state, the last keys, the events and the key help.
+"""The teleop terminal screen (curses): the twin's state, the last keys, the events and the key
+help.
 
 status_lines() is the screen's text (plain strings); CursesScreen draws it and reads keys. It reads
-the session it is given (a teleop.session.Session) without importing it: the session drives the screen. The
-terminal runs in raw mode so Ctrl-C and Ctrl-D arrive as keys and end the session cleanly.
+the session it is given (a teleop.session.Session) without importing it: the session drives the
+screen. The terminal runs in raw mode so Ctrl-C and Ctrl-D arrive as keys and end the session
+cleanly.
 """
 
 from __future__ import annotations

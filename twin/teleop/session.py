@@ -1,4 +1,5 @@
-"""Keyboard teleoperation: a session that turns key presses into Commands, in real or simulated time.
+"""Keyboard teleoperation: a session that turns key presses into Commands, in real or simulated
+time.
 
 Each press becomes twin.press_key(key), a Command stamped with the step it takes effect at, and the
 key map in the twin's config interprets it, so `twin replay` re-executes a session exactly. The
@@ -93,7 +94,8 @@ class Session:
     def run_scripted(
         self, keys: list[str], interval_s: float, *, pace: Callable[[], None] | None = None
     ) -> None:
-        """Press each key (`wait`: none), then let interval_s of simulated time pass; a quit key ends it."""
+        """Press each key (`wait`: none), then let interval_s of simulated time pass; a quit key
+        ends it."""
         steps = round(interval_s * 1e9 / self.twin.config.dt_ns)
         for key in keys:
             if key != WAIT and not self.press(key):
@@ -112,7 +114,8 @@ class Session:
         return True
 
     def _step(self, steps: int) -> bool:
-        """Step the twin; False when the PyBullet window was closed (PyBullet closes it on Esc, too)."""
+        """Step the twin; False when the PyBullet window was closed (PyBullet closes it on Esc,
+        too)."""
         try:
             self.twin.step(steps)
         except Exception:
@@ -129,7 +132,8 @@ class Session:
         *,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        """Step the twin up to wall-clock time, reading keys between steps, until a quit key or Ctrl-C."""
+        """Step the twin up to wall-clock time, reading keys between steps, until a quit key or
+        Ctrl-C."""
         dt_s = self.twin.config.dt_s
         max_lag_steps = max(1, round(MAX_LAG_S / dt_s))
         chunk_steps = max(1, round(CHUNK_S / dt_s))

@@ -42,8 +42,8 @@ def record_task(
     task_dir: str | os.PathLike | None = None,
     timeout_s: float | None = None,
 ) -> Recording:
-    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised);
-    timeout_s bounds it in simulated time, as `twin run --timeout` did."""
+    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not
+    raised); timeout_s bounds it in simulated time, as `twin run --timeout` did."""
     fn = resolve(_task_path(task, task_dir))
     collector = ColumnCollector()
     limit = [TimeLimit(timeout_s)] if timeout_s is not None else []
@@ -125,8 +125,8 @@ class Outcome:
 def check_one(
     path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False
 ) -> Outcome:
-    """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a run
-    whose task failed unless allow_error (a crash is not a new golden)."""
+    """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a
+    run whose task failed unless allow_error (a crash is not a new golden)."""
     from twin.record import open_recorders
     from twin.record.mcap.reader import load
 
@@ -214,8 +214,8 @@ def _task_sha256_now(golden: Recording) -> str | None:
 
 def golden_paths(paths: Sequence[str]) -> list[str]:
     """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped), each file
-    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden would
-    race on its temporary file."""
+    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden
+    would race on its temporary file."""
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
             raise ConfigError(
@@ -242,7 +242,8 @@ def golden_paths(paths: Sequence[str]) -> list[str]:
 
 
 def _each_file_once(paths: list[str]) -> list[str]:
-    """paths without a second name of a file already listed (same device and inode), in their order."""
+    """paths without a second name of a file already listed (same device and inode), in their
+    order."""
     seen: set[tuple[int, int]] = set()
     out = []
     for p in paths:
@@ -288,8 +289,9 @@ def check_all(
     allow_error: bool = False,
     run_many: Callable | None = None,
 ) -> list[Outcome]:
-    """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which yields
-    (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order of paths."""
+    """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which
+    yields (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order
+    of paths."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     if run_many is None:

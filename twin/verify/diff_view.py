@@ -35,7 +35,8 @@ def _times(steps: np.ndarray, t_ns: np.ndarray) -> list[rr.TimeColumn]:
 
 
 def arm_points(rec: Recording) -> np.ndarray:
-    """(n, 5, 3): floor, shoulder, elbow, wrist axis, pad tip of every frame (a SCARA as a polyline)."""
+    """(n, 5, 3): floor, shoulder, elbow, wrist axis, pad tip of every frame (a SCARA as a
+    polyline)."""
     p, q, pad = rec.config.profile, rec.frames.joint_q, rec.frames.pad_pose
     n = len(rec.frames)
     elbow_xy, wrist_xy = kinematics.elbow_and_wrist_xy(p, q.T)  # in the profile's own frame

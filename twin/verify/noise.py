@@ -1,9 +1,10 @@
-"""Verdicts that travel: judge a candidate against a golden with the candidate's noise floor measured here.
+"""Verdicts that travel: judge a candidate against a golden with the candidate's noise floor
+measured here.
 
-The floor run is the candidate's inputs again (its task re-run, or its commands replayed) with gravity
-one unit in the last place stronger: every physics step's arithmetic then differs in its last bits, as
-it does under another libm or CPU, and the floor is how far the run drifts from that on its own.
-Measured on this machine and with this code, at every check, so it never goes stale.
+The floor run is the candidate's inputs again (its task re-run, or its commands replayed) with
+gravity one unit in the last place stronger: every physics step's arithmetic then differs in its
+last bits, as it does under another libm or CPU, and the floor is how far the run drifts from that
+on its own. Measured on this machine and with this code, at every check, so it never goes stale.
 """
 
 from __future__ import annotations
@@ -43,13 +44,15 @@ def judge(
     event_kinds: frozenset[str] | None = None,
     force: bool = False,
 ) -> DiffResult:
-    """compare(golden, candidate), against the noise floor of the candidate's inputs when the tolerances ask.
+    """compare(golden, candidate), against the noise floor of the candidate's inputs when the
+    tolerances ask.
 
-    remake(recording) re-runs a recording (its task, or its commands). source: the recording the candidate
-    was just remade from (check, replay); the floor is then the candidate against remake(perturbed source).
-    Without it (a candidate from a file or a test), both runs of the floor are remade here: remake(candidate)
-    and remake(perturbed candidate), so that nothing but last-bit noise separates them. When the floor cannot
-    be measured (nothing to re-run), the verdict is the preset's own tolerances, with a note saying so.
+    remake(recording) re-runs a recording (its task, or its commands). source: the recording the
+    candidate was just remade from (check, replay); the floor is then the candidate against
+    remake(perturbed source). Without it (a candidate from a file or a test), both runs of the floor
+    are remade here: remake(candidate) and remake(perturbed candidate), so that nothing but last-bit
+    noise separates them. When the floor cannot be measured (nothing to re-run), the verdict is the
+    preset's own tolerances, with a note saying so.
     """
     if tolerances.noise_margin is None:
         return _where(
@@ -79,8 +82,8 @@ def judge(
 
 
 def _where(result: DiffResult, golden: Recording, candidate: Recording) -> DiffResult:
-    """Notes "recorded on X, checked on Y" when the golden's machine record differs from the candidate's
-    (a run made here has none: it is this machine's)."""
+    """Notes "recorded on X, checked on Y" when the golden's machine record differs from the
+    candidate's (a run made here has none: it is this machine's)."""
     made, checked = golden.machine, candidate.machine or machine()
     if made and differences(made, checked):
         result.notes.append(f"recorded on {machine_text(made)}, checked on {machine_text(checked)}")

@@ -7,8 +7,9 @@
 
 Goldens live in the `twin_goldens_dir` ini folder (default `recordings/`, relative to the rootdir).
 A missing golden is written and the test fails (review it, then commit it); `--update-goldens`
-rewrites goldens that differ, but never with a run whose task failed (`allow_error=True` says so). On a mismatch NAME.obtained.mcap and NAME.report.md are left beside
-the golden, and the failure message is the diff's text report.
+rewrites goldens that differ, but never with a run whose task failed (`allow_error=True` says so).
+On a mismatch NAME.obtained.mcap and NAME.report.md are left beside the golden, and the failure
+message is the diff's text report.
 """
 
 from __future__ import annotations
@@ -46,9 +47,9 @@ class GoldenChecker:
         event_kinds: frozenset[str] | None = None,
         allow_error: bool = False,
     ) -> DiffResult:
-        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff. Under
-        the default `noise` preset the run is made once more with its math perturbed (its task re-run, or its
-        commands replayed) to measure its noise floor."""
+        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the
+        diff. Under the default `noise` preset the run is made once more with its math perturbed
+        (its task re-run, or its commands replayed) to measure its noise floor."""
         from twin.record.mcap.reader import load
         from twin.verify.check import remade
         from twin.verify.noise import judge

@@ -42,7 +42,8 @@ def replayed_event_kinds(rec: Recording) -> frozenset[str] | None:
 
 
 def replay_run(rec: Recording) -> dict:
-    """The run description of a replay of rec: rec's own, plus which file it replays (name and hash)."""
+    """The run description of a replay of rec: rec's own, plus which file it replays (name and
+    hash)."""
     import hashlib
 
     run = {k: v for k, v in (rec.run or {}).items() if k != "replay_of"}
@@ -128,8 +129,9 @@ def _robot_files(rec: Recording) -> Iterator[TwinConfig]:
 
 
 def feed(rec: Recording, sinks: Sequence[Sink]) -> None:
-    """Send a recording's frames, pictures, commands and events to sinks, step by step: frame s, then
-    the pictures, commands and events stamped s (those happen after frame s, before frame s + 1)."""
+    """Send a recording's frames, pictures, commands and events to sinks, step by step: frame s,
+    then the pictures, commands and events stamped s (those happen after frame s, before frame s +
+    1)."""
     commands = sorted(rec.commands, key=lambda c: c.step)
     events = sorted(rec.events, key=lambda e: e.step)
     images = recorded_images(rec.config.cameras, rec.cameras, rec.frames.step, rec.frames.pad_pose)

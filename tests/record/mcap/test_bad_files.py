@@ -1,11 +1,12 @@
-"""Damaged files through every reader: one error line, exit 2, no traceback, bounded memory and time.
+"""Damaged files through every reader: one error line, exit 2, no traceback, bounded memory and
+time.
 
 A corpus of damaged variants of a real recording made here (truncations, bit flips, a zstd bomb,
 trailing and overwriting zeros, corrupted metadata and messages, a FIFO, a folder, an empty and a
-foreign file) goes through `twin info/recover/diff/replay/check/view --rrd`, each in a process of its
-own: the CLI's own main() in a child forked from this (already imported) interpreter, so ~180 runs
-take seconds; the worst cases also run through the installed `twin` executable. os.wait4 gives each
-child's peak RSS. Variants are written with mcap's own Writer, independently of twin's writer.
+foreign file) goes through `twin info/recover/diff/replay/check/view --rrd`, each in a process of
+its own: the CLI's own main() in a child forked from this (already imported) interpreter, so ~180
+runs take seconds; the worst cases also run through the installed `twin` executable. os.wait4 gives
+each child's peak RSS. Variants are written with mcap's own Writer, independently of twin's writer.
 """
 
 from __future__ import annotations
@@ -73,9 +74,9 @@ def _wait(pid: int, timeout_s: float) -> tuple[int, resource.struct_rusage]:
 
 
 def run_forked(argv: list[str], cwd: Path, timeout_s: float = TIMEOUT_S) -> Run:
-    """`twin ARGV` as twin.cli.main in a forked child with its own stdout/stderr; its exit code, output,
-    peak RSS (MB) above what it started with (pytest's own, whose size depends on the tests run before)
-    and wall time."""
+    """`twin ARGV` as twin.cli.main in a forked child with its own stdout/stderr; its exit code,
+    output, peak RSS (MB) above what it started with (pytest's own, whose size depends on the tests
+    run before) and wall time."""
     out_path, err_path = cwd / ".out", cwd / ".err"
     base_mb = _rss_mb()
     t0 = time.monotonic()
@@ -189,8 +190,8 @@ def _read(path: Path) -> dict:
 def rewrite(
     content: dict, out: Path, *, metadata: dict | None = None, edit=None, raw_chunk: bytes = b""
 ) -> Path:
-    """A copy of a recording with its metadata replaced and messages edited (edit(topic, data) -> data)
-    by mcap's Writer; raw_chunk is written as is before the messages."""
+    """A copy of a recording with its metadata replaced and messages edited (edit(topic, data) ->
+    data) by mcap's Writer; raw_chunk is written as is before the messages."""
     with open(out, "wb") as f:
         w = Writer(f, compression=CompressionType.ZSTD)
         w.start(profile="", library=S.LIBRARY)
@@ -219,7 +220,8 @@ def _record(opcode: int, body: bytes) -> bytes:
 def chunk_record(
     records: bytes | None, *, compression: str, declared: int, compressed: bytes | None = None
 ) -> bytes:
-    """An MCAP chunk record holding `records` (or an already compressed stream) with a declared size."""
+    """An MCAP chunk record holding `records` (or an already compressed stream) with a declared
+    size."""
     data = compressed if compressed is not None else records
     crc = 0 if compressed is not None else zlib.crc32(records)
     name = compression.encode()
@@ -289,7 +291,8 @@ def wrong_value(old):
 
 @pytest.fixture(scope="module")
 def good(tmp_path_factory) -> Path:
-    """A short real teleop recording (3.5 s simulated, key commands): re-run cheaply by replay and check."""
+    """A short real teleop recording (3.5 s simulated, key commands): re-run cheaply by replay and
+    check."""
     folder = tmp_path_factory.mktemp("good")
     path = folder / "good.mcap"
     run = run_forked(["teleop", "--keys", KEYS, "--record", str(path)], folder)
@@ -299,9 +302,9 @@ def good(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def corpus(good, tmp_path_factory) -> dict[str, tuple[Path, str]]:
-    """name -> (path, kind). kind "bad": every reader exits 2; "damaged": recover may restore it (0);
-    "messages": a part that info reads too is bad or foreign (it prints the rest, then exits 2); "any": a bit flip
-    may hit bytes nobody reads (0), or a value replay then sees differ (1)."""
+    """name -> (path, kind). kind "bad": every reader exits 2; "damaged": recover may restore it
+    (0); "messages": a part that info reads too is bad or foreign (it prints the rest, then exits
+    2); "any": a bit flip may hit bytes nobody reads (0), or a value replay then sees differ (1)."""
     d = tmp_path_factory.mktemp("corpus")
     raw = good.read_bytes()
     content = _read(good)
@@ -479,7 +482,8 @@ def test_every_reader_gives_one_line_and_exit_2_on_the_corpus(corpus, good, tmp_
 
 
 def test_the_worst_cases_through_the_twin_executable(corpus, good, tmp_path):
-    """A fresh `twin` process each: peak memory and time of the bomb, the zeros, a FIFO, a bad config."""
+    """A fresh `twin` process each: peak memory and time of the bomb, the zeros, a FIFO, a bad
+    config."""
     for name in (
         "zstd_bomb_1GiB",
         "zstd_bomb_declared_small",
@@ -500,8 +504,8 @@ def test_the_worst_cases_through_the_twin_executable(corpus, good, tmp_path):
 
 
 def test_load_names_every_corrupted_config_field(good, tmp_path):
-    """twin.load on a config with each field in turn given a wrong type, NaN, or infinity: a RecordingError
-    naming that field (the schema checks every field a file holds)."""
+    """twin.load on a config with each field in turn given a wrong type, NaN, or infinity: a
+    RecordingError naming that field (the schema checks every field a file holds)."""
     content = _read(good)
     config = json.loads(content["metadata"][S.META_CONFIG]["json"])
     leaves = list(config_leaves(config))
@@ -538,7 +542,8 @@ def _get(value, path):
 
 
 def test_nan_in_event_data_is_written_as_null(tmp_path):
-    """The JSON channels never hold NaN or Infinity: event data from a diverged simulation is null."""
+    """The JSON channels never hold NaN or Infinity: event data from a diverged simulation is
+    null."""
     from twin.model.config import TwinConfig
     from twin.record import open_recorders
     from twin.sim.twin import Twin
@@ -570,7 +575,8 @@ def test_nan_in_event_data_is_written_as_null(tmp_path):
 
 
 def _black_png(width: int, height: int, *, pixels: bool = True) -> bytes:
-    """An 8-bit RGB PNG of black pixels, compressed row by row; pixels=False: the header and one row only."""
+    """An 8-bit RGB PNG of black pixels, compressed row by row; pixels=False: the header and one row
+    only."""
     c = zlib.compressobj(1)
     row = bytes(1 + 3 * width)
     idat = b"".join([c.compress(row) for _ in range(height if pixels else 1)] + [c.flush()])
@@ -684,8 +690,9 @@ def _channel_record(channel_id: int, schema_id: int, topic: str, encoding: str) 
 
 
 def _flood_chunk(channel: bytes, channel_id: int, n: int, *, timed: bool, first: int = 0) -> bytes:
-    """A zstd chunk: a channel record, then n empty messages on it (sequence first..; log and publish
-    time 0, or, timed, one step apart and scattered: then the chunk compresses about 2.5 times only)."""
+    """A zstd chunk: a channel record, then n empty messages on it (sequence first..; log and
+    publish time 0, or, timed, one step apart and scattered: then the chunk compresses about 2.5
+    times only)."""
     import numpy as np
 
     records = np.zeros(n, dtype=_FLOOD_RECORD)
@@ -706,7 +713,8 @@ def _flood_chunk(channel: bytes, channel_id: int, n: int, *, timed: bool, first:
 @pytest.fixture(scope="module")
 def floods(good, tmp_path_factory) -> dict[str, tuple[Path, int]]:
     """name -> (path, the exit code every reader gives): the `good` recording with a flood of empty
-    messages written before its own (rewrite's Writer numbers schemas and channels 1, 2, ... in order)."""
+    messages written before its own (rewrite's Writer numbers schemas and channels 1, 2, ... in
+    order)."""
     folder = tmp_path_factory.mktemp("floods")
     content = _read(good)
     ids = {
@@ -754,7 +762,8 @@ def test_a_flood_of_empty_messages_costs_bounded_memory_and_time(
 
 
 def test_a_message_on_a_channel_never_registered_is_refused_at_once(good, tmp_path):
-    """MCAP registers a channel before its messages: 44 million messages on channel 999 stop at the first."""
+    """MCAP registers a channel before its messages: 44 million messages on channel 999 stop at the
+    first."""
     content = _read(good)
     chunk = _flood_chunk(b"", 999, 1 << 20, timed=False)
     path = rewrite(content, tmp_path / "unregistered.mcap", raw_chunk=chunk * 44)

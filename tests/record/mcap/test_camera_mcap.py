@@ -1,5 +1,6 @@
-"""A recorded camera is in the MCAP file as foxglove.CompressedImage and CameraCalibration channels that
-the stock mcap reader decodes with Foxglove's schemas from the file alone; twin.load gives the pictures."""
+"""A recorded camera is in the MCAP file as foxglove.CompressedImage and CameraCalibration channels
+that the stock mcap reader decodes with Foxglove's schemas from the file alone; twin.load gives the
+pictures."""
 
 from __future__ import annotations
 
@@ -125,8 +126,9 @@ def test_camera_options_refuse_bad_values_in_one_line(capsys, tmp_path):
 
 
 def test_a_pictures_pose_is_read_from_the_files_tf_also_when_decimated(tmp_path):
-    """The pad camera's pose on /tf is where it was when the picture was taken; a decimated file (rate 3,
-    a picture every 16 steps) holds no frame at most picture steps, and load gives that pose exactly."""
+    """The pad camera's pose on /tf is where it was when the picture was taken; a decimated file
+    (rate 3, a picture every 16 steps) holds no frame at most picture steps, and load gives that
+    pose exactly."""
     from twin.model.images import camera, recorded_images
     from twin.record import open_recorders
     from twin.sim.world import engine_versions

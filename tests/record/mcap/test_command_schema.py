@@ -1,5 +1,6 @@
-"""Every /commands message of a real file satisfies the JSON Schema that the file itself carries, and
-that schema names exactly the command kinds the Twin applies (a new kind cannot be forgotten there)."""
+"""Every /commands message of a real file satisfies the JSON Schema that the file itself carries,
+and that schema names exactly the command kinds the Twin applies (a new kind cannot be forgotten
+there)."""
 
 from __future__ import annotations
 

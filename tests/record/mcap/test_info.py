@@ -1,4 +1,5 @@
-"""`twin info` and bad input to the recording commands: one clear line, exit code 2, no traceback."""
+"""`twin info` and bad input to the recording commands: one clear line, exit code 2, no
+traceback."""
 
 from __future__ import annotations
 

@@ -38,7 +38,8 @@ def record(path: Path, *, rate: int = 1, config: TwinConfig | None = None) -> Fr
 
 @pytest.fixture(scope="module")
 def recorded(pick_place_mcap) -> tuple[Path, FrameCollector]:
-    """(path, collector) of one pick_place cycle: the session's shared recording, made by record()'s helper."""
+    """(path, collector) of one pick_place cycle: the session's shared recording, made by record()'s
+    helper."""
     return pick_place_mcap
 
 
@@ -336,10 +337,10 @@ def test_every_chunk_compression_loads_the_same(recorded, tmp_path, compression)
 
 @pytest.mark.parametrize("rate", [1, 7])
 def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path, rate):
-    """The recorder process hands on_rows runs of rows in a buffer it overwrites once on_rows returns
-    (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame writes.
-    Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last frame is
-    kept only from the last run (the buffer is garbage by then)."""
+    """The recorder process hands on_rows runs of rows in a buffer it overwrites once on_rows
+    returns (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame
+    writes. Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last
+    frame is kept only from the last run (the buffer is garbage by then)."""
     from twin.record.mcap.writer import McapRecorder
     from twin.record.rows import FrameRows
 
@@ -374,9 +375,9 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
 
 
 def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
-    """The writer gathers its block messages from the rows in one go; field by field from numpy columns
-    (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame count and
-    in whatever order the counts come (the gather's index is kept for the last count)."""
+    """The writer gathers its block messages from the rows in one go; field by field from numpy
+    columns (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame
+    count and in whatever order the counts come (the gather's index is kept for the last count)."""
     from twin.model import fields as F
     from twin.record.mcap.blocks import BlockEncoder
     from twin.record.rows import FrameRows

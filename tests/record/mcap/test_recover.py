@@ -1,4 +1,5 @@
-"""Crash safety: a run killed with SIGKILL, or a file cut anywhere, is restored by `twin recover`."""
+"""Crash safety: a run killed with SIGKILL, or a file cut anywhere, is restored by `twin
+recover`."""
 
 from __future__ import annotations
 
@@ -188,7 +189,8 @@ def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_
 
 
 def test_recovering_a_run_that_left_no_file_says_so(tmp_path, capsys, monkeypatch):
-    """Neither the recording nor its .partial file: one line naming both, exit 2 (not a hint about -o)."""
+    """Neither the recording nor its .partial file: one line naming both, exit 2 (not a hint about
+    -o)."""
     monkeypatch.chdir(tmp_path)
     assert main(["recover", "runs/killed.mcap"]) == 2
     err = capsys.readouterr().err

@@ -1,10 +1,12 @@
-"""Readers on a recording with one corrupt or foreign part: what they could read, one error line, exit 2.
+"""Readers on a recording with one corrupt or foreign part: what they could read, one error line,
+exit 2.
 
-`twin info` prints its report and exits 2 when anything in the file is unreadable or foreign (it used to
-exit 0, printing `events: (unreadable) 13`); a corrupt configuration record (`objects = 7`) is one line
-naming the field from every reader (it was a TypeError traceback, raised while wording the error); a
-camera that cannot look anywhere is refused where the configuration is read (it was a ZeroDivisionError
-in `twin view --rrd`). Deep nesting in a file's JSON is one line too, never a RecursionError.
+`twin info` prints its report and exits 2 when anything in the file is unreadable or foreign (it
+used to exit 0, printing `events: (unreadable) 13`); a corrupt configuration record (`objects = 7`)
+is one line naming the field from every reader (it was a TypeError traceback, raised while wording
+the error); a camera that cannot look anywhere is refused where the configuration is read (it was a
+ZeroDivisionError in `twin view --rrd`). Deep nesting in a file's JSON is one line too, never a
+RecursionError.
 """
 
 from __future__ import annotations
@@ -36,8 +38,9 @@ def rewrite(
     edit=None,
     library: str = S.LIBRARY,
 ) -> Path:
-    """A copy of a recording written by mcap's own Writer: config(dict) edits the twin.config record in
-    place, metadata replaces records by name (None: leaves it out), edit(topic, data) -> data the messages."""
+    """A copy of a recording written by mcap's own Writer: config(dict) edits the twin.config record
+    in place, metadata replaces records by name (None: leaves it out), edit(topic, data) -> data the
+    messages."""
     with open(source, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()

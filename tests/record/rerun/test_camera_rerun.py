@@ -1,5 +1,6 @@
-"""A camera run's .rrd holds each picture as an encoded image on the camera's entity (also when an MCAP
-file is drawn), and the viewer shows the pictures beside the 3D view, which frames the whole workspace."""
+"""A camera run's .rrd holds each picture as an encoded image on the camera's entity (also when an
+MCAP file is drawn), and the viewer shows the pictures beside the 3D view, which frames the whole
+workspace."""
 
 from __future__ import annotations
 

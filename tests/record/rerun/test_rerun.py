@@ -34,7 +34,8 @@ def rerun_env(home) -> dict:
 
 @pytest.fixture(autouse=True)
 def rerun_home(tmp_path, monkeypatch):
-    """verify_rrd runs the `rerun` CLI, which writes an analytics config under the home directory."""
+    """verify_rrd runs the `rerun` CLI, which writes an analytics config under the home
+    directory."""
     for var, value in rerun_env(tmp_path / "home").items():
         if var == "HOME" or var.startswith("XDG_"):
             monkeypatch.setenv(var, value)
@@ -226,7 +227,8 @@ def test_write_rrd_converts_a_recording_through_the_same_sink(run):
 
 
 def _urdf_with_tilted_joints() -> str:
-    """Joints with rotated origins and oblique (unit) axes, to check the transform maths in general."""
+    """Joints with rotated origins and oblique (unit) axes, to check the transform maths in
+    general."""
     link = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
     joint = (
         '<joint name="{0}" type="{1}"><parent link="{2}"/><child link="{3}"/>'
@@ -346,8 +348,8 @@ def test_any_number_of_objects_with_any_names(tmp_path, objects):
 
 @pytest.mark.parametrize("source", ["mtb", "tilted"])
 def test_the_drawing_and_the_mcap_transforms_pose_every_joint_alike(source):
-    """Both read the joints through robot.urdf: the vectorised poses (Rerun) and the scalar ones (the
-    MCAP's /tf) agree to rounding for every moving joint."""
+    """Both read the joints through robot.urdf: the vectorised poses (Rerun) and the scalar ones
+    (the MCAP's /tf) agree to rounding for every moving joint."""
     from twin.record.mcap.scene_tf import SceneTransforms
 
     text = urdf_text(PROFILES["mtb"]) if source == "mtb" else _urdf_with_tilted_joints()

@@ -1,7 +1,7 @@
-"""`twin view`: MCAP -> .rrd conversion, a headless screenshot that shows the arm, the box and the plots,
-the web and native viewers on loopback and free ports, side by side, their `rerun` child never outliving
-`twin view` (SIGTERM, SIGHUP, SIGKILL), no temporary folder left behind, and one-line errors (exit 2)
-for bad files, busy ports and a missing display."""
+"""`twin view`: MCAP -> .rrd conversion, a headless screenshot that shows the arm, the box and the
+plots, the web and native viewers on loopback and free ports, side by side, their `rerun` child
+never outliving `twin view` (SIGTERM, SIGHUP, SIGKILL), no temporary folder left behind, and
+one-line errors (exit 2) for bad files, busy ports and a missing display."""
 
 import glob
 import os
@@ -57,8 +57,8 @@ def no_view_folders_left_in_the_temp_dir():
 
 @pytest.fixture(autouse=True)
 def view_tmp(tmp_path, monkeypatch):
-    """A temp dir of the test's own (for `twin view` in this process and in children), empty when the
-    test is over: no `twin-view-*` folder, nor a `rerun-data-*` one the viewer makes."""
+    """A temp dir of the test's own (for `twin view` in this process and in children), empty when
+    the test is over: no `twin-view-*` folder, nor a `rerun-data-*` one the viewer makes."""
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp))
@@ -69,7 +69,8 @@ def view_tmp(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def recorded(pick_place_cli):
-    """One pick_place cycle recorded as MCAP and .rrd by `twin run` (the session's shared recording)."""
+    """One pick_place cycle recorded as MCAP and .rrd by `twin run` (the session's shared
+    recording)."""
     return pick_place_cli
 
 
@@ -189,7 +190,8 @@ def _start_view(*argv: str, env: dict[str, str] | None = None) -> subprocess.Pop
 
 
 def _end_group(proc: subprocess.Popen) -> None:
-    """Stop the twin process started here (its own session's group; its viewer has a group of its own)."""
+    """Stop the twin process started here (its own session's group; its viewer has a group of its
+    own)."""
     try:
         os.killpg(proc.pid, signal.SIGTERM)
     except ProcessLookupError:
@@ -211,8 +213,9 @@ def _served(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[str, int,
 
 
 def _first_line(proc: subprocess.Popen, timeout_s: float) -> str:
-    """The first line the process prints, or what came before timeout_s (never blocks past it: the viewer,
-    a grandchild, keeps the pipe open, so a line without its newline would otherwise wait forever)."""
+    """The first line the process prints, or what came before timeout_s (never blocks past it: the
+    viewer, a grandchild, keeps the pipe open, so a line without its newline would otherwise wait
+    forever)."""
     deadline, data = time.monotonic() + timeout_s, b""
     fd = proc.stdout.fileno()
     while b"\n" not in data:
@@ -288,7 +291,8 @@ def test_given_ports_are_used_and_busy_ones_are_one_line_errors(recorded, capsys
     not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer"
 )
 def test_the_printed_url_streams_the_recording(recorded, tmp_path):
-    """What the web page loads from its ?url=: a headless viewer opens that source and gets the whole run."""
+    """What the web page loads from its ?url=: a headless viewer opens that source and gets the
+    whole run."""
     from rerun.experimental import ViewerClient
 
     from twin.record.rerun.rrd_file import rerun_executable
@@ -386,7 +390,8 @@ def test_no_display_is_one_line_naming_the_other_ways(recorded, monkeypatch, cap
 
 
 def test_an_unreachable_display_is_one_line_without_rerun_noise(recorded, monkeypatch, capfd):
-    """The real viewer starts, fails to reach the X server, and its log stays out of the terminal."""
+    """The real viewer starts, fails to reach the X server, and its log stays out of the
+    terminal."""
     unused = next(n for n in range(90, 200) if not os.path.exists(f"/tmp/.X11-unix/X{n}"))
     monkeypatch.setenv("DISPLAY", f":{unused}")
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -195,7 +195,8 @@ def read_info(path: str | Path, *, keep_events: bool = True) -> Info:
 
 
 def format_info(info: Info, *, all_events: bool = False) -> list[str]:
-    """The human-readable report `twin info` prints; with all_events, every event with its time and data."""
+    """The human-readable report `twin info` prints; with all_events, every event with its time and
+    data."""
     if info.finalized:
         outcome = info.finished.get("outcome", "?")
         state = f"yes (run outcome {outcome}" + (
@@ -259,8 +260,8 @@ def format_info(info: Info, *, all_events: bool = False) -> list[str]:
 
 
 def setup_lines(config: TwinConfig, run: dict) -> list[str]:
-    """What the run was: the robot, each scene object with its mass and start pose, the pad's strength
-    and limits, the cameras, the task and its parameters."""
+    """What the run was: the robot, each scene object with its mass and start pose, the pad's
+    strength and limits, the cameras, the task and its parameters."""
     p, pad = config.profile, config.suction
     lines = [
         "setup:",

@@ -35,7 +35,8 @@ def _version(dist: str) -> str:
 
 
 def versions(engine: dict[str, str] | None = None) -> dict[str, str]:
-    """The packages' versions; engine: what the simulation says of itself (sim.world.engine_versions)."""
+    """The packages' versions; engine: what the simulation says of itself
+    (sim.world.engine_versions)."""
     api = (engine or {}).get("pybullet_api", "unknown")
     return {
         "twin": _version("twin"),
@@ -64,7 +65,8 @@ def portable_config(config: TwinConfig, recording: str | Path | None) -> TwinCon
 
 
 def located_config(config: TwinConfig, recording: str | Path) -> TwinConfig:
-    """The inverse of portable_config on reading: a relative URDF path resolved from the recording's folder."""
+    """The inverse of portable_config on reading: a relative URDF path resolved from the recording's
+    folder."""
     urdf = config.profile.urdf_path
     if not urdf or Path(urdf).is_absolute():
         return config
@@ -136,7 +138,8 @@ def run_metadata(
 
 
 def parse_config(records: dict[str, dict[str, str]], where: str) -> TwinConfig:
-    """The TwinConfig stored in a file's metadata; RecordingError naming the file if absent or bad."""
+    """The TwinConfig stored in a file's metadata; RecordingError naming the file if absent or
+    bad."""
     record = records.get(S.META_CONFIG)
     if record is None or "json" not in record:
         raise RecordingError(f"{where} has no {S.META_CONFIG} metadata; it was not written by twin")
@@ -148,8 +151,8 @@ def parse_config(records: dict[str, dict[str, str]], where: str) -> TwinConfig:
 
 
 def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") -> dict:
-    """The run description of a file's metadata (empty fields if it has none); RecordingError naming the
-    field if its source or parameters are malformed (a task is re-run with them)."""
+    """The run description of a file's metadata (empty fields if it has none); RecordingError naming
+    the field if its source or parameters are malformed (a task is re-run with them)."""
     record = records.get(S.META_RUN, {})
     try:
         params = strict_json.loads(record.get("params", "{}"))

@@ -1,4 +1,5 @@
-"""Reading recordings: `load(path)` -> Recording (frames as numpy columns, commands, events, config).
+"""Reading recordings: `load(path)` -> Recording (frames as numpy columns, commands, events,
+config).
 
 One pass over the file's records (mcap.scan); the twin's blocks are decoded with a numpy fast
 path (tests check it against the standard protobuf decoder). `scan(path, strict=False)` stops at
@@ -41,8 +42,8 @@ Message = mcap_scan.Message
 @dataclass
 class Scan:
     """Every record read from a file, in file order, and whether the file ended cleanly. `messages`
-    holds the messages of the topics the scan kept (all, unless it was told which, or handed them on);
-    `counts` the number of messages on each channel id, kept or not."""
+    holds the messages of the topics the scan kept (all, unless it was told which, or handed them
+    on); `counts` the number of messages on each channel id, kept or not."""
 
     path: str
     size_bytes: int
@@ -62,7 +63,8 @@ class Scan:
     _dropped: set[str] = field(default_factory=set, repr=False)
 
     def stop_keeping(self, topic: str) -> None:
-        """From now on, only count the messages of `topic` (a consumer that has seen enough of them)."""
+        """From now on, only count the messages of `topic` (a consumer that has seen enough of
+        them)."""
         self._dropped.add(topic)
         self._keep.difference_update(cid for cid, c in self.channels.items() if c.topic == topic)
 
@@ -99,8 +101,8 @@ def block_steps(message: Message) -> np.ndarray:
 
 
 def open_checked(path: str | Path) -> tuple[str, int]:
-    """The path as text and its size; RecordingError for a missing, empty, non-file or non-MCAP path.
-    Only a regular file is opened: a FIFO, socket or device would block or never end."""
+    """The path as text and its size; RecordingError for a missing, empty, non-file or non-MCAP
+    path. Only a regular file is opened: a FIFO, socket or device would block or never end."""
     where = str(path)
     try:
         mode = os.stat(path).st_mode
@@ -286,7 +288,8 @@ class RecordingBuilder:
         return self._config
 
     def _without_cameras(self, s: Scan) -> bool:
-        """True once the configuration is read and has no camera (a bad one is reported by recording())."""
+        """True once the configuration is read and has no camera (a bad one is reported by
+        recording())."""
         if S.META_CONFIG not in s.metadata:
             return False
         try:
@@ -295,7 +298,8 @@ class RecordingBuilder:
             return False
 
     def _camera_pose(self, data: bytes, where: str) -> None:
-        """The camera poses a /tf message holds, by camera frame and time (what the picture was taken from)."""
+        """The camera poses a /tf message holds, by camera frame and time (what the picture was
+        taken from)."""
         from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
         from google.protobuf.message import DecodeError
 
@@ -320,7 +324,8 @@ class RecordingBuilder:
                 )
 
     def _picture(self, config: TwinConfig, topic: str, data: bytes, where: str) -> None:
-        """A picture on a configured camera's channel, checked now (others are left out, as before)."""
+        """A picture on a configured camera's channel, checked now (others are left out, as
+        before)."""
         spec = next((c for c in config.cameras if S.image_channel(c.name).topic == topic), None)
         if spec is None:
             return
@@ -431,8 +436,8 @@ def _object(v: dict, name: str) -> dict:
 
 
 def parse_command(data: bytes, where: str) -> Command:
-    """A /commands message: step (0..MAX_STEP), kind, args; finite numbers only (the args themselves are
-    checked by Twin.apply when replayed). RecordingError naming the field otherwise."""
+    """A /commands message: step (0..MAX_STEP), kind, args; finite numbers only (the args themselves
+    are checked by Twin.apply when replayed). RecordingError naming the field otherwise."""
     v = _json_message(data, "command", where)
     try:
         return Command(
@@ -445,7 +450,8 @@ def parse_command(data: bytes, where: str) -> Command:
 
 
 def parse_event(data: bytes, where: str) -> Event:
-    """A /twin/events message: step, t_ns, kind, body, message, data; RecordingError naming the field otherwise."""
+    """A /twin/events message: step, t_ns, kind, body, message, data; RecordingError naming the
+    field otherwise."""
     v = _json_message(data, "event", where)
     try:
         return Event(
@@ -521,8 +527,8 @@ def decode_frames(
 
 
 def frames_of(*blocks: BlockParts, n_objects: int, where: str) -> FrameColumns:
-    """FrameColumns from the three block channels' parts (in model.fields' block order); RecordingError
-    if they disagree."""
+    """FrameColumns from the three block channels' parts (in model.fields' block order);
+    RecordingError if they disagree."""
     n_joints = 4
     columns: dict[str, np.ndarray] = {}
     steps = []

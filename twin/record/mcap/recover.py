@@ -1,4 +1,5 @@
-"""`twin recover`: rewrite the readable part of a recording cut short (crash, kill -9) as a complete file.
+"""`twin recover`: rewrite the readable part of a recording cut short (crash, kill -9) as a complete
+file.
 
 Reads up to the first damaged record, keeps only the frames all three block channels hold (a
 chunk may end between them), drops commands and events after the last kept frame, and writes
@@ -98,7 +99,8 @@ class _Ends:
 
 
 class _Enough(Exception):
-    """The second pass has written every message the first one read (a file still being written grows)."""
+    """The second pass has written every message the first one read (a file still being written
+    grows)."""
 
 
 class _Copy:
@@ -162,7 +164,8 @@ def default_output(source: Path) -> Path:
 
 def recover(source: str | Path, output: str | Path | None = None) -> RecoverReport:
     """Write the readable, consistent part of `source` (or the .partial file beside it, see
-    find_source) to `output` (default: see default_output), a complete MCAP file put in place whole."""
+    find_source) to `output` (default: see default_output), a complete MCAP file put in place
+    whole."""
     asked, source = str(source), find_source(source)
     if not source.exists() and not source.is_symlink():
         raise RecordingError(
@@ -208,8 +211,9 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
 
 
 def _write(f, s: Scan, source: Path, last_step: int, dt_ns: int) -> int:
-    """The recovered file: the first pass's schemas, channels, metadata (and the recovered marker) and
-    attachments, then the kept messages of a second pass over the source. Returns how many were kept."""
+    """The recovered file: the first pass's schemas, channels, metadata (and the recovered marker)
+    and attachments, then the kept messages of a second pass over the source. Returns how many were
+    kept."""
     writer = Writer(f, compression=CompressionType.ZSTD)
     writer.start(profile="", library=S.LIBRARY)
     schema_ids = {

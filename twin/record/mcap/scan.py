@@ -10,16 +10,16 @@ and every flush), a message holds at most MAX_MESSAGE_BYTES, and a file decompre
 MAX_EXPANSION times its size (recordings measured here expand 2.6-6.6 times) or MAX_CHUNK_BYTES,
 whichever is larger. Decompression stops at the declared size, whatever the compressed stream says.
 
-Per record, the cost is bounded too. A chunk holds only schema, channel and message records (the MCAP
-specification's rule); a message names a channel registered before it. The records inside chunks
-number at most RECORD_ALLOWANCE plus one per MIN_BYTES_PER_RECORD (8) bytes of the file: twin's writer
-puts a 16-byte message index entry in the file for every message, beside its compressed record (17.6
-bytes a message in all, measured on a task that says one event 100,000 times in one step; 60-600
-bytes in ordinary runs). So a file of tiny or empty messages that decompresses 32 times cannot make
-the pass walk hundreds of millions of them (a 45 MB file of 44 million empty messages stops after 5.7
-million). A caller that names the channels it wants (`keep`) gets Message objects for those only;
-every message is counted by channel (`counts`), which is all a message the caller does not interpret
-costs: memory does not grow with the number of messages.
+Per record, the cost is bounded too. A chunk holds only schema, channel and message records (the
+MCAP specification's rule); a message names a channel registered before it. The records inside
+chunks number at most RECORD_ALLOWANCE plus one per MIN_BYTES_PER_RECORD (8) bytes of the file:
+twin's writer puts a 16-byte message index entry in the file for every message, beside its
+compressed record (17.6 bytes a message in all, measured on a task that says one event 100,000 times
+in one step; 60-600 bytes in ordinary runs). So a file of tiny or empty messages that decompresses
+32 times cannot make the pass walk hundreds of millions of them (a 45 MB file of 44 million empty
+messages stops after 5.7 million). A caller that names the channels it wants (`keep`) gets Message
+objects for those only; every message is counted by channel (`counts`), which is all a message the
+caller does not interpret costs: memory does not grow with the number of messages.
 """
 
 from __future__ import annotations
@@ -86,7 +86,8 @@ class Damaged(Exception):
 
 @dataclass(slots=True)  # not frozen: a frozen dataclass's __init__ costs 3x more, per message
 class Message:
-    """A message record: the fields of mcap's Message, in a fifth of its memory (a file may hold millions)."""
+    """A message record: the fields of mcap's Message, in a fifth of its memory (a file may hold
+    millions)."""
 
     channel_id: int
     sequence: int
@@ -112,7 +113,8 @@ def _parse(opcode: int, body: bytes) -> McapRecord | None:
 
 
 def _decompress(chunk: Chunk, budget: list[int]) -> bytes:
-    """A chunk's records, decompressed to exactly its declared size (refused over the caps) and CRC-checked."""
+    """A chunk's records, decompressed to exactly its declared size (refused over the caps) and
+    CRC-checked."""
     size = chunk.uncompressed_size
     if size > MAX_CHUNK_BYTES:
         raise Damaged(
@@ -247,9 +249,9 @@ def _count_run(
     keep: Container[int] | None,
     left: int,
 ) -> int:
-    """How many message records of `length` bytes follow one another from `pos`, none on a channel kept
-    or unknown, counted by channel in one numpy pass (at most `left`); 0 if fewer than 64. Floods of
-    empty or equal messages cost no Python work per message."""
+    """How many message records of `length` bytes follow one another from `pos`, none on a channel
+    kept or unknown, counted by channel in one numpy pass (at most `left`); 0 if fewer than 64.
+    Floods of empty or equal messages cost no Python work per message."""
     stride = 9 + length
     rows = min((end - pos) // stride, left, 1 << 20)
     if rows < 64:

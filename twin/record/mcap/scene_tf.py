@@ -40,8 +40,8 @@ _SECONDS_TAG, _NANOS_TAG = tag(1, VARINT), tag(2, VARINT)  # a Timestamp's field
 
 
 class _Joint:
-    """One URDF joint (robot.urdf's reading of it), pre-digested so a transform costs a sine, a cosine
-    and a pack."""
+    """One URDF joint (robot.urdf's reading of it), pre-digested so a transform costs a sine, a
+    cosine and a pack."""
 
     def __init__(self, joint: UrdfJoint, column: int) -> None:
         self.kind = joint.kind
@@ -83,7 +83,8 @@ def timestamp_field(t_ns: int) -> bytes:
 
 
 class SceneTransforms:
-    """Builds one FrameTransforms message per viewed frame from a URDF and the scene's object names."""
+    """Builds one FrameTransforms message per viewed frame from a URDF and the scene's object
+    names."""
 
     def __init__(
         self, urdf: str, joint_names: tuple[str, ...], object_names: tuple[str, ...]
@@ -117,10 +118,11 @@ class SceneTransforms:
         self._encoders: dict[int, tuple[struct.Struct, itemgetter, tuple[bytes, ...]]] = {}
 
     def _encoder(self, ts_len: int) -> tuple[struct.Struct, itemgetter, tuple[bytes, ...]]:
-        """The whole message as one struct, given the timestamp's encoded length, and which value goes
-        in each of its places: message() fills it from one tuple (timestamp, the moving joints' numbers,
-        the poses' numbers, the constant pieces), so a message costs one pack (pick_place's scene: about
-        5 us a message from a row, where a Frame from the row and a pack per transform cost 7.3)."""
+        """The whole message as one struct, given the timestamp's encoded length, and which value
+        goes in each of its places: message() fills it from one tuple (timestamp, the moving joints'
+        numbers, the poses' numbers, the constant pieces), so a message costs one pack (pick_place's
+        scene: about 5 us a message from a row, where a Frame from the row and a pack per transform
+        cost 7.3)."""
         pieces: list[bytes | int] = []  # constant bytes, or a value's index in that tuple
         at = 1  # the next number's index (0 is the timestamp)
         for names, tail in self._transforms:

@@ -37,7 +37,8 @@ _PROTO_TYPES = {
 
 
 def _block_fields(block: str) -> list[tuple[str, int, int]]:
-    """(name, number, protobuf type) of a block message's fields: step, t_ns, its names, then its Frame fields."""
+    """(name, number, protobuf type) of a block message's fields: step, t_ns, its names, then its
+    Frame fields."""
     step, t_ns, *rest = F.block_fields(block)
     return (
         [(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in (step, t_ns)]
@@ -75,7 +76,8 @@ def _json_name(name: str) -> str:
 
 @cache
 def foxglove_descriptor_set(message_name: str) -> bytes:
-    """FileDescriptorSet of a Foxglove well-known message ('FrameTransforms', 'Log') and its imports."""
+    """FileDescriptorSet of a Foxglove well-known message ('FrameTransforms', 'Log') and its
+    imports."""
     import importlib
 
     module = importlib.import_module(f"foxglove_schemas_protobuf.{message_name}_pb2")

@@ -31,8 +31,9 @@ _LENIENT = json.JSONDecoder()
 
 
 def loads(text: str | bytes, *, constants: bool = False) -> object:
-    """Parse JSON text; ValueError for malformed JSON, NaN/Infinity, overflowing numbers, deep nesting.
-    constants: let NaN and infinities through, for a caller whose schema then names the field."""
+    """Parse JSON text; ValueError for malformed JSON, NaN/Infinity, overflowing numbers, deep
+    nesting. constants: let NaN and infinities through, for a caller whose schema then names the
+    field."""
     try:
         # as json.loads decodes bytes (a JSON object: UTF-8, at once)
         if isinstance(text, bytes | bytearray):

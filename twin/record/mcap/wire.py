@@ -47,7 +47,8 @@ def str_field(field_number: int, text: str) -> bytes:
 
 
 def packed(field_number: int, array: np.ndarray, dtype: str) -> bytes:
-    """A packed repeated field from a numpy array ('<f8' double, '<i8' sfixed64, '<i4' sfixed32, '|u1' bool)."""
+    """A packed repeated field from a numpy array ('<f8' double, '<i8' sfixed64, '<i4' sfixed32,
+    '|u1' bool)."""
     return len_field(field_number, np.ascontiguousarray(array, dtype=dtype).tobytes())
 
 

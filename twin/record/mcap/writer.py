@@ -44,8 +44,8 @@ _ERROR = {"task_error", "break"}
 
 
 def _json(value: object) -> bytes:
-    """Standard JSON: a NaN or infinity (a diverged simulation's event data) is written as null, never as
-    the NaN/Infinity tokens Python would write and other JSON readers refuse."""
+    """Standard JSON: a NaN or infinity (a diverged simulation's event data) is written as null,
+    never as the NaN/Infinity tokens Python would write and other JSON readers refuse."""
     try:
         return json.dumps(
             value, sort_keys=True, separators=(",", ":"), default=_plain, allow_nan=False
@@ -62,7 +62,8 @@ def _plain(value: object) -> object:
 
 
 class McapRecorder(Sink):
-    """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized marker)."""
+    """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized
+    marker)."""
 
     def __init__(
         self,
@@ -201,9 +202,9 @@ class McapRecorder(Sink):
             self._take(view)
 
     def _take(self, view: memoryview) -> None:
-        """Frames as rows, one after another in `view`: each one's transforms at the viewing rate, its
-        row into the block at the recording rate. What it keeps it copies (the sender may reuse the
-        memory behind `view` as soon as this returns)."""
+        """Frames as rows, one after another in `view`: each one's transforms at the viewing rate,
+        its row into the block at the recording rate. What it keeps it copies (the sender may reuse
+        the memory behind `view` as soon as this returns)."""
         # locals, not attributes, in this loop over every frame (its bare loop: 0.19 us a frame,
         # 0.22 with attributes)
         size, n_joints, view_every, rate = (
@@ -258,8 +259,8 @@ class McapRecorder(Sink):
         self._pending.append((event.t_ns, self._channel[S.LOG.topic], _log_message(event)))
 
     def on_image(self, image: CameraImage) -> None:
-        """A camera's picture as foxglove.CompressedImage, its calibration, and the camera's pose on /tf
-        (world -> its frame_id), all at the picture's time."""
+        """A camera's picture as foxglove.CompressedImage, its calibration, and the camera's pose on
+        /tf (world -> its frame_id), all at the picture's time."""
         channels = self._camera_channels.get(image.camera)
         if channels is None:
             raise RecordingError(
@@ -293,7 +294,8 @@ class McapRecorder(Sink):
             )
 
     def _register_cameras(self, config: TwinConfig) -> None:
-        """Each camera's image and calibration channels, after the fixed ones (none without cameras)."""
+        """Each camera's image and calibration channels, after the fixed ones (none without
+        cameras)."""
         self._cameras = {c.name: c for c in config.cameras}
         self._camera_channels: dict[str, tuple[int, int]] = {}
         if not config.cameras:
@@ -336,7 +338,8 @@ class McapRecorder(Sink):
         self._pending.clear()
 
     def _write_block(self) -> None:
-        """The buffered frames as one message per block channel (model.fields says which field goes where)."""
+        """The buffered frames as one message per block channel (model.fields says which field goes
+        where)."""
         size = self._rows.size
         last_step, t_last = self._step_time.unpack_from(self._block, len(self._block) - size)
         messages = self._blocks.messages(self._block)
@@ -356,7 +359,8 @@ class McapRecorder(Sink):
     # -- ending ---------------------------------------------------------------------------------
     def abandon(self) -> None:
         """The run died without closing (its process was killed): write out what arrived, leave the
-        .partial file without a summary or finalized marker, as a crash would (twin recover finds it)."""
+        .partial file without a summary or finalized marker, as a crash would (twin recover finds
+        it)."""
         if self.closed:
             return
         self.closed = True
@@ -369,8 +373,8 @@ class McapRecorder(Sink):
             self._file.close()
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Write what is buffered (and the final frame, whatever the rate), the finalized marker, the
-        summary; fsync the file and rename it into place. Idempotent. A run whose task raised is
+        """Write what is buffered (and the final frame, whatever the rate), the finalized marker,
+        the summary; fsync the file and rename it into place. Idempotent. A run whose task raised is
         finalized as error even when its caller went on (twin check records a crashing task)."""
         if self.closed:
             return
@@ -415,8 +419,9 @@ class McapRecorder(Sink):
 
 
 def _row_struct(rows: FrameRows, names: tuple[str, ...]) -> struct.Struct:
-    """A row's struct that unpacks only the named int64 or float64 fields (in row order), as one flat
-    tuple: what the loop over frames and a /tf message need, without a Frame or a numpy array."""
+    """A row's struct that unpacks only the named int64 or float64 fields (in row order), as one
+    flat tuple: what the loop over frames and a /tf message need, without a Frame or a numpy
+    array."""
     form, at = ["<"], 0
     for name in names:
         dtype, offset = rows.dtype.fields[name][:2]
@@ -440,7 +445,8 @@ def _log_message(event: Event) -> bytes:
 
 
 def _read_meshes(config: TwinConfig, meshes: list[Path]) -> list[tuple[str, str, bytes]]:
-    """(attachment name, media type, bytes) of each mesh file, read before the recording is opened."""
+    """(attachment name, media type, bytes) of each mesh file, read before the recording is
+    opened."""
     out = []
     for mesh, name in _mesh_names(config, meshes):
         try:

@@ -1,9 +1,9 @@
 """Joint transforms for many joint values at once (numpy), for animating a URDF drawn by Rerun.
 
-The joints are robot.urdf's reading of the URDF, the same the MCAP transforms use one value at a time.
-Rerun's `UrdfJoint.compute_transform_columns` costs ~3 µs per value and per joint; this vectorised
-form costs a fraction of that. Tests check the result against Rerun's own `compute_transform` and
-against the MCAP transforms.
+The joints are robot.urdf's reading of the URDF, the same the MCAP transforms use one value at a
+time. Rerun's `UrdfJoint.compute_transform_columns` costs ~3 µs per value and per joint; this
+vectorised form costs a fraction of that. Tests check the result against Rerun's own
+`compute_transform` and against the MCAP transforms.
 """
 
 from __future__ import annotations
@@ -46,7 +46,8 @@ class JointMotion:
         )
 
     def transforms(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(translations (n, 3), quaternions (n, 4) as x, y, z, w) of the child frame in the parent frame."""
+        """(translations (n, 3), quaternions (n, 4) as x, y, z, w) of the child frame in the parent
+        frame."""
         values = np.asarray(values, dtype=np.float64)
         n = values.shape[0]
         if self.joint_type == "prismatic":

@@ -1,4 +1,5 @@
-"""Checking and reading back .rrd files: magic bytes, `rerun rrd verify`, and scalar series by entity."""
+"""Checking and reading back .rrd files: magic bytes, `rerun rrd verify`, and scalar series by
+entity."""
 
 from __future__ import annotations
 
@@ -20,8 +21,8 @@ VERIFY_TIMEOUT_S = 120.0
 
 
 def rerun_executable() -> str:
-    """The viewer binary that ships with rerun-sdk (not the Python wrapper on PATH, which would leave its
-    child running when terminated), else `rerun` from PATH."""
+    """The viewer binary that ships with rerun-sdk (not the Python wrapper on PATH, which would
+    leave its child running when terminated), else `rerun` from PATH."""
     spec = importlib.util.find_spec("rerun_cli")
     if spec is not None and spec.origin:
         binary = Path(spec.origin).parent / "rerun"
@@ -36,7 +37,8 @@ def rerun_executable() -> str:
 
 
 def file_kind(path: str | os.PathLike) -> str:
-    """'rrd' or 'mcap' by the file's first bytes; RecordingError for a missing, empty or other file."""
+    """'rrd' or 'mcap' by the file's first bytes; RecordingError for a missing, empty or other
+    file."""
     p = Path(path)
     if not p.exists():
         raise RecordingError(f"recording {str(p)!r} does not exist")
@@ -60,7 +62,8 @@ def file_kind(path: str | os.PathLike) -> str:
 
 
 def verify_rrd(path: str | os.PathLike) -> None:
-    """Rerun's own check (`rerun rrd verify`) plus the magic bytes; RecordingError naming the fault."""
+    """Rerun's own check (`rerun rrd verify`) plus the magic bytes; RecordingError naming the
+    fault."""
     if file_kind(path) != "rrd":
         raise RecordingError(f"{str(path)!r} is an MCAP file, not a Rerun .rrd file")
     try:

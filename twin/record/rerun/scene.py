@@ -1,4 +1,5 @@
-"""What a Rerun recording of a run looks like: entity paths, colours, the static scene and the blueprint.
+"""What a Rerun recording of a run looks like: entity paths, colours, the static scene and the
+blueprint.
 
 The robot is drawn by Rerun's own URDF loader (its links live in named frames, one per URDF link);
 everything else lives in the world frame. Only record/ imports rerun.
@@ -187,7 +188,8 @@ def _series_style(
 def blueprint(config: TwinConfig, *, play_state: str | None = None) -> rrb.Blueprint:
     """A 3D view of the robot and boxes beside the joint plots, suction state and event log.
 
-    play_state "following" opens on the end of the run (screenshots); None lets the viewer play from the start.
+    play_state "following" opens on the end of the run (screenshots); None lets the viewer play from
+    the start.
     """
     reach_m = config.profile.link1_m + config.profile.link2_m
     view_3d = rrb.Spatial3DView(

@@ -1,8 +1,10 @@
-"""Showing a recording in Rerun's viewer: the native window, the web viewer, or a headless screenshot.
+"""Showing a recording in Rerun's viewer: the native window, the web viewer, or a headless
+screenshot.
 
 An .mcap recording is drawn into a temporary .rrd first (twin.load + write_rrd); an .rrd is checked
 (magic bytes and `rerun rrd verify`) before any viewer starts. Every viewer is a `rerun` child that
-listens on 127.0.0.1 only, on free ports unless told otherwise, and dies with us (twin.record.rerun.process).
+listens on 127.0.0.1 only, on free ports unless told otherwise, and dies with us
+(twin.record.rerun.process).
 """
 
 from __future__ import annotations
@@ -116,7 +118,8 @@ def open_native(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, grpc_por
 
 
 def web_url(web_port: int, grpc_port: int) -> str:
-    """The address that opens the recording in the web viewer (without ?url= it shows a welcome page)."""
+    """The address that opens the recording in the web viewer (without ?url= it shows a welcome
+    page)."""
     source = urllib.parse.quote(f"rerun+http://{LOOPBACK}:{grpc_port}/proxy", safe="")
     return f"http://{LOOPBACK}:{web_port}/?url={source}"
 
@@ -130,7 +133,8 @@ def serve_web(
     on_ready: Callable[[str], None] = print,
 ) -> int:
     """Serve the web viewer (bundled in the wheel, works offline) on 127.0.0.1 until interrupted; no
-    browser is opened (`--serve-web`: `--web-viewer` would start the default one, the user opens the URL).
+    browser is opened (`--serve-web`: `--web-viewer` would start the default one, the user opens the
+    URL).
 
     Both ports are the given ones or free ones, so several viewers run side by side. Once both
     listen, on_ready gets the URL that opens the recording. Its log and its temporary files go to
@@ -165,8 +169,8 @@ def serve_web(
 
 
 def holding_time_ns(rrd: str | os.PathLike) -> int | None:
-    """The last moment of the first hold: the arm is down at the place point with the box still on the
-    pad (while carried, a box can hide under the arm). None if the pad never holds anything."""
+    """The last moment of the first hold: the arm is down at the place point with the box still on
+    the pad (while carried, a box can hide under the arm). None if the pad never holds anything."""
     try:
         t_ns, held = read_scalars(
             rrd, f"/{scene.SUCTION_PATH}/holding", timeline=scene.TIME_TIMELINE

@@ -1,4 +1,5 @@
-"""The Rerun sink: a run drawn as an .rrd file (robot from its URDF, boxes, pad, joint plots, events).
+"""The Rerun sink: a run drawn as an .rrd file (robot from its URDF, boxes, pad, joint plots,
+events).
 
 on_frame only copies into preallocated numpy buffers; every `batch_steps` frames (and at close) the
 buffers go out as columns with `send_columns` — one `rr.log` per step would slow a run ~20x.
@@ -43,7 +44,8 @@ def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStre
 
 
 def finish_file(stream: rr.RecordingStream, partial: Path, target: Path) -> None:
-    """Flush and close a stream saving to `partial`, then put the finished file in place as `target`."""
+    """Flush and close a stream saving to `partial`, then put the finished file in place as
+    `target`."""
     stream.flush()
     stream.disconnect()  # closes the file sink: the .rrd is complete on disk
     try:
@@ -99,7 +101,8 @@ class RerunRecorder(Sink):
         *,
         batch_steps: int = DEFAULT_BATCH_STEPS,
     ) -> Self:
-        """Log into a stream the caller opened (saved, served or spawned); the caller sends the blueprint."""
+        """Log into a stream the caller opened (saved, served or spawned); the caller sends the
+        blueprint."""
         self = cls.__new__(cls)
         tree = self._prepare(config, urdf_text, batch_steps)
         self.path = ""
@@ -184,7 +187,8 @@ class RerunRecorder(Sink):
 
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture on its entity (world/cameras/NAME, under its static Pinhole), with the
-        camera's pose at that moment: shown in the camera's own view and as a frustum in the 3D view."""
+        camera's pose at that moment: shown in the camera's own view and as a frustum in the 3D
+        view."""
         times = _event_times([image.step], [image.t_ns])
         path = scene.camera_path(image.camera)
         self.stream.send_columns(
@@ -209,8 +213,8 @@ class RerunRecorder(Sink):
         self._events.append(event)
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Send what is buffered and finish the file (fsynced and renamed into place); the view keeps no
-        outcome (the MCAP file's finalized record does)."""
+        """Send what is buffered and finish the file (fsynced and renamed into place); the view
+        keeps no outcome (the MCAP file's finalized record does)."""
         if self.closed:
             return
         self.closed = True
@@ -221,8 +225,8 @@ class RerunRecorder(Sink):
             self.stream.flush()
 
     def abandon(self) -> None:
-        """The run died without closing: write out what arrived but leave the file as `NAME.partial`,
-        so an earlier file at the path is not replaced by a cut-short view."""
+        """The run died without closing: write out what arrived but leave the file as
+        `NAME.partial`, so an earlier file at the path is not replaced by a cut-short view."""
         if self.closed:
             return
         self.closed = True
@@ -353,7 +357,8 @@ def _event_times(steps: list[int], t_ns: list[int]) -> list[rr.TimeColumn]:
 def write_rrd(
     recording: Recording, path: str | os.PathLike, *, batch_steps: int = DEFAULT_BATCH_STEPS
 ) -> int:
-    """Draw a loaded recording (e.g. an MCAP file) as an .rrd through the same sink; returns frames written."""
+    """Draw a loaded recording (e.g. an MCAP file) as an .rrd through the same sink; returns frames
+    written."""
     urdf = recording.urdf or profile_urdf_text(recording.config.profile)
     with RerunRecorder(path, recording.config, urdf, batch_steps=batch_steps) as recorder:
         recorder.on_frames(recording.frames)

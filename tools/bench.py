@@ -225,13 +225,19 @@ def run(
         (
             "physics",
             f"physics-only steps/s (median of {repeats})",
-            f"{ctx.physics_steps_per_s:,.0f} ({ctx.physics_step_us:.1f} us/step, {realtime:.0f}x real time at 240 Hz)",
+            (
+                f"{ctx.physics_steps_per_s:,.0f} ({ctx.physics_step_us:.1f} us/step, "
+                f"{realtime:.0f}x real time at 240 Hz)"
+            ),
         ),
         ("physics", "spread over repeats", f"{min(samples):,.0f} .. {max(samples):,.0f}"),
         (
             "physics",
             "physics-only steps/s, pick_place's motion and holds (median)",
-            f"{ctx.motion_physics_steps_per_s:,.0f} ({1e6 / ctx.motion_physics_steps_per_s:.1f} us/step)",
+            (
+                f"{ctx.motion_physics_steps_per_s:,.0f} "
+                f"({1e6 / ctx.motion_physics_steps_per_s:.1f} us/step)"
+            ),
         ),
     ]
     failed = 0
@@ -326,13 +332,15 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.repeats < 1 or args.physics_steps < 1:
         print(
-            f"bench: error: --repeats {args.repeats} and --physics-steps {args.physics_steps} must be >= 1",
+            f"bench: error: --repeats {args.repeats} and --physics-steps "
+            f"{args.physics_steps} must be >= 1",
             file=sys.stderr,
         )
         return 2
     if args.json and not Path(args.json).parent.is_dir():
         print(
-            f"bench: error: --json {args.json!r}: folder {str(Path(args.json).parent)!r} does not exist",
+            f"bench: error: --json {args.json!r}: folder {str(Path(args.json).parent)!r} "
+            f"does not exist",
             file=sys.stderr,
         )
         return 2

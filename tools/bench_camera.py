@@ -93,7 +93,8 @@ def bench(ctx) -> list[tuple[str, str]]:
     rate = statistics.median(r[0] for r in runs)
     ctx.rate_figures("record_camera", rate)
     label = (
-        f"twin + MCAP + overhead camera at 15 Hz (a picture every {every} steps, {runs[0][1]} pictures), "
+        f"twin + MCAP + overhead camera at 15 Hz (a picture every {every} steps, "
+        f"{runs[0][1]} pictures), "
         "rendered in the render process: steps/s"
     )
     rows.append((label, ctx.ratio(rate)))

@@ -72,7 +72,10 @@ def bench(ctx) -> list[tuple[str, str]]:
         ("twin export --format csv (load + write)", f"{csv:.2f} s ({frames / csv:,.0f} rows/s)"),
         (
             f"twin export --format lerobot --fps {FPS} (AV1 video)",
-            f"{plain:.2f} s ({ds_frames / plain:,.0f} dataset frames/s, {ds_frames} frames, video {video_mb:.2f} MB)",
+            (
+                f"{plain:.2f} s ({ds_frames / plain:,.0f} dataset frames/s, {ds_frames} "
+                f"frames, video {video_mb:.2f} MB)"
+            ),
         ),
         ("the same with --verify (replay first)", f"{verified:.2f} s"),
     ]

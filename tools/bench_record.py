@@ -247,7 +247,10 @@ def bench(ctx) -> list[tuple[str, str]]:
         ctx.figures["record_motion_steps_per_s"] = statistics.median(motion)
         rows.append(
             (
-                f"physics-only steps/s of the same motion, taken beside each repeat (median of {repeats})",
+                (
+                    f"physics-only steps/s of the same motion, taken beside each repeat "
+                    f"(median of {repeats})"
+                ),
                 f"{statistics.median(motion):,.0f} ({min(motion):,.0f} .. {max(motion):,.0f})",
             )
         )
@@ -286,7 +289,8 @@ def bench(ctx) -> list[tuple[str, str]]:
             rows.append(
                 (
                     f"{name}: whole run, start and finish included",
-                    f"{_rate_text(ctx, key + '_run')}; start {start_ms:.0f} ms, finish {finish_ms:.0f} ms"
+                    f"{_rate_text(ctx, key + '_run')}; start {start_ms:.0f} ms, finish "
+                    f"{finish_ms:.0f} ms"
                     + (
                         f"; the twin waited for a recorder {waits:.0f} times a run"
                         if key != "record_none"
@@ -301,7 +305,10 @@ def bench(ctx) -> list[tuple[str, str]]:
         rows.append(
             (
                 "twin + MCAP: speed relative to no recording (wall; CPU)",
-                f"{with_mcap / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP']:.2f}x",
+                (
+                    f"{with_mcap / plain:.2f}x; "
+                    f"{cpu_us['twin, no recording'] / cpu_us['twin + MCAP']:.2f}x"
+                ),
             )
         )
         rows.append(
@@ -315,7 +322,10 @@ def bench(ctx) -> list[tuple[str, str]]:
             rows.append(
                 (
                     "twin + MCAP + Rerun: speed relative to no recording (wall; CPU)",
-                    f"{both / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x",
+                    (
+                        f"{both / plain:.2f}x; "
+                        f"{cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"
+                    ),
                 )
             )
             rows.append(
@@ -366,7 +376,10 @@ def _user_baselines(
     rows = [
         (
             "the reads floor: the same motion, a Frame's engine reads and nothing else (steps/s)",
-            f"{statistics.median(reads):,.0f} ({ctx.figures['record_reads_vs_motion']:.2f}x same motion)",
+            (
+                f"{statistics.median(reads):,.0f} "
+                f"({ctx.figures['record_reads_vs_motion']:.2f}x same motion)"
+            ),
         )
     ]
     if not naive:
@@ -378,14 +391,23 @@ def _user_baselines(
     ctx.figures["record_both_vs_naive"] = paired(both, naive)
     rows.append(
         (
-            "a hand-written logger: rr.log of joints and box + one JSON MCAP message a step (steps/s)",
-            f"{statistics.median(naive):,.0f} ({ctx.figures['record_naive_vs_motion']:.2f}x same motion)",
+            (
+                "a hand-written logger: rr.log of joints and box + one JSON MCAP message a "
+                "step (steps/s)"
+            ),
+            (
+                f"{statistics.median(naive):,.0f} "
+                f"({ctx.figures['record_naive_vs_motion']:.2f}x same motion)"
+            ),
         )
     )
     rows.append(
         (
             "twin + MCAP + Rerun against the reads floor; against the hand-written logger",
-            f"{ctx.figures['record_both_vs_reads']:.2f}x; {ctx.figures['record_both_vs_naive']:.2f}x",
+            (
+                f"{ctx.figures['record_both_vs_reads']:.2f}x; "
+                f"{ctx.figures['record_both_vs_naive']:.2f}x"
+            ),
         )
     )
     return rows
@@ -394,7 +416,10 @@ def _user_baselines(
 def _rate_text(ctx, key: str) -> str:
     """'31,250 (0.45x idle, 0.78x same motion)' from the figures paired() wrote."""
     f = ctx.figures
-    return f"{f[key + '_steps_per_s']:,.0f} ({f[key + '_vs_idle']:.2f}x idle, {f[key + '_vs_motion']:.2f}x same motion)"
+    return (
+        f"{f[key + '_steps_per_s']:,.0f} ({f[key + '_vs_idle']:.2f}x idle, "
+        f"{f[key + '_vs_motion']:.2f}x same motion)"
+    )
 
 
 def main() -> int:

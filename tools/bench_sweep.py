@@ -180,7 +180,10 @@ def bench(ctx) -> list[tuple[str, str]]:
             f"{speedup:.2f}x (pairs {min(speedups):.2f}..{max(speedups):.2f})",
         ),
         (
-            "scenarios/s, Dask LocalCluster of 2 workers (started, warm) / 2 local workers around it",
+            (
+                "scenarios/s, Dask LocalCluster of 2 workers (started, warm) / 2 local "
+                "workers around it"
+            ),
             f"{dask:.1f} / {statistics.median(local):.1f}",
         ),
         (

@@ -96,7 +96,10 @@ def bench(ctx) -> list[tuple[str, str]]:
             runs = [measure(n, Path(tmp) / f"r{k}") for k in range(ctx.repeats)]
             first, peak, stop = (statistics.median(r[i] for r in runs) for i in range(3))
             figures[n] = (first, peak, stop)
-            label = f"{n:,} planned scenarios: first result, parent's peak memory, stop after Ctrl-C (medians of {ctx.repeats})"
+            label = (
+                f"{n:,} planned scenarios: first result, parent's peak memory, stop after "
+                f"Ctrl-C (medians of {ctx.repeats})"
+            )
             rows.append((label, f"{first:.2f} s, {peak:.0f} MB, {stop:.2f} s"))
     small, large = figures[SIZES[0]], figures[SIZES[-1]]
     rows.append(

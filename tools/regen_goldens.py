@@ -56,7 +56,8 @@ def goldens() -> list[Golden]:
             TwinConfig(profile=profile),
             "pick_place",
             {"cycles": 2},
-            f"pick_place, 2 cycles, robot {name}, default scene (one 50 mm, 0.1 kg box at (0.2, 0.7))",
+            f"pick_place, 2 cycles, robot {name}, default scene (one 50 mm, 0.1 kg box "
+            f"at (0.2, 0.7))",
         )
         for name, profile in sorted(PROFILES.items())
     ]
@@ -69,7 +70,8 @@ def goldens() -> list[Golden]:
             TwinConfig(profile=PROFILES["seed000"]),
             "seed000",
             {"cycles": 1},
-            "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: the box to (-0.3, -0.55)",
+            "task seed000 (report 000's Lua loop), 1 cycle, robot seed000: the box to "
+            "(-0.3, -0.55)",
             4,
         ),
         Golden(
@@ -77,7 +79,8 @@ def goldens() -> list[Golden]:
             TwinConfig(profile=PROFILES["seed001"]),
             "seed001",
             {"cycles": 1},
-            "task seed001 (report 001's Lua loop, its Heron IK as written), 1 cycle, robot seed001: the miss",
+            "task seed001 (report 001's Lua loop, its Heron IK as written), 1 cycle, "
+            "robot seed001: the miss",
             4,
         ),
         Golden(
@@ -230,7 +233,8 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [n for n in args.names if n not in known]
     if unknown:
         print(
-            f"regen_goldens: error: unknown golden {unknown[0]!r}; expected one of {', '.join(known)}",
+            f"regen_goldens: error: unknown golden {unknown[0]!r}; expected one of "
+            f"{', '.join(known)}",
             file=sys.stderr,
         )
         return 2

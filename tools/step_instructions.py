@@ -1,7 +1,7 @@
 """Instructions a step, counted by valgrind's callgrind: the same count every run, where wall time
 on a shared machine moves by a third from one minute to the next.
 
-    python tools/step_instructions.py            # physics-only, twin alone, + MCAP, + MCAP and Rerun
+    python tools/step_instructions.py           # physics-only, twin alone, + MCAP, + MCAP and Rerun
     python tools/step_instructions.py --modes physics alone
 
 Each mode runs pick_place at 2 and at 4 cycles under callgrind; a step's cost is the difference of
@@ -122,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if shutil.which("valgrind") is None:
         print(
-            "step_instructions: valgrind is not installed; expected it on PATH (apt-get install valgrind)",
+            "step_instructions: valgrind is not installed; expected it on PATH (apt-get "
+            "install valgrind)",
             file=sys.stderr,
         )
         return 2

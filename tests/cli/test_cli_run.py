@@ -265,9 +265,9 @@ def test_report_002s_program_as_a_task_misses_and_leaves_the_box(tmp_path):
 
 
 def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tmp_path):
-    """`twin run ... | head -1`: the reader goes away before the twin has printed all of its summary.
-    The run's files are finished before the summary is printed, so they are what an unpiped run
-    writes (byte for byte, the camera's pictures included), and the camera process ends with the
+    """`twin run ... | head -1`: the reader goes away before the twin has printed all of its
+    summary. The run's files are finished before the summary is printed, so they are what an unpiped
+    run writes (byte for byte, the camera's pictures included), and the camera process ends with the
     twin: exit 141 (128 + SIGPIPE). The reader here closes its end before the first line: had it
     read one line first, the twin could write the whole short summary into the pipe before the
     close, and exit 0."""
@@ -294,8 +294,9 @@ def test_output_piped_into_head_leaves_a_good_recording_and_no_process_behind(tm
 PLACED_TASK = """
 def run(twin, error: str = "missing", fail: bool = False):
     twin.wait(0.05)
-    data = {"missing": {}, "none": {"error_m": None}, "text": {"error_m": "1 mm"}, "bool": {"error_m": True},
-            "huge": {"error_m": 10**400}, "list": {"error_m": [0.001]}}[error]
+    data = {"missing": {}, "none": {"error_m": None}, "text": {"error_m": "1 mm"},
+            "bool": {"error_m": True}, "huge": {"error_m": 10**400},
+            "list": {"error_m": [0.001]}}[error]
     twin.event("placed", "box", "put down", **data)
     twin.event("placed", "box", "put down again", error_m=0.0015)
     if fail:

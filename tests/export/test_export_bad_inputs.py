@@ -46,7 +46,10 @@ class Run:
         self.code, self.out, self.err, self.rss_mb, self.seconds = code, out, err, rss_mb, seconds
 
     def __repr__(self) -> str:
-        return f"exit {self.code}, {self.rss_mb:.0f} MB, {self.seconds:.2f} s, stderr {self.err[-600:]!r}"
+        return (
+            f"exit {self.code}, {self.rss_mb:.0f} MB, {self.seconds:.2f} s, stderr "
+            f"{self.err[-600:]!r}"
+        )
 
 
 # Peak RSS survives fork and exec: a child of pytest would report at least pytest's size. A small

@@ -118,7 +118,7 @@ def test_a_writer_error_mid_run_is_one_line_and_keeps_what_came_before(tmp_path)
     path = tmp_path / "full.mcap"
     script = textwrap.dedent(f"""
         import resource, signal, sys
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit: EFBIG, no signal
         resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, resource.RLIM_INFINITY))
         from twin.cli import main
         sys.exit(main(["run", "pick_place", "--cycles", "4", "--record", {str(path)!r}]))

@@ -328,12 +328,14 @@ def test_idle_clients_cannot_lock_the_official_client_out():
             assert sim.getJointPosition(h) == pytest.approx(0.25)
             served_s = time.monotonic() - t0
             server.wait_for(
-                rf"client \d+ forgotten: silent for \d+\.\d s while all {MAX_CLIENTS} client slots were taken"
+                rf"client \d+ forgotten: silent for \d+\.\d s while all {MAX_CLIENTS} "
+                rf"client slots were taken"
             )
             # the rule is in the refusal's text; the official client got in at once, not after a
             # timeout
             assert (
-                f"when all slots are taken, a new client takes the slot of the least recently seen one silent "
+                f"when all slots are taken, a new client takes the slot of the least "
+                f"recently seen one silent "
                 f"for {EVICT_IDLE_S:g} s or more"
             ) in str(refused.value)
             assert served_s < 5.0
@@ -433,7 +435,8 @@ def test_a_multipart_flood_is_cut_off_after_one_frames_worth():
                 stop.set()
                 caller.join(10)
             print(
-                f"multipart flood: peak RSS +{rss.growth_mb():.0f} MB over {rss.base / 1e6:.0f} MB, "
+                f"multipart flood: peak RSS +{rss.growth_mb():.0f} MB over "
+                f"{rss.base / 1e6:.0f} MB, "
                 f"{elapsed_s:.2f} s; {reply}"
             )
             assert rss.growth_mb() < (MAX_UNREAD_BYTES + (24 << 20)) / 1e6  # < 294 MB (old: 629 MB)
@@ -484,7 +487,8 @@ def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
                     sent += len(chunk)
             elapsed_s = time.monotonic() - t0
         print(
-            f"raw flood: {sent >> 20} MiB sent in {elapsed_s:.2f} s, peak RSS +{rss.growth_mb():.0f} MB"
+            f"raw flood: {sent >> 20} MiB sent in {elapsed_s:.2f} s, peak RSS "
+            f"+{rss.growth_mb():.0f} MB"
         )
         # what the kernels' buffers took after the close, at most
         assert sent < MAX_UNREAD_BYTES + (32 << 20)

@@ -52,8 +52,10 @@ def _link(
 ) -> str:
     geom = f'<geometry><mesh filename="meshes/{mesh}" scale="0.001 0.001 0.001"/></geometry>'
     return (
-        f'<link name="{name}"><inertial><origin xyz="{com[0]} {com[1]} {com[2]}"/><mass value="{mass}"/>'
-        f'<inertia ixx="{inertia[0]}" ixy="0" ixz="0" iyy="{inertia[1]}" iyz="0" izz="{inertia[2]}"/></inertial>'
+        f'<link name="{name}"><inertial><origin xyz="{com[0]} {com[1]} {com[2]}"/><mass '
+        f'value="{mass}"/>'
+        f'<inertia ixx="{inertia[0]}" ixy="0" ixz="0" iyy="{inertia[1]}" iyz="0" '
+        f'izz="{inertia[2]}"/></inertial>'
         f"<visual>{geom}</visual><collision>{geom}</collision></link>\n"
     )
 
@@ -73,7 +75,8 @@ def _joint(
     return (
         f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
         f'<origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}" rpy="0 0 0"/><axis xyz="{axis}"/>'
-        f'<limit lower="{lower}" upper="{upper}" effort="{effort}" velocity="{velocity}"/></joint>\n'
+        f'<limit lower="{lower}" upper="{upper}" effort="{effort}" '
+        f'velocity="{velocity}"/></joint>\n'
     )
 
 
@@ -151,6 +154,7 @@ def write_user_robot(folder: Path, *, suction_signal: str = "vacuum") -> Path:
     profile = folder / "stl_scara.toml"
     profile.write_text(
         f'name = "stl_scara"\nurdf = "stl_scara.urdf"\npad_link = "tool0"\n'
-        f'suction_signal = "{suction_signal}"\npad_length_m = {PAD_LENGTH_M}\n\n[joints]\n{joints}\n'
+        f'suction_signal = "{suction_signal}"\npad_length_m = {PAD_LENGTH_M}\n\n'
+        f"[joints]\n{joints}\n"
     )
     return profile

@@ -344,7 +344,8 @@ try:
 except ConfigError as err:
     print("ConfigError:", err)
     sys.exit(3)
-print(client.submit(lambda x: x + 1, 41, pure=False).result(timeout=30), len(client.scheduler_info()["workers"]))
+workers = len(client.scheduler_info()["workers"])
+print(client.submit(lambda x: x + 1, 41, pure=False).result(timeout=30), workers)
 client.close()
 """
 

@@ -102,7 +102,10 @@ def test_judge_allows_moves_within_tolerance():
     assert judge(golden, near, tol) == []
     far = {**near, "success_rate": 0.8, "placement_error_mm": {"p50": 1.6, "p95": 2.9, "max": 1.5}}
     assert judge(golden, far, tol) == [
-        "success_rate 0.8000 is outside the golden's Wilson 95 % interval [0.8200, 0.9500] (golden 0.9000, moved -0.1000)",
+        (
+            "success_rate 0.8000 is outside the golden's Wilson 95 % interval [0.8200, "
+            "0.9500] (golden 0.9000, moved -0.1000)"
+        ),
         "placement_error_mm.p50 moved +0.600 mm (golden 1.000, now 1.600; tolerance 0.5 mm)",
     ]
 

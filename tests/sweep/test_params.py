@@ -48,7 +48,8 @@ def test_unknown_params_are_one_line_exit_2(capsys):
     assert main(["run", "pick_place", "--param", "speed=2", "--no-record"]) == 2
     err = capsys.readouterr().err
     assert err == (
-        "twin: error: task 'pick_place' takes no parameter 'speed'; its parameters: cycles, pause_s, "
+        "twin: error: task 'pick_place' takes no parameter 'speed'; its parameters: "
+        "cycles, pause_s, "
         "box, keep_going, max_error_m\n"
     )
     assert main(["run", "seed002", "--robot", "seed002", "--cycles", "3", "--no-record"]) == 2
@@ -84,7 +85,8 @@ LONG = "1" + "0" * 5000  # more digits than Python's int() reads by default
         (
             "task.k=choice(9223372036854775808)",
             (
-                "--vary task.k=choice(9223372036854775808) is invalid: 9223372036854775808 is outside int64; "
+                "--vary task.k=choice(9223372036854775808) is invalid: "
+                "9223372036854775808 is outside int64; "
                 "expected a whole number -2**63..2**63-1 (int64)"
             ),
         ),
@@ -216,7 +218,10 @@ def test_the_int64_ends_and_the_widest_finite_distributions_are_accepted_and_sta
     [
         (
             "cycles=1e400",
-            "--param cycles=1e400 is invalid: 1e400 is not a finite number; expected a finite number",
+            (
+                "--param cycles=1e400 is invalid: 1e400 is not a finite number; expected a "
+                "finite number"
+            ),
         ),
         ("pause_s=NaN", "--param pause_s=NaN is invalid: NaN is not a finite number"),
         ("pause_s=nan", "--param pause_s=nan is invalid: nan is not a finite number"),

@@ -58,7 +58,10 @@ def test_values_reach_the_configuration_and_are_checked_against_its_schema():
     [
         (
             ("bax.x_m", "0.2"),
-            "--vary key 'bax.x_m' is unknown; expected <object>.x_m|y_m|z_m|yaw_rad|mass_kg|friction",
+            (
+                "--vary key 'bax.x_m' is unknown; expected "
+                "<object>.x_m|y_m|z_m|yaw_rad|mass_kg|friction"
+            ),
         ),
         (
             ("box.colour", "1"),

@@ -40,7 +40,10 @@ class Terminal:
         self.socket = f"twin-teleop-{os.getpid()}-{tmp_path.name}"
         self.status = tmp_path / "exit_status"
         env = f"HOME={shlex.quote(str(tmp_path))} TERM=xterm-256color"
-        shell = f"cd {shlex.quote(os.getcwd())} && env {env} {command}; echo $? > {shlex.quote(str(self.status))}"
+        shell = (
+            f"cd {shlex.quote(os.getcwd())} && env {env} {command}; echo $? > "
+            f"{shlex.quote(str(self.status))}"
+        )
         self._tmux(
             "new-session",
             "-d",
@@ -150,7 +153,10 @@ def terminal(tmp_path):
 
 def test_curses_pick_and_place_then_replay_exactly(terminal, tmp_path, capsys):
     record = tmp_path / "teleop_mtb.mcap"
-    cmd = f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot mtb --record {shlex.quote(str(record))}"
+    cmd = (
+        f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot mtb --record "
+        f"{shlex.quote(str(record))}"
+    )
     term = terminal(cmd)
     text = term.wait_for("the start screen", lambda s: "last keys (none yet)" in s)
     assert (
@@ -214,7 +220,10 @@ def test_curses_pick_and_place_then_replay_exactly(terminal, tmp_path, capsys):
 
 def test_seed000_screen_ctrl_c_ends_and_keeps_the_recording(terminal, tmp_path):
     record = tmp_path / "teleop_seed000.mcap"
-    cmd = f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot seed000 --record {shlex.quote(str(record))}"
+    cmd = (
+        f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot seed000 --record "
+        f"{shlex.quote(str(record))}"
+    )
     term = terminal(cmd)
     text = term.wait_for("the start screen", lambda s: "last keys (none yet)" in s)
     # q is the elbow here, not quit

@@ -36,7 +36,8 @@ def test_every_golden_rerun_matches():
     outcomes = check_all([str(p) for p in GOLDENS], Tolerances.from_preset(DEFAULT), jobs=2)
     bad = {Path(o.path).name: o.summary for o in outcomes if o.status != "match"}
     assert not bad, "\n".join(f"{name}: {why}" for name, why in bad.items()) + (
-        "\n(if the change is intended: python tools/regen_goldens.py rewrites every golden with this machine's "
+        "\n(if the change is intended: python tools/regen_goldens.py rewrites every "
+        "golden with this machine's "
         "runs; review `twin diff` old vs new first)"
     )
 
@@ -82,7 +83,8 @@ def test_run(golden):
     run = record_task(TwinConfig(), "pick_place", {"cycles": 1})
     if os.environ.get("TWIN_TAMPER"):
         run.frames.object_poses[400:, 0, 1] += 0.003
-    golden.check(run, "one_cycle", **({"tolerance": os.environ["TWIN_TOL"]} if "TWIN_TOL" in os.environ else {}))
+    tolerance = {"tolerance": os.environ["TWIN_TOL"]} if "TWIN_TOL" in os.environ else {}
+    golden.check(run, "one_cycle", **tolerance)
 """
 
 

@@ -186,9 +186,11 @@ def _first_change(a, b, above: float = 0.0) -> int:
 # -- sensitivity: a configuration change, run on another machine, diffed against a golden here ---
 
 CONFIG_CHANGES = {
-    "1 mm link": "replace(BASE, profile=replace(BASE.profile, link1_m=BASE.profile.link1_m + 0.001))",
+    "1 mm link": "replace(BASE, profile=replace(BASE.profile, link1_m=BASE.profile.link1_m + "
+    "0.001))",
     "1 mm box": "replace(BASE, objects=(replace(BASE.objects[0], pos_m=(0.201, 0.7, 0.025)),))",
-    "1 % mass": "replace(BASE, objects=(replace(BASE.objects[0], mass_kg=BASE.objects[0].mass_kg * 1.01),))",
+    "1 % mass": "replace(BASE, objects=(replace(BASE.objects[0], mass_kg=BASE.objects[0].mass_kg "
+    "* 1.01),))",
     "solver": "replace(BASE, engine=replace(BASE.engine, num_solver_iterations=40))",
     "none": "BASE",
 }

@@ -189,7 +189,8 @@ def test_the_report_names_the_first_command_difference_and_the_likely_cause(
     # annotations apart
     acting = [c for c in load(d / "on_time_r4.mcap").commands if c.kind != "event"]
     assert (
-        f"the golden's command #{acting.index(signal)} is {cause}; the candidate's is step {signal.step + 1} "
+        f"the golden's command #{acting.index(signal)} is {cause}; the candidate's is "
+        f"step {signal.step + 1} "
         "signal(" in out
     )
 
@@ -377,8 +378,8 @@ def test_a_moved_event_prints_each_side_its_own_time_and_json_gives_the_window(t
     dt_s = golden.config.dt_ns * 1e-9
     text = render_text(result)
     assert (
-        f"moved    release box: expected step {e} (t = {e * dt_s:.3f} s), actual step {s} (t = {s * dt_s:.3f} s)"
-        in text
+        f"moved    release box: expected step {e} (t = {e * dt_s:.3f} s), actual step "
+        f"{s} (t = {s * dt_s:.3f} s)" in text
     )
     data = json.loads(render_json(result))
     assert data["first"]["channel"] == "events" and data["first"]["field"] == "moved"

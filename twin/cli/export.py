@@ -75,7 +75,8 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="lerobot: replace an existing dataset folder (one holding meta/info.json) once the new one is complete",
+        help="lerobot: replace an existing dataset folder (one holding meta/info.json) once "
+        "the new one is complete",
     )
     p.set_defaults(func=cmd_export)
 
@@ -125,7 +126,8 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     # before loading anything; each recording's own physics rate is checked once loaded
     if args.fps > MAX_FPS:
         raise ConfigError(
-            f"--fps {args.fps} is above {MAX_FPS}, the fastest physics rate a recording has; expected "
+            f"--fps {args.fps} is above {MAX_FPS}, the fastest physics rate a recording "
+            f"has; expected "
             "at most the recordings' physics rate (240 by default)"
         )
     written, sources = export_lerobot(
@@ -141,12 +143,14 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     left_out = sum(1 for s in sources if s.verified is False)
     if written is None:
         raise _LeftOut(
-            f"no recording to export: the replay of each differs from it (--verify); nothing written to "
+            f"no recording to export: the replay of each differs from it (--verify); "
+            f"nothing written to "
             f"{args.output!r}"
         )
     videos = f", videos {', '.join(written.video_keys)}" if written.video_keys else ", no camera"
     print(
-        f"wrote {written.path}: {written.episodes} episode(s), {written.frames} frames at {args.fps} fps{videos}"
+        f"wrote {written.path}: {written.episodes} episode(s), {written.frames} frames "
+        f"at {args.fps} fps{videos}"
     )
     if left_out:
         raise _LeftOut(

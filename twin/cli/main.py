@@ -104,7 +104,8 @@ class _Summary(Sink):
 def _print_summary(twin: Twin, summary: _Summary, wall_s: float) -> None:
     sim_s = twin.t_s
     print(
-        f"robot {twin.profile.name}: {twin.step_index} steps, simulated {sim_s:.3f} s, wall {wall_s:.3f} s, "
+        f"robot {twin.profile.name}: {twin.step_index} steps, simulated {sim_s:.3f} s, "
+        f"wall {wall_s:.3f} s, "
         f"real-time factor {sim_s / wall_s if wall_s > 0 else float('inf'):.1f}x"
     )
     counts: dict[str, int] = {}

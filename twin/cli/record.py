@@ -42,7 +42,8 @@ def add_record_options(
         type=whole_number(1),
         default=1,
         metavar="N",
-        help="MCAP: keep every Nth physics step (default 1: every step; the last step is always kept); "
+        help="MCAP: keep every Nth physics step (default 1: every step; the last step is "
+        "always kept); "
         "the .rrd view keeps every step",
     )
     p.set_defaults(record_by_default=record_by_default)
@@ -71,8 +72,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     partial = partial_path(args.file)
     if not Path(args.file).exists() and partial.is_file():
         raise RecordingError(
-            f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
-            f"of a run that was killed (or is still running); `twin recover {args.file}` restores it"
+            f"recording {args.file!r} does not exist, but {str(partial)!r} does: the "
+            f"unfinished file "
+            f"of a run that was killed (or is still running); `twin recover {args.file}` "
+            f"restores it"
         )
     info = read_info(args.file, keep_events=args.events)
     for line in format_info(info, all_events=args.events):
@@ -129,7 +132,8 @@ def add_record_commands(sub) -> None:
         "-o",
         "--output",
         metavar="FIXED.mcap",
-        help="where to write the restored file (default, for a killed run's .partial file: the NAME.mcap "
+        help="where to write the restored file (default, for a killed run's .partial file: "
+        "the NAME.mcap "
         "it was meant to become, if that does not exist)",
     )
     p.set_defaults(func=cmd_recover)

@@ -92,7 +92,8 @@ def add_sweep_command(sub) -> None:
         action="append",
         default=[],
         metavar="KEY=DIST",
-        help="a varied value (repeatable): KEY box.x_m, box.y_m, box.yaw_rad, box.mass_kg, box.friction "
+        help="a varied value (repeatable): KEY box.x_m, box.y_m, box.yaw_rad, box.mass_kg, "
+        "box.friction "
         "(any scene object), pad.<suction field>, robot.revolute_max_velocity_rad_s, "
         "robot.prismatic_max_velocity_m_s, engine.<field>, task.<parameter>; DIST uniform(a,b), "
         "normal(mu,sigma), choice(v1,v2,...) or a value",
@@ -110,7 +111,8 @@ def add_sweep_command(sub) -> None:
         type=seconds,
         default=None,
         metavar="S",
-        help="a scenario that gives no result within S seconds of wall time (hung without stepping) "
+        help="a scenario that gives no result within S seconds of wall time (hung without "
+        "stepping) "
         "is ended and fails with that reason",
     )
     p.add_argument(
@@ -131,14 +133,16 @@ def add_sweep_command(sub) -> None:
         "--scheduler",
         default=None,
         metavar="ADDR",
-        help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or tls://HOST:8786 "
+        help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or "
+        "tls://HOST:8786 "
         "(certificates from Dask's configuration; default: a cluster of --jobs workers on "
         "127.0.0.1 that only this sweep can reach, TLS with a certificate made for the run)",
     )
     p.add_argument(
         "--dashboard",
         action="store_true",
-        help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on a free "
+        help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on "
+        "a free "
         "port (its address is printed); without it no HTTP server runs",
     )
     p.add_argument(
@@ -146,7 +150,8 @@ def add_sweep_command(sub) -> None:
         type=whole_number(1),
         default=None,
         metavar="N",
-        help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on Dask; at most 16)",
+        help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on "
+        "Dask; at most 16)",
     )
     p.add_argument(
         "--out",
@@ -380,7 +385,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise ConfigError("--only and --resume cannot go together; expected one of them")
     if args.only is not None and max(args.only) >= spec.scenarios:
         raise ConfigError(
-            f"--only {max(args.only)} is out of range; the sweep has scenarios 0..{spec.scenarios - 1}"
+            f"--only {max(args.only)} is out of range; the sweep has scenarios "
+            f"0..{spec.scenarios - 1}"
         )
     out = _out_dir(args.out, clear=args.only is None and not args.resume)
     journal = None
@@ -394,7 +400,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         write_definition(out, spec)
         if journal.rows:
             print(
-                f"resuming: {len(journal.rows)} of {spec.scenarios} scenarios are in {out / JOURNAL}",
+                f"resuming: {len(journal.rows)} of {spec.scenarios} scenarios are in "
+                f"{out / JOURNAL}",
                 file=sys.stderr,
             )
         scenarios = (i for i in range(spec.scenarios) if not journal.done(i))
@@ -444,7 +451,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             )
     if done.stopped_by is not None:
         print(
-            f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` runs the rest",
+            f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` "
+            f"runs the rest",
             file=sys.stderr,
         )
         # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
@@ -496,7 +504,8 @@ def _print_only(rows: list[dict], out: Path, save: str) -> None:
             else f", placement error {r['placement_error_mm']:.2f} mm"
         )
         print(
-            f"scenario {r['scenario']}: {r['outcome']}{': ' + r['error'] if r['error'] else ''}{placed}"
+            f"scenario {r['scenario']}: "
+            f"{r['outcome']}{': ' + r['error'] if r['error'] else ''}{placed}"
         )
         folder = (
             SCENARIOS
@@ -523,13 +532,15 @@ def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> 
     ]
     lo, hi = summary["wilson95"]
     lines.append(
-        f"ok {summary['ok']}, failed {summary['failed']}: success rate {100 * summary['success_rate']:.1f} % "
+        f"ok {summary['ok']}, failed {summary['failed']}: success rate "
+        f"{100 * summary['success_rate']:.1f} % "
         f"(Wilson 95 %: {100 * lo:.1f}-{100 * hi:.1f} %)"
     )
     pe = summary["placement_error_mm"]
     if pe["count"]:
         lines.append(
-            f"placement error: p50 {pe['p50']:.2f} mm, p95 {pe['p95']:.2f} mm, max {pe['max']:.2f} mm "
+            f"placement error: p50 {pe['p50']:.2f} mm, p95 {pe['p95']:.2f} mm, max "
+            f"{pe['max']:.2f} mm "
             f"(over {pe['count']} scenarios that placed)"
         )
     if summary["failures_by_reason"]:

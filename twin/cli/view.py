@@ -22,7 +22,8 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
     mode.add_argument(
         "--web",
         action="store_true",
-        help="serve the web viewer on 127.0.0.1 (offline) and print the URL that opens the recording",
+        help="serve the web viewer on 127.0.0.1 (offline) and print the URL that opens the "
+        "recording",
     )
     mode.add_argument(
         "--rrd", metavar="OUT.rrd", help="convert an MCAP recording to a Rerun .rrd file and exit"

@@ -257,7 +257,8 @@ def compare(
         commands_tol, commands_until = max(commands_tol, floor.commands), floor.commands_split_step
         if commands_until is not None:
             notes.append(
-                f"the candidate's own commands change with last-bit noise from step {commands_until} on "
+                f"the candidate's own commands change with last-bit noise from step "
+                f"{commands_until} on "
                 "(its noise run took other ones): commands are compared up to there"
             )
     g_parts, c_parts = _split_annotations(golden.commands), _split_annotations(candidate.commands)
@@ -296,7 +297,8 @@ def compare(
         if floor is not None and floor.events_split_step is not None:
             event_diffs = [d for d in event_diffs if d.step < floor.events_split_step]
             notes.append(
-                f"the candidate's own events change with last-bit noise from step {floor.events_split_step} "
+                f"the candidate's own events change with last-bit noise from step "
+                f"{floor.events_split_step} "
                 "on: events are paired up to there"
             )
     notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
@@ -799,7 +801,8 @@ def _decimation_notes(golden: Recording, candidate: Recording, compared: int) ->
         rate = rec.rate_steps
         if rate > 1:
             notes.append(
-                f"the {name} is decimated (a frame every {rate} steps): frames compare on the {compared} "
+                f"the {name} is decimated (a frame every {rate} steps): frames compare "
+                f"on the {compared} "
                 "steps both files keep; commands, events and final poses compare at every step"
             )
     return notes

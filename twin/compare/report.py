@@ -62,7 +62,8 @@ def first_detail(d: Divergence) -> str:
         if d.field == "extra":
             return f"the candidate has it at step {d.actual[0]}; the golden has no such event"
         return (
-            f"expected at step {d.expected[0]}, actual at step {d.actual[0]}: moved {fmt(d.difference, 'steps')}, "
+            f"expected at step {d.expected[0]}, actual at step {d.actual[0]}: moved "
+            f"{fmt(d.difference, 'steps')}, "
             f"more than the event window"
         )
     text = (
@@ -119,7 +120,8 @@ def _run_line(info: dict) -> str:
     what = run.get("task") or run.get("source") or "?"
     params = json.dumps(run.get("params", {}), sort_keys=True)
     return (
-        f"{info.get('path') or '<memory>'} ({info['profile']}, {run.get('source', '?')} {what} {params}, "
+        f"{info.get('path') or '<memory>'} ({info['profile']}, {run.get('source', '?')} "
+        f"{what} {params}, "
         f"{info['frames']} frames, steps {info['first_step']}..{info['last_step']})"
     )
 
@@ -249,7 +251,8 @@ def render_text(result: DiffResult) -> str:
         )
     if result.floor is not None:
         lines.append(
-            f"  noise floor: measured on a run with {result.floor.perturbation}, times {result.floor.margin:g}"
+            f"  noise floor: measured on a run with {result.floor.perturbation}, times "
+            f"{result.floor.margin:g}"
         )
     lines.append(f"  {noise_summary(result)}")
     if result.first is None:

@@ -186,7 +186,8 @@ def parse_override(spec: str) -> tuple[list[str], float]:
     known = ", ".join(FIELDS)
     if not isinstance(spec, str) or spec.count("=") != 1:
         raise ConfigError(
-            f"tolerance {spec!r} is malformed; expected CHANNEL.FIELD=VALUE, e.g. joints.position=1e-4"
+            f"tolerance {spec!r} is malformed; expected CHANNEL.FIELD=VALUE, e.g. "
+            f"joints.position=1e-4"
         )
     name, text = (s.strip() for s in spec.split("="))
     if name in FIELDS:

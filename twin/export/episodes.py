@@ -96,7 +96,8 @@ def check_times(rec: Recording) -> None:
     if wrong.size:
         i = int(wrong[0])
         raise RecordingError(
-            f"recording {rec.path!r}: the frame at step {int(f.step[i])} has time {int(f.t_ns[i])} ns; "
+            f"recording {rec.path!r}: the frame at step {int(f.step[i])} has time "
+            f"{int(f.t_ns[i])} ns; "
             f"expected step x {dt_ns} ns = {int(f.step[i]) * dt_ns} ns"
         )
 
@@ -147,8 +148,10 @@ def episodes(recordings: list[Recording], fps: int, mode: str) -> list[Episode]:
         if total > MAX_DATASET_FRAMES:
             seconds = sum(int(r.frames.t_ns[-1] - r.frames.t_ns[0]) for r in recordings) / NS_PER_S
             raise ConfigError(
-                f"the dataset would hold more than {MAX_DATASET_FRAMES:,} frames ({seconds:.1f} s of "
-                f"recordings at --fps {fps}); expected at most {MAX_DATASET_FRAMES:,}: lower --fps, "
+                f"the dataset would hold more than {MAX_DATASET_FRAMES:,} frames "
+                f"({seconds:.1f} s of "
+                f"recordings at --fps {fps}); expected at most {MAX_DATASET_FRAMES:,}: "
+                f"lower --fps, "
                 "or export the recordings in parts"
             )
     return [resample(rec, first, end, fps, cycle) for rec, first, end, cycle in cut]

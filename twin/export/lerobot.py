@@ -3,13 +3,15 @@
 The layout and fields follow LeRobot's own code (src/lerobot/datasets: utils.py, feature_utils.py,
 dataset_metadata.py, dataset_writer.py, compute_stats.py, video_utils.py):
 
-  meta/info.json                         codebase_version "v3.0", fps, features, totals, path templates
-  meta/stats.json                        per feature: min, max, mean, std, count, q01, q10, q50, q90, q99
-  meta/tasks.parquet                     task_index, indexed by the task text (pandas index "task")
-  meta/episodes/chunk-000/file-000.parquet   one row per episode: where its frames and video are, its stats
-  meta/twin_provenance.json              (ours) each source file, its sha256, whether its replay was exact
-  data/chunk-000/file-000.parquet        one row per frame, one row group per episode
-  videos/observation.images.<camera>/chunk-000/file-000.mp4   every episode, one after the other
+  meta/info.json                  codebase_version "v3.0", fps, features, totals, path templates
+  meta/stats.json                 per feature: min, max, mean, std, count, q01, q10, q50, q90, q99
+  meta/tasks.parquet              task_index, indexed by the task text (pandas index "task")
+  meta/episodes/chunk-000/file-000.parquet
+                                  one row per episode: where its frames and video are, its stats
+  meta/twin_provenance.json       (ours) each source file, its sha256, whether its replay was exact
+  data/chunk-000/file-000.parquet one row per frame, one row group per episode
+  videos/observation.images.<camera>/chunk-000/file-000.mp4
+                                  every episode, one after the other
 
 Frames: `observation.state` = joint positions (rad, z in m) + suction.on + suction.holding,
 `action` = joint targets + suction.command (float32); `timestamp` = frame_index / fps as float32,
@@ -367,7 +369,8 @@ def _camera_images(
         track = ep.rec.cameras[name]
         if (track.height_px, track.width_px, 3) != shape:
             raise ConfigError(
-                f"recording {ep.rec.path!r}: camera {name!r} is {track.width_px}x{track.height_px} px; "
+                f"recording {ep.rec.path!r}: camera {name!r} is "
+                f"{track.width_px}x{track.height_px} px; "
                 f"expected {shape[1]}x{shape[0]} px as in the first recording"
             )
         picks = camera_picks(ep, name, fps).tolist()
@@ -510,7 +513,8 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
     if out.exists() and any(out.iterdir()):
         if not overwrite:  # checked before any work too; a folder filled meanwhile is not replaced
             raise ConfigError(
-                f"output folder {str(out)!r} is not empty; expected a new or empty folder (or --overwrite)"
+                f"output folder {str(out)!r} is not empty; expected a new or empty "
+                f"folder (or --overwrite)"
             )
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
         os.replace(out, old / out.name)

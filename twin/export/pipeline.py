@@ -60,7 +60,8 @@ def export_lerobot(
         for source in sources:
             verify(source)
             say(
-                f"{'verified' if source.verified else 'left out'} {source.path}: replay {source.replay}"
+                f"{'verified' if source.verified else 'left out'} {source.path}: replay "
+                f"{source.replay}"
             )
     kept = [s for s in sources if s.verified is not False]
     if not kept:

@@ -36,7 +36,8 @@ def check_size(name: str, width_px: int, height_px: int) -> None:
     """yuv420p halves the colour resolution: both sides must be even."""
     if width_px % 2 or height_px % 2 or width_px <= 0 or height_px <= 0:
         raise ConfigError(
-            f"camera {name!r} is {width_px}x{height_px} px; video export needs an even width and height"
+            f"camera {name!r} is {width_px}x{height_px} px; video export needs an even "
+            f"width and height"
         )
 
 

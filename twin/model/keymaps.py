@@ -3,13 +3,16 @@
 A key map is plain data carried in TwinConfig.keymap (so a recording replays its keys the same
 way): key name -> list of actions, in SI units (rad for revolute joints, m for Z):
   ["jog", joint, delta]               the joint's target moves by delta
-  ["jog_keep_heading", joint, delta]  shoulder/elbow jog; the wrist turns back so the pad keeps its heading
-  ["target", joint, value|"min"|"max"|"down"|"up"]   ("down"/"up": the scene's Z values, profile.z_down/z_up)
+  ["jog_keep_heading", joint, delta]  shoulder/elbow jog; the wrist turns back so the pad keeps
+                                      its heading
+  ["target", joint, value|"min"|"max"|"down"|"up"]
+                                      ("down"/"up": the scene's Z values, profile.z_down/z_up)
   ["position", joint, value]          set at once (a jump, like sim.setJointPosition)
   ["add", joint, delta, "target"|"position"]  the map's own variable for the joint (from 0, as the
-                                      reports' scripts keep one) moves by delta; the joint is sent
+                                      reports' scripts keep one) moves by delta; the joint is
+                                      sent there
+  ["diff", joint, a, b]               the joint's variable becomes a's minus b's; its target goes
                                       there
-  ["diff", joint, a, b]               the joint's variable becomes a's minus b's; its target goes there
   ["signal", name, value]             an integer signal
   ["suction", 0|1]                    the profile's suction signal
 Joints are named by role (shoulder, elbow, z, wrist) or by the profile's own joint names.
@@ -427,7 +430,8 @@ def describe_action(action: list) -> str:
 
 
 def help_lines(keymap: dict) -> list[str]:
-    """One line per key: `key  what it does`, grouped by joint (shoulder, elbow, Z, wrist, then the rest)."""
+    """One line per key: `key  what it does`, grouped by joint (shoulder, elbow, Z, wrist, then
+    the rest)."""
 
     def order(key: str) -> tuple:
         first = keymap[key][0]

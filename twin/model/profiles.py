@@ -167,7 +167,8 @@ PROFILES: dict[str, RobotProfile] = {
         link1_m=0.8,
         link2_m=0.8,
         joint_names=("joint1", "joint2", "joint3", "joint4"),
-        description="report 000: 0.8 m / 0.8 m links; shoulder zero along +y; Z 0.06 on the box, -0.06 up",
+        description="report 000: 0.8 m / 0.8 m links; shoulder zero along +y; Z 0.06 on the box, "
+        "-0.06 up",
         shoulder_zero_rad=math.pi / 2,
         revolute_cyclic=True,
         revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S,
@@ -183,7 +184,8 @@ PROFILES: dict[str, RobotProfile] = {
         link1_m=0.467,
         link2_m=0.401,
         joint_names=("Revolute_joint", "Revolute_joint1", "Prismatic_joint", "Revolute_joint0"),
-        description="report 001: MTB-like links, arrow-key control; zero along +y, clockwise; Z -0.055 down, 0 up",
+        description="report 001: MTB-like links, arrow-key control; zero along +y, clockwise; Z "
+        "-0.055 down, 0 up",
         shoulder_zero_rad=math.pi / 2,
         axis_signs=(-1, -1, -1, -1),
         revolute_cyclic=True,
@@ -214,6 +216,7 @@ PROFILES: dict[str, RobotProfile] = {
         link2_m=0.4,
         joint_names=("MTB_axis1", "MTB_axis2", "MTB_axis3", "MTB_axis4"),
         suction_signals=("suctionPad", DEFAULT_SUCTION_SIGNAL),
-        description="report 003: MTB names and conventions (its IK is CoppeliaSim's MTB frame), suction signal 'suctionPad'",
+        description="report 003: MTB names and conventions (its IK is CoppeliaSim's MTB frame), "
+        "suction signal 'suctionPad'",
     ),
 }

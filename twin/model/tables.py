@@ -3,17 +3,17 @@ and commands. Column names carry their unit; they come from the one Frame field 
 (model.fields): a field added there fails here at import until it is given a column name.
 
 Frame columns, in field order:
-  step, t_ns                                        int64
-  joint.<role>.position_rad|_m                      float64 (role: shoulder, elbow, z, wrist; z in m)
+  step, t_ns                                      int64
+  joint.<role>.position_rad|_m                    float64 (role: shoulder, elbow, z, wrist; z in m)
   joint.<role>.velocity_rad_s|_m_s, .effort_Nm|_N, .target_rad|_m
-  suction.on                                        bool (the pad switched on)
-  suction.sensed, suction.held                      int32 (object index in scene order, -1 none)
+  suction.on                                      bool (the pad switched on)
+  suction.sensed, suction.held                    int32 (object index in scene order, -1 none)
   hold.force_x_N .. hold.force_z_N, hold.torque_x_Nm .. _z_Nm   float64 (world axes)
   pad.x_m, pad.y_m, pad.z_m, pad.qx, pad.qy, pad.qz, pad.qw     float64 (pad tip, world frame)
-  <object>.x_m .. <object>.qw                       float64 (each scene object by name)
-  suction.command                                   bool: a suction signal was on for the physics step
-                                                    that made this frame (Commands stamped before
-                                                    it)
+  <object>.x_m .. <object>.qw                     float64 (each scene object by name)
+  suction.command                                 bool: a suction signal was on for the physics
+                                                  step that made this frame (Commands stamped
+                                                  before it)
 
 pyarrow is imported when a table is built, not with the module: importing the model needs only
 numpy.
@@ -101,7 +101,8 @@ def frames_table(rec):
     names = frame_column_names([o.name for o in rec.config.objects])
     if len(names) != len(arrays):
         raise ValueError(
-            f"recording {rec.path or '<memory>'}: {len(arrays)} frame columns for {len(names)} names; "
+            f"recording {rec.path or '<memory>'}: {len(arrays)} frame columns for "
+            f"{len(names)} names; "
             "its frames do not match its configuration's joints and objects"
         )
     arrays.append(suction_command(rec))

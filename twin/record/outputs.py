@@ -98,11 +98,13 @@ def check_target(
     p = Path(path)
     if not p.parent.is_dir():
         raise error(
-            f"cannot write {what} {str(path)!r}: folder {str(p.parent)!r} does not exist; create it first"
+            f"cannot write {what} {str(path)!r}: folder {str(p.parent)!r} does not "
+            f"exist; create it first"
         )
     if (p.exists() and not p.is_dir()) if folder else p.is_dir():
         raise error(
-            f"cannot write {what} {str(path)!r}: it is a {'file' if folder else 'folder'}; expected {expected}"
+            f"cannot write {what} {str(path)!r}: it is a "
+            f"{'file' if folder else 'folder'}; expected {expected}"
         )
     return p
 

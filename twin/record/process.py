@@ -386,7 +386,10 @@ class _Feed:
                         getattr(sink, _HANDLERS[kind])(message)
             self._rows(written)
         except Exception as err:  # noqa: BLE001 - e.g. a full disk
-            self.failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
+            self.failure = (
+                f"recording stopped by a writer error (what came before is kept): "
+                f"{type(err).__name__}: {err}"
+            )
             _abandon(self.sinks)
         self.read = max(self.read, written)
 

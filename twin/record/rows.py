@@ -57,7 +57,8 @@ class FrameRows:
             f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope
         )
         self._unpack = eval(
-            f"lambda buf, offset: (lambda v: Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
+            f"lambda buf, offset: (lambda v: "
+            f"Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
             scope,
         )
 

@@ -27,7 +27,8 @@ try:
     from coppeliasim_zmqremoteapi_client import RemoteAPIClient
 except ImportError as _err:  # the official client is what speaks the protocol underneath
     raise ImportError(
-        "twin.remote.legacy needs the official client: pip install coppeliasim-zmqremoteapi-client==2.0.4"
+        "twin.remote.legacy needs the official client: pip install "
+        "coppeliasim-zmqremoteapi-client==2.0.4"
     ) from _err
 
 LEGACY_PORT = 19997

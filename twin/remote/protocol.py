@@ -97,7 +97,8 @@ def decode(raw: bytes) -> Request:
         args = []
     if not isinstance(args, list):
         raise RequestError(
-            f"malformed request to {brief(func)}: 'args' must be an array, got {type(args).__name__}"
+            f"malformed request to {brief(func)}: 'args' must be an array, got "
+            f"{type(args).__name__}"
         )
     n = msg.get("argsL", len(args))
     if isinstance(n, bool) or not isinstance(n, int) or not len(args) <= n <= MAX_ARGS:
@@ -112,7 +113,8 @@ def decode(raw: bytes) -> Request:
         ver = msg["ver"]
         if isinstance(ver, bool) or ver != PROTOCOL_VERSION:
             raise VersionMismatch(
-                f"client version does not match: protocol version {brief_value(ver)}; this server speaks version "
+                f"client version does not match: protocol version {brief_value(ver)}; "
+                f"this server speaks version "
                 f"{PROTOCOL_VERSION}"
             )
         first = {"lang": msg.get("lang"), "timeout": msg.get("timeout")}

@@ -216,7 +216,8 @@ class Server:
                 )
             except Exception as err:  # noqa: BLE001 - a bug of ours: no request may end the server
                 self.log(
-                    f"internal error: {type(err).__name__}: {safe_str(err)}\n{traceback.format_exc()}"
+                    f"internal error: {type(err).__name__}: {safe_str(err)}\n"
+                    f"{traceback.format_exc()}"
                 )
                 reply = encode_err(f"internal error: {type(err).__name__}")
         return [*envelope, reply]
@@ -266,7 +267,8 @@ class Server:
         if due > max_due:
             if not self._slipping:
                 self.log(
-                    f"the twin cannot keep up with {self.speed:g}x real time here; simulated time slips"
+                    f"the twin cannot keep up with {self.speed:g}x real time here; "
+                    f"simulated time slips"
                 )
                 self._slipping = True
             self._anchor = (now, scene.twin.step_index + max_due)
@@ -276,14 +278,16 @@ class Server:
                 scene.advance(due)
             except Exception as err:  # noqa: BLE001 - e.g. a recorder failing: end the run, keep serving
                 self.log(
-                    f"error while stepping the twin: {type(err).__name__}: {err}; stopping the simulation"
+                    f"error while stepping the twin: {type(err).__name__}: {err}; "
+                    f"stopping the simulation"
                 )
                 self._anchor = None
                 try:
                     scene.stop()
                 except Exception as stop_err:  # noqa: BLE001
                     self.log(
-                        f"error while stopping the simulation: {type(stop_err).__name__}: {stop_err}"
+                        f"error while stopping the simulation: "
+                        f"{type(stop_err).__name__}: {stop_err}"
                     )
 
     def _drain_monitor(self) -> None:
@@ -380,7 +384,8 @@ class Server:
             >= MAX_CLIENTS_PER_CONNECTION
         ):
             return (
-                f"too many clients on one connection: {MAX_CLIENTS_PER_CONNECTION} uuids already came over it "
+                f"too many clients on one connection: {MAX_CLIENTS_PER_CONNECTION} uuids "
+                f"already came over it "
                 "(the limit)"
             )
         if len(self.clients) < MAX_CLIENTS:
@@ -392,16 +397,21 @@ class Server:
         ]
         if not idle:
             return (
-                f"too many clients: {MAX_CLIENTS} are connected (the limit), none silent long enough to give "
-                f"up its slot; when all slots are taken, a new client takes the slot of the least recently seen "
-                f"one silent for {EVICT_IDLE_S:g} s or more ({self.step_grace_s:g} s, --step-grace, if it is in "
-                "stepping mode): try again then. A client is also forgotten when its connection closes or "
+                f"too many clients: {MAX_CLIENTS} are connected (the limit), none silent "
+                f"long enough to give "
+                f"up its slot; when all slots are taken, a new client takes the slot of "
+                f"the least recently seen "
+                f"one silent for {EVICT_IDLE_S:g} s or more ({self.step_grace_s:g} s, "
+                f"--step-grace, if it is in "
+                "stepping mode): try again then. A client is also forgotten when its "
+                "connection closes or "
                 "after its timeout"
             )
         _, uuid = min(idle)
         c = self.clients.pop(uuid)
         self.log(
-            f"{c.label} forgotten: silent for {now - c.last_seen_s:.1f} s while all {MAX_CLIENTS} client "
+            f"{c.label} forgotten: silent for {now - c.last_seen_s:.1f} s while all "
+            f"{MAX_CLIENTS} client "
             "slots were taken (a new client takes its slot)"
         )
         return ""
@@ -467,7 +477,8 @@ class Server:
                     return
                 c.stepping = False
                 self.log(
-                    f"{c.label} silent for {self.step_grace_s:g} s (--step-grace): no longer holds back stepping"
+                    f"{c.label} silent for {self.step_grace_s:g} s (--step-grace): no "
+                    f"longer holds back stepping"
                 )
         if asked and self.scene.running:
             self.scene.advance(1)
@@ -530,7 +541,8 @@ def serve(
         if host not in ("127.0.0.1", "localhost", "::1"):
             log(f"warning: listening on {host}, reachable from other machines")
         log(
-            f"twin serve: listening on tcp://{server.host}:{server.port} (robot {config.profile.name}, {pace})"
+            f"twin serve: listening on tcp://{server.host}:{server.port} (robot "
+            f"{config.profile.name}, {pace})"
         )
         if start:
             scene.start()

@@ -131,7 +131,8 @@ class Scene:
         self.state = SIMULATION_ADVANCING_RUNNING
         where = f", recording to {', '.join(self._files)}" if self._files else ""
         self.log(
-            f"simulation started: run {self.run_index}, robot {self.config.profile.name}, {self.mode}{where}"
+            f"simulation started: run {self.run_index}, robot "
+            f"{self.config.profile.name}, {self.mode}{where}"
         )
 
     def _open_recorders(self) -> list:
@@ -199,7 +200,8 @@ class Scene:
         where = f"; recorded {', '.join(self._files)}" if self._files else ""
         holding = f", released {twin.config.objects[held].name}" if held >= 0 else ""
         self.log(
-            f"simulation stopped: run {self.run_index} lasted {steps} steps ({t_s:.3f} s){holding}{where}"
+            f"simulation stopped: run {self.run_index} lasted {steps} steps ({t_s:.3f} "
+            f"s){holding}{where}"
         )
 
     def _close_recorders(self) -> None:

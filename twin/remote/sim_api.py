@@ -171,14 +171,18 @@ class SimApi:
     def _handle_list(self) -> str:
         n = len(self.scene.twin.config.objects)
         objs = f", objects {HANDLE_OBJECT0}..{HANDLE_OBJECT0 + n - 1}" if n else ""
-        return f"robot {HANDLE_ROBOT}, joints {HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}, pad {HANDLE_PAD}{objs}"
+        return (
+            f"robot {HANDLE_ROBOT}, joints {HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}, pad "
+            f"{HANDLE_PAD}{objs}"
+        )
 
     def _joint(self, handle: int) -> int:
         if HANDLE_JOINT0 <= handle < HANDLE_JOINT0 + 4:
             return handle - HANDLE_JOINT0
         name = self.name_of(handle)  # raises for an unknown handle
         raise RequestError(
-            f"object {handle} ({name}) is not a joint; joints are {HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}"
+            f"object {handle} ({name}) is not a joint; joints are "
+            f"{HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}"
         )
 
     # -- objects -----------------------------------------------------------------------------
@@ -240,7 +244,8 @@ class SimApi:
     def set_joint_target_position(self, handle: int, q: float, motion: list) -> None:
         if motion:
             raise RequestError(
-                f"sim.setJointTargetPosition: motionParams ({brief_value(motion)}) are not supported; "
+                f"sim.setJointTargetPosition: motionParams ({brief_value(motion)}) are "
+                f"not supported; "
                 "pass none (the joint moves at its maximum velocity)"
             )
         self.scene.twin.set_joint_target(self._joint(handle), q)
@@ -272,7 +277,8 @@ class SimApi:
         signals = self.scene.twin.signals
         if name not in signals and len(signals) >= MAX_SIGNALS:
             raise RequestError(
-                f"signal {brief_value(name)}: the scene already holds {MAX_SIGNALS} signals (the limit); "
+                f"signal {brief_value(name)}: the scene already holds {MAX_SIGNALS} "
+                f"signals (the limit); "
                 "clear one first"
             )
         self.scene.twin.set_signal(name, value)

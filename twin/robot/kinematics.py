@@ -129,7 +129,8 @@ def _reach_text(profile: RobotProfile) -> str:
         return f"reach annulus {inner:.4f}..{outer:.4f} m (cyclic joints)"
     (s_lo, s_hi), (e_lo, e_hi) = profile.joint_limits()[:2]
     return (
-        f"reach annulus {inner:.4f}..{outer:.4f} m, shoulder {math.degrees(s_lo):.0f}..{math.degrees(s_hi):.0f} deg,"
+        f"reach annulus {inner:.4f}..{outer:.4f} m, shoulder "
+        f"{math.degrees(s_lo):.0f}..{math.degrees(s_hi):.0f} deg,"
         f" elbow {math.degrees(e_lo):.0f}..{math.degrees(e_hi):.0f} deg"
     )
 
@@ -177,7 +178,8 @@ def wrist_for_heading(profile: RobotProfile, sol: ArmSolution, heading_rad: floa
     lo, hi = profile.joint_limits()[3]
     if not _within(q4, (lo, hi)):
         raise OutOfReach(
-            f"heading {heading_rad:.4f} rad needs wrist {q4:.4f} rad, outside {lo:.4f}..{hi:.4f} rad"
+            f"heading {heading_rad:.4f} rad needs wrist {q4:.4f} rad, outside "
+            f"{lo:.4f}..{hi:.4f} rad"
         )
     return q4
 

@@ -21,7 +21,8 @@ def get_profile(name_or_path: str) -> RobotProfile:
     if path.suffix in (".toml", ".json"):
         return load_profile_file(path)
     raise ConfigError(
-        f"unknown robot {name_or_path!r}; expected one of {', '.join(PROFILES)} or a profile file (.toml/.json)"
+        f"unknown robot {name_or_path!r}; expected one of {', '.join(PROFILES)} or a "
+        f"profile file (.toml/.json)"
     )
 
 
@@ -60,7 +61,8 @@ def load_profile_file(path: Path) -> RobotProfile:
     for key in ("urdf", "pad_link", "name", "suction_signal"):
         if key in data and not isinstance(data[key], str):
             raise ConfigError(
-                f"robot profile {str(path)!r}: {key} = {data[key]!r:.60} is invalid; expected a string"
+                f"robot profile {str(path)!r}: {key} = {data[key]!r:.60} is invalid; "
+                f"expected a string"
             )
     joints = data["joints"]
     if not isinstance(joints, dict):

@@ -167,7 +167,8 @@ def _joint(
     rpy = f' rpy="0 0 {_f(yaw_rad)}"' if yaw_rad else ""
     bounds = "" if kind == "continuous" else f'lower="{_f(lower)}" upper="{_f(upper)}" '
     return f"""  <joint name="{name}" type="{kind}">
-    <parent link="{parent}"/><child link="{child}"/><origin xyz="{x} {y} {z}"{rpy}/><axis xyz="{axis}"/>
+    <parent link="{parent}"/><child link="{child}"/>\
+<origin xyz="{x} {y} {z}"{rpy}/><axis xyz="{axis}"/>
     <limit {bounds}effort="{_f(effort)}" velocity="{_f(velocity)}"/>
   </joint>
 """

@@ -251,7 +251,8 @@ class Twin:
         expected = COMMAND_ARGS[command.kind]
         if not isinstance(command.args, dict) or sorted(command.args) != sorted(expected):
             raise ConfigError(
-                f"{command.kind} command at step {command.step} has arguments {command.args!r:.80}; "
+                f"{command.kind} command at step {command.step} has arguments "
+                f"{command.args!r:.80}; "
                 f"expected {', '.join(expected)}"
             )
         for s in self.sinks:

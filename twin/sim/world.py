@@ -411,7 +411,8 @@ def _require_display() -> None:
     handle = xlib.XOpenDisplay(display.encode())
     if not handle:
         raise ConfigError(
-            f"--gui cannot connect to the X display DISPLAY={display!r}; run without --gui or under Xvfb"
+            f"--gui cannot connect to the X display DISPLAY={display!r}; run without "
+            f"--gui or under Xvfb"
         )
     xlib.XCloseDisplay(handle)
 

@@ -1,15 +1,15 @@
 """Starting or reaching a Dask cluster safely: `start_local` and `connect`.
 
-`start_local(jobs)` starts a LocalCluster-like SpecCluster of `jobs` single-threaded worker processes
-(each with its nanny) on 127.0.0.1 whose scheduler, nannies and workers speak TLS only (tls://,
-require_encryption) with a throwaway certificate made for the run (`Security.temporary()`, kept in
-memory): only this process's client and the workers it started can talk to the scheduler, not any
-other local process (without it, anyone on the machine could connect a Client and run code in the
-workers as the sweep's user). Dask's scheduler serves HTTP (/metrics, /health, /info, /json) on
-127.0.0.1:8787 even with dashboard_address=None (Scheduler.__init__ calls start_http_server
-unconditionally, and Node.start_http_server binds `dashboard_address or 8787`), and every worker on a
-random port; here neither has an HTTP server at all, unless `dashboard=True` asks for the scheduler's
-dashboard, then on 127.0.0.1 on a free port (its URL is returned).
+`start_local(jobs)` starts a LocalCluster-like SpecCluster of `jobs` single-threaded worker
+processes (each with its nanny) on 127.0.0.1 whose scheduler, nannies and workers speak TLS only
+(tls://, require_encryption) with a throwaway certificate made for the run (`Security.temporary()`,
+kept in memory): only this process's client and the workers it started can talk to the scheduler,
+not any other local process (without it, anyone on the machine could connect a Client and run code
+in the workers as the sweep's user). Dask's scheduler serves HTTP (/metrics, /health, /info, /json)
+on 127.0.0.1:8787 even with dashboard_address=None (Scheduler.__init__ calls start_http_server
+unconditionally, and Node.start_http_server binds `dashboard_address or 8787`), and every worker on
+a random port; here neither has an HTTP server at all, unless `dashboard=True` asks for the
+scheduler's dashboard, then on 127.0.0.1 on a free port (its URL is returned).
 
 `connect(address)` reaches a running cluster (`--scheduler`) in bounded time: Client(timeout=10)
 bounds only the TCP connect, not the handshake read that follows it (distributed/comm/core.py,
@@ -22,23 +22,29 @@ configuration (see `connect`).
 The secured external cluster, from Dask's own command line (verified with distributed 2026.8.0). One
 CA, and a certificate with its key per role signed by it (Dask checks the chain, not host names):
 
-    openssl req -x509 -newkey rsa:2048 -nodes -days 365 -subj /CN=twin-dask-ca -keyout ca-key.pem -out ca.pem
+    openssl req -x509 -newkey rsa:2048 -nodes -days 365 -subj /CN=twin-dask-ca \\
+        -keyout ca-key.pem -out ca.pem
     for role in scheduler worker client; do
       openssl req -newkey rsa:2048 -nodes -subj /CN=dask-$role -keyout $role-key.pem -out $role.csr
-      openssl x509 -req -in $role.csr -CA ca.pem -CAkey ca-key.pem -CAcreateserial -days 365 -out $role.pem \\
-        -extfile <(printf "subjectAltName=DNS:localhost,IP:127.0.0.1\\nextendedKeyUsage=serverAuth,clientAuth")
+      openssl x509 -req -in $role.csr -CA ca.pem -CAkey ca-key.pem -CAcreateserial -days 365 \\
+        -out $role.pem -extfile <(printf \\
+        "subjectAltName=DNS:localhost,IP:127.0.0.1\\nextendedKeyUsage=serverAuth,clientAuth")
     done
-    DASK_DISTRIBUTED__SCHEDULER__HTTP__ROUTES='[]' dask scheduler --protocol tls --host HOST --port 8786 \\
-        --dashboard-address 127.0.0.1:0 --tls-ca-file ca.pem --tls-cert scheduler.pem --tls-key scheduler-key.pem
-    DASK_DISTRIBUTED__WORKER__HTTP__ROUTES='[]' dask worker tls://HOST:8786 --nworkers 1 --nthreads 1 \\
-        --preload twin.sweep.worker --tls-ca-file ca.pem --tls-cert worker.pem --tls-key worker-key.pem
-    DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT=client.pem \\
+    DASK_DISTRIBUTED__SCHEDULER__HTTP__ROUTES='[]' dask scheduler --protocol tls --host HOST \\
+        --port 8786 --dashboard-address 127.0.0.1:0 \\
+        --tls-ca-file ca.pem --tls-cert scheduler.pem --tls-key scheduler-key.pem
+    DASK_DISTRIBUTED__WORKER__HTTP__ROUTES='[]' dask worker tls://HOST:8786 --nworkers 1 \\
+        --nthreads 1 --preload twin.sweep.worker \\
+        --tls-ca-file ca.pem --tls-cert worker.pem --tls-key worker-key.pem
+    DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem \\
+    DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT=client.pem \\
     DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY=client-key.pem \\
         twin sweep ... --executor dask --scheduler tls://HOST:8786
 
-`dask scheduler` serves HTTP whatever its options (--no-dashboard drops only the Bokeh pages; /metrics,
-/health, /info, /json stay): the empty routes make every page a 404 and --dashboard-address keeps the
-port on loopback. A client without the CA's client certificate is refused in the TLS handshake.
+`dask scheduler` serves HTTP whatever its options (--no-dashboard drops only the Bokeh pages;
+/metrics, /health, /info, /json stay): the empty routes make every page a 404 and
+--dashboard-address keeps the port on loopback. A client without the CA's client certificate is
+refused in the TLS handshake.
 
 This module imports Dask only when called (`import twin.sweep.cluster` stays cheap); the classes
 QuietScheduler and QuietWorker are made on first use (module __getattr__), also when a spawned
@@ -86,7 +92,8 @@ WORKER_CONFIG = {
 }
 
 TLS_ENV = (
-    "DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT=client.pem "
+    "DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem "
+    "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT=client.pem "
     "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY=client-key.pem"
 )
 _QUIET = ("QuietScheduler", "QuietWorker")
@@ -121,7 +128,8 @@ def _define_quiet_classes() -> tuple[type, type]:
                 {
                     "__module__": __name__,
                     "start_http_server": _no_http_server,
-                    "__doc__": f"Dask's {base.__name__} without its HTTP server (twin.sweep.cluster).",
+                    "__doc__": f"Dask's {base.__name__} without its HTTP server "
+                    f"(twin.sweep.cluster).",
                 },
             )
     return globals()[_QUIET[0]], globals()[_QUIET[1]]
@@ -276,8 +284,10 @@ def _security_for(address: str):
     if address.startswith("tls://"):
         if not security.tls_ca_file or not security.tls_client_cert:
             raise ConfigError(
-                f"--scheduler {address!r} speaks TLS: Dask's configuration must name the cluster's CA and this "
-                f"client's certificate (distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and "
+                f"--scheduler {address!r} speaks TLS: Dask's configuration must name the "
+                f"cluster's CA and this "
+                f"client's certificate (distributed.comm.tls.ca-file, "
+                f"distributed.comm.tls.client.cert and "
                 f".key), e.g. {TLS_ENV}"
             )
         try:
@@ -331,7 +341,8 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
         info = _probe(address, security, timeout_s)
     except _Deadline as err:
         raise ConfigError(
-            f"cannot reach the Dask scheduler {address!r} within {within}: it accepted the connection "
+            f"cannot reach the Dask scheduler {address!r} within {within}: it accepted "
+            f"the connection "
             "but did not answer Dask's handshake (expected a Dask scheduler's address, not another "
             "server's)"
         ) from err

@@ -68,7 +68,8 @@ def parse_dist(text: str, key: str = "") -> Dist:
     where = f"--vary {key}={shown}" if key else f"distribution {shown!r}"
     if not isinstance(text, str) or not text.strip():
         raise ConfigError(
-            f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), choice(v1,v2,...) or a value"
+            f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), "
+            f"choice(v1,v2,...) or a value"
         )
     m = _CALL.match(text)
     if m is None:

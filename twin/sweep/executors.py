@@ -177,9 +177,8 @@ class DaskExecutor:
                         for i in batch:
                             done.add(submit([i]))
                         continue
-                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})".splitlines()[
-                        0
-                    ]
+                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})"
+                    why = why.splitlines()[0]
                     result = [failed_row(job, batch[0], why, 0.0)]
                 nxt = next(source, None)
                 if nxt is not None:
@@ -238,7 +237,8 @@ def make_executor(name: str, jobs: int, scheduler: str | None = None, *, dashboa
         raise ConfigError("--scheduler needs --executor dask")
     if dashboard and (name != "dask" or scheduler):
         raise ConfigError(
-            "--dashboard needs --executor dask without --scheduler (a cluster of your own has its own)"
+            "--dashboard needs --executor dask without --scheduler (a cluster of your "
+            "own has its own)"
         )
     if scheduler and not scheduler.startswith(("tcp://", "tls://")):
         raise ConfigError(

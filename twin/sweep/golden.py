@@ -132,7 +132,10 @@ def _not_a_definition(path: Path) -> str | None:
         return str(err)
     missing = [k for k in DEFINITION_KEYS if k not in data]
     if missing:
-        return f"lacks {', '.join(missing)}; expected a sweep definition with {', '.join(DEFINITION_KEYS)}"
+        return (
+            f"lacks {', '.join(missing)}; expected a sweep definition with "
+            f"{', '.join(DEFINITION_KEYS)}"
+        )
     return None
 
 
@@ -177,7 +180,8 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
     lo, hi = golden.get("wilson95", [0.0, 1.0])
     if not lo <= rate <= hi:
         problems.append(
-            f"success_rate {rate:.4f} is outside the golden's Wilson 95 % interval [{lo:.4f}, {hi:.4f}] "
+            f"success_rate {rate:.4f} is outside the golden's Wilson 95 % interval "
+            f"[{lo:.4f}, {hi:.4f}] "
             f"(golden {g_rate:.4f}, moved {rate - g_rate:+.4f})"
         )
     g_pe, pe = golden.get("placement_error_mm", {}), new["placement_error_mm"]
@@ -380,7 +384,8 @@ def _write_atomically(path: Path, data: dict) -> None:
         ) from err
     if len(text.encode()) > MAX_BYTES:
         raise ConfigError(
-            f"the new summary of {path.name} would hold {len(text.encode())} bytes; expected at most "
+            f"the new summary of {path.name} would hold {len(text.encode())} bytes; "
+            f"expected at most "
             f"{MAX_BYTES}; not written"
         )
     _publish_atomically(path, lambda p: Path(p).write_text(text))

@@ -75,7 +75,8 @@ def resolve_key(name: str, config: TwinConfig, fn: TaskFn, task: str) -> Key:
     if fields is not None:
         if tail not in fields:
             raise ConfigError(
-                f"--vary key {name!r} is unknown; expected {head}. followed by one of {', '.join(fields)}"
+                f"--vary key {name!r} is unknown; expected {head}. followed by one of "
+                f"{', '.join(fields)}"
             )
         return Key(name, head, tail)
     if head in objects:

@@ -62,7 +62,8 @@ class SweepSpec:
             or not 1 <= self.scenarios <= MAX_SCENARIOS
         ):
             raise ConfigError(
-                f"scenarios {self.scenarios!r} is invalid; expected a whole number 1..{MAX_SCENARIOS}"
+                f"scenarios {self.scenarios!r} is invalid; expected a whole number "
+                f"1..{MAX_SCENARIOS}"
             )
         if (
             isinstance(self.seed, bool)
@@ -195,7 +196,8 @@ def load_spec(path: str | Path) -> SweepSpec:
     ):
         if name in data and not isinstance(data[name], kind):
             raise ConfigError(
-                f"sweep definition {str(path)!r}: {name} must be a {'string' if kind is str else 'table'}"
+                f"sweep definition {str(path)!r}: {name} must be a "
+                f"{'string' if kind is str else 'table'}"
             )
     for name in ("rate_hz", "timeout_s"):
         if name in data and (

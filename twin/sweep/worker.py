@@ -103,7 +103,8 @@ def run_scenario(job: Job, scenario: int) -> dict:
                 failed.parent.mkdir(exist_ok=True)
                 shutil.copyfile(first, failed)
             except OSError as err:
-                raise RecordingError(f"cannot write {str(failed)!r}: {err.strerror or err}") from err
+                why = err.strerror or err
+                raise RecordingError(f"cannot write {str(failed)!r}: {why}") from err
         else:  # the run is deterministic: running it again, recorded, gives this same run
             _run(prep, values, scenario, failed)
     return row

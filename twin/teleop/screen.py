@@ -85,7 +85,8 @@ def status_lines(session: Any) -> list[str]:
         _joint_line("joints ", q),
         _joint_line("targets", target),
         f"pad      x {pad[0]:+.4f}  y {pad[1]:+.4f}  z {pad[2]:+.4f} m  heading {heading:+.1f} deg",
-        f"suction  {'ON ' if f.suction_on else 'off'}  sensed: {_body(session, f.sensed_body)}  held: {held}"
+        f"suction  {'ON ' if f.suction_on else 'off'}  sensed: "
+        f"{_body(session, f.sensed_body)}  held: {held}"
         + (f"   HOLDING {held}" if f.held_body != NO_BODY else ""),
     ]
     for obj, pose in zip(twin.config.objects, f.object_poses, strict=True):

@@ -281,8 +281,10 @@ def summary_lines(session: Session) -> list[str]:
     unknown = [p.key for p in session.presses if not p.known]
     lines = [
         (
-            f"teleop ({session.mode}) robot {twin.profile.name}: {len(session.presses)} key presses "
-            f"({len(unknown)} not in the key map), {twin.step_index} steps, simulated {twin.t_s:.3f} s; "
+            f"teleop ({session.mode}) robot {twin.profile.name}: {len(session.presses)} "
+            f"key presses "
+            f"({len(unknown)} not in the key map), {twin.step_index} steps, simulated "
+            f"{twin.t_s:.3f} s; "
             f"ended by {session.ended_by or 'quit'}"
         ),
         "events: "

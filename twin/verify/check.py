@@ -219,7 +219,8 @@ def golden_paths(paths: Sequence[str]) -> list[str]:
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
             raise ConfigError(
-                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap files or folders"
+                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap "
+                f"files or folders"
             )
         paths = [DEFAULT_DIR]
     out: list[str] = []

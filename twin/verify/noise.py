@@ -70,7 +70,8 @@ def judge(
         )
     except TwinError as err:
         note = (
-            f"the noise floor could not be measured ({err}); judged by the {tolerances.preset} preset's "
+            f"the noise floor could not be measured ({err}); judged by the "
+            f"{tolerances.preset} preset's "
             "tolerances alone"
         )
     result = compare(

@@ -69,14 +69,16 @@ class GoldenChecker:
             # a golden is never made from a failed run unless asked (allow_error)
             if failed is not None:
                 pytest.fail(
-                    f"golden {str(golden_path)!r} does not exist, and this run cannot become it: {failed} "
+                    f"golden {str(golden_path)!r} does not exist, and this run cannot "
+                    f"become it: {failed} "
                     "(pass allow_error=True to keep a failing run as the golden)",
                     pytrace=False,
                 )
             golden_path.parent.mkdir(parents=True, exist_ok=True)
             save(candidate, golden_path)
             pytest.fail(
-                f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
+                f"golden {str(golden_path)!r} did not exist; wrote it from this run: "
+                f"review and commit it",
                 pytrace=False,
             )
         golden = load(golden_path)
@@ -93,7 +95,8 @@ class GoldenChecker:
         save(candidate, obtained)
         write_report(result, report)
         hint = (
-            "if the change is intended, rerun with --update-goldens: it rewrites the golden with this run"
+            "if the change is intended, rerun with --update-goldens: it rewrites the "
+            "golden with this run"
             if failed is None
             else f"this run cannot become the golden: {failed}; pass allow_error=True to "
             "accept a failing run"

@@ -57,7 +57,10 @@ class Run:
         self.code, self.out, self.err, self.rss_mb, self.seconds = code, out, err, rss_mb, seconds
 
     def __repr__(self) -> str:
-        return f"exit {self.code}, {self.rss_mb:.0f} MB, {self.seconds:.2f} s, stderr {self.err[-600:]!r}"
+        return (
+            f"exit {self.code}, {self.rss_mb:.0f} MB, {self.seconds:.2f} s, stderr "
+            f"{self.err[-600:]!r}"
+        )
 
 
 def _wait(pid: int, timeout_s: float) -> tuple[int, resource.struct_rusage]:
@@ -499,7 +502,8 @@ def test_the_worst_cases_through_the_twin_executable(corpus, good, tmp_path):
             _assert_clean(run, _expected_codes(kind, reader), f"{reader} {name} (executable)")
             size = path.stat().st_size if path.is_file() else 0
             print(
-                f"twin {reader} {name} ({size:,} bytes): {run.rss_mb:.0f} MB peak, {run.seconds:.2f} s"
+                f"twin {reader} {name} ({size:,} bytes): {run.rss_mb:.0f} MB peak, "
+                f"{run.seconds:.2f} s"
             )
 
 
@@ -756,7 +760,8 @@ def test_a_flood_of_empty_messages_costs_bounded_memory_and_time(
     _assert_clean(run, {code}, f"{reader} {name} (executable)")
     assert run.seconds < FLOOD_TIMEOUT_S, run
     print(
-        f"twin {reader} {name} ({path.stat().st_size:,} bytes): exit {run.code}, {run.rss_mb:.0f} MB peak, "
+        f"twin {reader} {name} ({path.stat().st_size:,} bytes): exit {run.code}, "
+        f"{run.rss_mb:.0f} MB peak, "
         f"{run.seconds:.2f} s"
     )
 

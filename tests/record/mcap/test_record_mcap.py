@@ -231,7 +231,8 @@ def test_twin_run_records_by_default_and_no_record_disables(tmp_path, monkeypatc
 def test_a_raising_task_closes_the_file_with_the_error(tmp_path, capsys):
     task = tmp_path / "boom.py"
     task.write_text(
-        "def run(twin):\n    twin.suction(True)\n    twin.wait(1.3)\n    raise RuntimeError('sensor on fire')\n"
+        "def run(twin):\n    twin.suction(True)\n    twin.wait(1.3)\n    raise "
+        "RuntimeError('sensor on fire')\n"
     )
     out = tmp_path / "boom.mcap"
     assert main(["run", str(task), "--record", str(out)]) == 1

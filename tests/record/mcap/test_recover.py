@@ -21,7 +21,8 @@ from twin.sim.twin import Twin
 from twin.tasks import run_task
 from twin.verify.collectors import FrameCollector
 
-LOOP_TASK = '''"""Moves between three points forever, reporting simulated time (a crash-test task)."""
+LOOP_TASK = '''"""Moves between three points forever, reporting simulated time \
+(a crash-test task)."""
 import time
 
 
@@ -195,6 +196,7 @@ def test_recovering_a_run_that_left_no_file_says_so(tmp_path, capsys, monkeypatc
     assert main(["recover", "runs/killed.mcap"]) == 2
     err = capsys.readouterr().err
     assert err == (
-        "twin: error: recording 'runs/killed.mcap' does not exist, nor does 'runs/killed.mcap.partial'; "
+        "twin: error: recording 'runs/killed.mcap' does not exist, nor does "
+        "'runs/killed.mcap.partial'; "
         "expected a recording or the .partial file a killed run left\n"
     )

@@ -232,7 +232,8 @@ def _urdf_with_tilted_joints() -> str:
     link = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
     joint = (
         '<joint name="{0}" type="{1}"><parent link="{2}"/><child link="{3}"/>'
-        '<origin xyz="{4}" rpy="{5}"/><axis xyz="{6}"/><limit lower="-3" upper="3" effort="1" velocity="1"/>'
+        '<origin xyz="{4}" rpy="{5}"/><axis xyz="{6}"/><limit lower="-3" upper="3" '
+        'effort="1" velocity="1"/>'
         "</joint>"
     )
     return (

@@ -126,7 +126,8 @@ class _Reading:
                 else f"{count:,}"
             )
             out.append(
-                f"{at_least} of its {total:,} {topic} {what} {'is' if count == 1 else 'are'} unreadable "
+                f"{at_least} of its {total:,} {topic} {what} "
+                f"{'is' if count == 1 else 'are'} unreadable "
                 f"(the first: {reason[:160]})"
             )
         return out
@@ -217,7 +218,8 @@ def format_info(info: Info, *, all_events: bool = False) -> list[str]:
     replay_of = info.run.get("replay_of")
     if isinstance(replay_of, dict):
         lines.append(
-            f"a replay of {replay_of.get('file', '?')} (sha256 {str(replay_of.get('sha256', '?'))[:12]}...)"
+            f"a replay of {replay_of.get('file', '?')} (sha256 "
+            f"{str(replay_of.get('sha256', '?'))[:12]}...)"
         )
     lines.append(
         f"robot: {info.robot or '?'}; objects: {', '.join(info.objects) or 'none'}; "
@@ -302,4 +304,6 @@ def event_line(e: Event) -> str:
         data = f" {json.dumps(e.data, sort_keys=True)}" if e.data else ""
     except RecursionError:  # as deep as the file's JSON parser allowed: printing it recurses again
         data = " (data nested too deeply to show)"
-    return f"t={e.t_ns * 1e-9:9.3f} s  step {e.step:>7}  {e.kind:<14} {e.body:<6} {e.message}{data}".rstrip()
+    return (
+        f"t={e.t_ns * 1e-9:9.3f} s  step {e.step:>7}  {e.kind:<14} {e.body:<6} {e.message}{data}"
+    ).rstrip()

@@ -160,7 +160,8 @@ def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") 
         raise RecordingError(f"{where}: {S.META_RUN} field params is not JSON: {err}") from err
     if not isinstance(params, dict):
         raise RecordingError(
-            f"{where}: {S.META_RUN} field params = {shown(params)} is invalid; expected a JSON object"
+            f"{where}: {S.META_RUN} field params = {shown(params)} is invalid; expected "
+            f"a JSON object"
         )
     if nesting_depth(params) > MAX_DEPTH:  # never printed: repr recurses too
         raise RecordingError(

@@ -205,7 +205,8 @@ def scan(
         )
     if strict and not out.complete:
         raise RecordingError(
-            f"recording {where!r} is truncated or damaged ({out.problem}) after {out.message_count} readable "
+            f"recording {where!r} is truncated or damaged ({out.problem}) after "
+            f"{out.message_count} readable "
             f"messages; `twin recover {where} -o FIXED.mcap` restores its readable part"
         )
     return out
@@ -561,7 +562,8 @@ def frames_of(*blocks: BlockParts, n_objects: int, where: str) -> FrameColumns:
         0 <= step[0] and step[-1] <= S.MAX_STEP and 0 <= t_ns.min() and t_ns.max() <= S.MAX_T_NS
     ):
         raise RecordingError(
-            f"recording {where!r}: frame steps or times out of range (steps {step[0]}..{step[-1]}); "
+            f"recording {where!r}: frame steps or times out of range (steps "
+            f"{step[0]}..{step[-1]}); "
             f"expected steps 0..{S.MAX_STEP} and times 0..{S.MAX_T_NS} ns"
         )
     return FrameColumns(**columns)

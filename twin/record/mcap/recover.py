@@ -58,7 +58,8 @@ class RecoverReport:
             if self.asked == self.source
             else [
                 (
-                    f"{self.asked} does not exist; using {self.source}, the unfinished file of a run that was killed "
+                    f"{self.asked} does not exist; using {self.source}, the unfinished "
+                    f"file of a run that was killed "
                     "(it is kept)"
                 )
             ]
@@ -67,8 +68,10 @@ class RecoverReport:
             *found,
             f"{self.source} {state}",
             (
-                f"wrote {self.output}: {self.frames:,} frames, steps 0..{self.last_step}, {self.duration_s:.3f} s "
-                f"simulated; {self.messages_kept:,} messages kept, {self.messages_dropped:,} dropped past the last "
+                f"wrote {self.output}: {self.frames:,} frames, steps "
+                f"0..{self.last_step}, {self.duration_s:.3f} s "
+                f"simulated; {self.messages_kept:,} messages kept, "
+                f"{self.messages_dropped:,} dropped past the last "
                 "whole frame"
             ),
         ]
@@ -178,7 +181,8 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
     s = scan(source, strict=False, topics=ends.TOPICS, consume=ends.take)
     if S.META_CONFIG not in s.metadata:
         raise RecordingError(
-            f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
+            f"{str(source)!r} holds no readable twin configuration "
+            f"({s.problem or 'not a twin file'});"
             " nothing to recover"
         )
     # a damaged config is a RecordingError

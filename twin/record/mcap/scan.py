@@ -122,7 +122,8 @@ def _decompress(chunk: Chunk, budget: list[int]) -> bytes:
         )
     if size > budget[0]:
         raise Damaged(
-            f"the chunks decompress to more than {MAX_EXPANSION} times the file's size; twin's do not"
+            f"the chunks decompress to more than {MAX_EXPANSION} times the file's size; "
+            f"twin's do not"
         )
     budget[0] -= size
     try:
@@ -140,13 +141,15 @@ def _decompress(chunk: Chunk, budget: list[int]) -> bytes:
             data = chunk.data
         else:
             raise Damaged(
-                f"chunk compression {chunk.compression[:40]!r} is unknown; expected zstd, lz4 or none"
+                f"chunk compression {chunk.compression[:40]!r} is unknown; expected "
+                f"zstd, lz4 or none"
             )
     except (zstandard.ZstdError, RuntimeError, ValueError) as err:
         raise Damaged(f"chunk does not decompress ({type(err).__name__}: {err})") from err
     if len(data) != size:
         raise Damaged(
-            f"a chunk decompresses to {'more than ' if len(data) > size else ''}{len(data):,} bytes; "
+            f"a chunk decompresses to "
+            f"{'more than ' if len(data) > size else ''}{len(data):,} bytes; "
             f"it declares {size:,}"
         )
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
@@ -194,7 +197,8 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
             left -= 1
             if left < 0:
                 raise Damaged(
-                    f"the chunks hold more than {state.records_limit:,} records ({RECORD_ALLOWANCE:,} and "
+                    f"the chunks hold more than {state.records_limit:,} records "
+                    f"({RECORD_ALLOWANCE:,} and "
                     f"one per {MIN_BYTES_PER_RECORD} bytes of the file); twin's hold far fewer"
                 )
             if opcode == _MESSAGE:
@@ -202,7 +206,8 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                     raise Damaged("a message record is shorter than its header")
                 if length - 22 > MAX_MESSAGE_BYTES:
                     raise Damaged(
-                        f"a message holds {length - 22:,} bytes; twin writes at most {MAX_MESSAGE_BYTES:,}"
+                        f"a message holds {length - 22:,} bytes; twin writes at most "
+                        f"{MAX_MESSAGE_BYTES:,}"
                     )
                 try:
                     counts[channel_id] += 1
@@ -233,7 +238,8 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                 except ValueError:
                     name = f"opcode {opcode:#x}"
                 raise Damaged(
-                    f"a chunk holds a {name} record; chunks hold only schema, channel and message records"
+                    f"a chunk holds a {name} record; chunks hold only schema, channel "
+                    f"and message records"
                 )
             pos = stop
     finally:
@@ -318,6 +324,7 @@ def records(
                 raise Truncated("the file ends without its closing MCAP magic bytes")
             if pos + len(MAGIC) != size_bytes:
                 raise Damaged(
-                    f"{size_bytes - pos - len(MAGIC):,} bytes follow the MCAP file's closing magic bytes"
+                    f"{size_bytes - pos - len(MAGIC):,} bytes follow the MCAP file's "
+                    f"closing magic bytes"
                 )
             return

@@ -89,7 +89,8 @@ def require_display() -> None:
     if sys.platform in ("darwin", "win32") or any(os.environ.get(v) for v in DISPLAY_VARIABLES):
         return
     raise ViewerError(
-        f"no display for the native viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); {NO_DISPLAY_HINT}"
+        f"no display for the native viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); "
+        f"{NO_DISPLAY_HINT}"
     )
 
 
@@ -111,7 +112,8 @@ def open_native(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, grpc_por
             stop(proc)
         if code != 0:
             raise ViewerError(
-                f"the native Rerun viewer exited with code {code} ({last_log_line(log) or 'no output'}); "
+                f"the native Rerun viewer exited with code {code} "
+                f"({last_log_line(log) or 'no output'}); "
                 f"without a working display {NO_DISPLAY_HINT}"
             )
     return 0

@@ -520,8 +520,8 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
         os.replace(out, old / out.name)
         os.replace(tmp, out)
         shutil.rmtree(old, ignore_errors=True)
-    # an empty folder (perhaps the current one): filled in place, meta/ (info.json) last
     elif out.exists():
+        # an empty folder (perhaps the current one): filled in place, meta/ (info.json) last
         for name in sorted(p.name for p in tmp.iterdir() if p.name != "meta") + ["meta"]:
             os.replace(tmp / name, out / name)
         tmp.rmdir()

@@ -51,8 +51,8 @@ def encode_mp4(
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
         return _encode(av, path, frames, fps, width_px, height_px)
-    # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
     finally:
+        # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
         # later would inherit it (a spinning one starved the machine)
         os.sched_setscheduler(0, policy, param)
 

@@ -225,8 +225,8 @@ def start_local(
                 name="twin",
             )
             client = Client(cluster, security=security, set_as_default=False)
-    # RuntimeError: a worker could not start
     except (OSError, TimeoutError, RuntimeError, ValueError) as err:
+        # RuntimeError: a worker could not start
         for part in (client, cluster):
             if part is not None:
                 part.close()
@@ -346,8 +346,8 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
             "but did not answer Dask's handshake (expected a Dask scheduler's address, not another "
             "server's)"
         ) from err
-    # refused or unreachable (retried for timeout_s), TLS refused, closed mid-handshake
     except OSError as err:
+        # refused or unreachable (retried for timeout_s), TLS refused, closed mid-handshake
         # Dask's "Timed out trying to connect" names the last attempt's error only here
         cause = err.__cause__
         why = _line(err) + (
@@ -357,8 +357,8 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
             f"cannot reach the Dask scheduler {address!r} within {within}: {why} "
             f"(expected a Dask scheduler's address{hint})"
         ) from err
-    # bytes that are not Dask's protocol (a length of exabytes: MemoryError...)
     except Exception as err:
+        # bytes that are not Dask's protocol (a length of exabytes: MemoryError...)
         raise ConfigError(
             f"cannot reach the Dask scheduler {address!r} within {within}: it answered, but not in "
             f"Dask's protocol ({_line(err)}); expected a Dask scheduler's address"

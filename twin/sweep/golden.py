@@ -189,8 +189,8 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
         before, now = g_pe.get(stat), pe[stat]
         if (before is None) != (now is None):
             problems.append(f"placement_error_mm.{stat} was {before} and is {now} now")
-        # a NaN moved too
         elif before is not None and not abs(now - before) <= tolerances[tol_name]:
+            # a NaN moved too
             problems.append(
                 f"placement_error_mm.{stat} moved {now - before:+.3f} mm (golden {before:.3f}, now "
                 f"{now:.3f}; tolerance {tolerances[tol_name]:g} mm)"

@@ -36,9 +36,9 @@ from twin.sweep.worker import (
 PR_SET_PDEATHSIG = 1  # prctl(2)
 # cgroup v2: oom_kill counts the processes the OOM killer ended
 OOM_EVENTS = "/sys/fs/cgroup/memory.events"
-# this process's ends of its children's pipes: a new child closes them, or a
+# this process's ends of its children's pipes: a new child closes them, or a child would never
+# read the end of its pipe while a sibling held that end open
 _PARENT_ENDS: set[int] = set()
-# child would never read the end of its pipe while a sibling held that end open
 
 
 class Child:

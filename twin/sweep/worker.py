@@ -205,11 +205,11 @@ def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) ->
                 config, run, mcap_path=mcap_path, background=False, engine=engine_versions()
             ) as sinks:
                 _task(config, prep.fn, params, tally, [*sinks, *limit])
-    # a file that cannot be written ends the sweep (one line), not the scenario
     except RecordingError:
+        # a file that cannot be written ends the sweep (one line), not the scenario
         raise
-    # the task failed, or the scenario's values are invalid: the sweep goes on
     except TwinError as err:
+        # the task failed, or the scenario's values are invalid: the sweep goes on
         error = exception_text(err) or type(err).__name__
     worst = tally.worst_m
     return {

@@ -275,8 +275,8 @@ class RecordingBuilder:
             if self._without_cameras(s):
                 # no camera: no picture's pose to read (the scene's /tf is the frames')
                 s.stop_keeping(topic)
-            # a picture's pose; the scene's own transforms are skipped
             elif _CAMERA_FRAME in m.data:
+                # a picture's pose; the scene's own transforms are skipped
                 self._camera_pose(m.data, where)
         elif self._config is None and S.META_CONFIG not in s.metadata:
             self._early.append((topic, m))

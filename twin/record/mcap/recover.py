@@ -230,9 +230,8 @@ def _write(f, s: Scan, source: Path, last_step: int, dt_ns: int) -> int:
         )
         for cid, c in sorted(s.channels.items())
     }
-    # a file cut short loses its finalization too: what followed the
+    # a file cut short loses its finalization too: what followed the kept frames is gone
     for name, record in s.metadata.items():
-        # kept frames is gone
         if name != S.META_RECOVERED and (s.complete or name != S.META_FINALIZED):
             writer.add_metadata(name, record)
     writer.add_metadata(

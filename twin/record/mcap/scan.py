@@ -221,9 +221,8 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                     yield Message(
                         channel_id, sequence, log_time, publish_time, data[start + 22 : stop]
                     )
-                # now and then in a run of same-size messages:
                 elif length == same and not (left & 255):
-                    # count it at once
+                    # now and then in a run of same-size messages: count it at once
                     skipped = _count_run(data, stop, end, length, counts, keep, left)
                     left -= skipped
                     stop += skipped * (9 + length)

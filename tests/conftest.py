@@ -22,28 +22,48 @@ FIXTURES = TESTS / "fixtures"
 
 @pytest.fixture(scope="session")
 def pick_place_mcap(tmp_path_factory):
-    """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector of
-    what the twin sent beside it: (path, collector). Read it; copy it before changing it."""
+    """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector
+    of what the twin sent beside it: (path, collector). Read it; copy it before changing it."""
     path = tmp_path_factory.mktemp("pick_place_mcap") / "pick.mcap"
     return path, collect_pick_place(path)
 
 
 @pytest.fixture(scope="session")
 def pick_place_cli(tmp_path_factory):
-    """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own process:
-    {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing them."""
+    """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own
+    process: {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing
+    them."""
     tmp = tmp_path_factory.mktemp("pick_place_cli")
     mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
-    env = {**os.environ, "HOME": str(tmp)}  # the rerun SDK may write its analytics config under HOME
-    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "1", "--record",
-                           str(mcap), "--rrd", str(rrd)], capture_output=True, text=True, env=env, timeout=300,
-                          check=False)
+    # the rerun SDK may write its analytics config under HOME
+    env = {**os.environ, "HOME": str(tmp)}
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "run",
+            "pick_place",
+            "--cycles",
+            "1",
+            "--record",
+            str(mcap),
+            "--rrd",
+            str(rrd),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     return {"tmp": tmp, "mcap": mcap, "rrd": rrd}
 
 
 @pytest.fixture(scope="session")
 def camera_run(tmp_path_factory):
-    """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (320x240,
-    15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before changing them."""
+    """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras
+    (320x240, 15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before
+    changing them."""
     return record_camera_run(tmp_path_factory.mktemp("camera_run"))

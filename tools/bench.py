@@ -39,15 +39,18 @@ class BenchContext:
     physics_steps_per_s: float  # median over repeats, idle scene
     physics_samples: tuple[float, ...]  # each repeat's steps/s
     repeats: int
-    motion_physics_steps_per_s: float = 0.0  # median over repeats, pick_place's motion (0: not measured)
+    # median over repeats, pick_place's motion (0: not measured)
+    motion_physics_steps_per_s: float = 0.0
     physics_step_us: float = field(init=False)
-    figures: dict[str, float] = field(default_factory=dict)  # named numbers for --json (sections add theirs)
+    # named numbers for --json (sections add theirs)
+    figures: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "physics_step_us", 1e6 / self.physics_steps_per_s)
 
     def median_rate(self, run: Callable[[], int]) -> float:
-        """Median over `repeats` of count / wall seconds, where `run()` does the work and returns the count."""
+        """Median over `repeats` of count / wall seconds, where `run()` does the work and returns
+        the count."""
         samples = []
         for _ in range(self.repeats):
             t0 = time.perf_counter()
@@ -56,14 +59,16 @@ class BenchContext:
         return statistics.median(samples)
 
     def rate_figures(self, name: str, steps_per_s: float) -> None:
-        """NAME_steps_per_s and its ratios to both baselines (NAME_vs_idle, NAME_vs_motion) for --json."""
+        """NAME_steps_per_s and its ratios to both baselines (NAME_vs_idle, NAME_vs_motion) for
+        --json."""
         self.figures[f"{name}_steps_per_s"] = steps_per_s
         self.figures[f"{name}_vs_idle"] = steps_per_s / self.physics_steps_per_s
         if self.motion_physics_steps_per_s:
             self.figures[f"{name}_vs_motion"] = steps_per_s / self.motion_physics_steps_per_s
 
     def ratio(self, steps_per_s: float) -> str:
-        """A step rate with its ratios to both physics-only baselines, e.g. '31,250 (0.45x idle, 0.78x motion)'."""
+        """A step rate with its ratios to both physics-only baselines, e.g. '31,250 (0.45x idle,
+        0.78x motion)'."""
         text = f"{steps_per_s:,.0f} ({steps_per_s / self.physics_steps_per_s:.2f}x idle"
         if self.motion_physics_steps_per_s:
             text += f", {steps_per_s / self.motion_physics_steps_per_s:.2f}x same motion"
@@ -87,10 +92,12 @@ def physics_only_steps_per_s(steps: int = PHYSICS_STEPS) -> float:
         world.close()
 
 
-@functools.cache  # the run is deterministic: every baseline sample of a bench run replays the same motion
+# the run is deterministic: every baseline sample of a bench run replays the same motion
+@functools.cache
 def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     """pick_place's steps and, by step, what the bare World must do to repeat its motion: the motor
-    targets it set and the holds it made and ended (from one twin run; read it, do not change it)."""
+    targets it set and the holds it made and ended (from one twin run; read it, do not change
+    it)."""
     from twin.sim.twin import Twin
     from twin.tasks import TASKS
     from twin.verify.collectors import FrameCollector
@@ -103,7 +110,9 @@ def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     actions: dict[int, list[tuple]] = {}
     for c in collector.commands:  # commands first: the twin applies them before its suction rule
         if c.kind == "joint_target":
-            actions.setdefault(c.step, []).append(("motor", profile.joint_index(c.args["joint"]), c.args["q"]))
+            actions.setdefault(c.step, []).append(
+                ("motor", profile.joint_index(c.args["joint"]), c.args["q"])
+            )
     for e in collector.events:
         if e.kind == "attach":
             f = collector.frames[e.step]
@@ -115,8 +124,12 @@ def motion_actions(cycles: int = 2) -> tuple[int, dict[int, list[tuple]]]:
     return n_steps, actions
 
 
-def replay_motion(world, n_steps: int, actions: dict[int, list[tuple]],
-                  after_step: Callable[[int], None] | None = None) -> None:
+def replay_motion(
+    world,
+    n_steps: int,
+    actions: dict[int, list[tuple]],
+    after_step: Callable[[int], None] | None = None,
+) -> None:
     """Step the bare World through a motion from motion_actions; after_step(step) after each step
     (a baseline's own work: reading the state, logging it)."""
     v_max = world.max_velocities()
@@ -178,11 +191,16 @@ def _table(rows: list[tuple[str, str, str]]) -> list[str]:
     return lines
 
 
-def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_path: str | None = None) -> int:
+def run(
+    only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_path: str | None = None
+) -> int:
     sections = discover()
     unknown = sorted(set(only) - set(sections))
     if unknown:
-        print(f"bench: error: unknown section {unknown[0]!r}; expected one of {', '.join(sections)}", file=sys.stderr)
+        print(
+            f"bench: error: unknown section {unknown[0]!r}; expected one of {', '.join(sections)}",
+            file=sys.stderr,
+        )
         return 2
     chosen = {name: path for name, path in sections.items() if not only or name in only}
     from twin.sim.world import pybullet_version
@@ -192,17 +210,36 @@ def run(only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_
     samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))
     motion = tuple(pick_place_physics_steps_per_s() for _ in range(repeats))
     ctx = BenchContext(statistics.median(samples), samples, repeats, statistics.median(motion))
-    ctx.figures.update(physics_steps_per_s=ctx.physics_steps_per_s,
-                       motion_physics_steps_per_s=ctx.motion_physics_steps_per_s)
+    ctx.figures.update(
+        physics_steps_per_s=ctx.physics_steps_per_s,
+        motion_physics_steps_per_s=ctx.motion_physics_steps_per_s,
+    )
     realtime = ctx.physics_steps_per_s * DT_S
-    rows = [("section", "measure", "value"),
-            ("machine", "python / pybullet API / cpus",
-             f"{platform.python_version()} / {pybullet_version()} / {os.cpu_count()}"),
-            ("physics", f"physics-only steps/s (median of {repeats})",
-             f"{ctx.physics_steps_per_s:,.0f} ({ctx.physics_step_us:.1f} us/step, {realtime:.0f}x real time at 240 Hz)"),
-            ("physics", "spread over repeats", f"{min(samples):,.0f} .. {max(samples):,.0f}"),
-            ("physics", "physics-only steps/s, pick_place's motion and holds (median)",
-             f"{ctx.motion_physics_steps_per_s:,.0f} ({1e6 / ctx.motion_physics_steps_per_s:.1f} us/step)")]
+    rows = [
+        ("section", "measure", "value"),
+        (
+            "machine",
+            "python / pybullet API / cpus",
+            f"{platform.python_version()} / {pybullet_version()} / {os.cpu_count()}",
+        ),
+        (
+            "physics",
+            f"physics-only steps/s (median of {repeats})",
+            (
+                f"{ctx.physics_steps_per_s:,.0f} ({ctx.physics_step_us:.1f} us/step, "
+                f"{realtime:.0f}x real time at 240 Hz)"
+            ),
+        ),
+        ("physics", "spread over repeats", f"{min(samples):,.0f} .. {max(samples):,.0f}"),
+        (
+            "physics",
+            "physics-only steps/s, pick_place's motion and holds (median)",
+            (
+                f"{ctx.motion_physics_steps_per_s:,.0f} "
+                f"({1e6 / ctx.motion_physics_steps_per_s:.1f} us/step)"
+            ),
+        ),
+    ]
     failed = 0
     for name, path in chosen.items():
         t0 = time.perf_counter()
@@ -232,21 +269,33 @@ def run_facts(only: list[str], repeats: int, load_before: tuple[float, ...]) -> 
     from twin.sim.world import pybullet_version
 
     command = ["python tools/bench.py", *(f"--only {n}" for n in only), f"--repeats {repeats}"]
-    return {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-            "machine": {"cpu": machine_text(machine()), "cpus": os.cpu_count(),
-                        "kernel": platform.release(), "python": platform.python_version(),
-                        "pybullet": pybullet_version()},
-            "command": " ".join(command),
-            "load_average": {"before": list(load_before), "after": list(os.getloadavg())}}
+    return {
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "machine": {
+            "cpu": machine_text(machine()),
+            "cpus": os.cpu_count(),
+            "kernel": platform.release(),
+            "python": platform.python_version(),
+            "pybullet": pybullet_version(),
+        },
+        "command": " ".join(command),
+        "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
+    }
 
 
-def write_json(path: str, figures: dict[str, float], rows: list[tuple[str, str, str]],
-               facts: dict | None = None) -> None:
+def write_json(
+    path: str,
+    figures: dict[str, float],
+    rows: list[tuple[str, str, str]],
+    facts: dict | None = None,
+) -> None:
     """The run as JSON: every named figure at the top level (ratios are plain numbers, e.g.
     record_both_vs_motion), every row of the table under "rows", and the run's date, machine,
     command and load under "run" (tools/docs_benchmarks.py renders it into the docs)."""
-    doc = {**{k: round(v, 6) for k, v in sorted(figures.items())},
-           "rows": [{"section": a, "measure": b, "value": c} for a, b, c in rows[1:]]}
+    doc = {
+        **{k: round(v, 6) for k, v in sorted(figures.items())},
+        "rows": [{"section": a, "measure": b, "value": c} for a, b, c in rows[1:]],
+    }
     if facts is not None:
         doc["run"] = facts
     Path(path).write_text(json.dumps(doc, indent=2) + "\n")
@@ -254,24 +303,46 @@ def write_json(path: str, figures: dict[str, float], rows: list[tuple[str, str, 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bench", description=__doc__.splitlines()[0])
-    parser.add_argument("--only", action="append", default=[], metavar="NAME",
-                        help=f"run only this section (repeatable): {', '.join(discover())}")
-    parser.add_argument("--repeats", type=int, default=3, help="repeats per measurement, median reported (default 3)")
-    parser.add_argument("--physics-steps", type=int, default=PHYSICS_STEPS,
-                        help=f"steps per physics-only sample (default {PHYSICS_STEPS})")
+    parser.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help=f"run only this section (repeatable): {', '.join(discover())}",
+    )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        help="repeats per measurement, median reported (default 3)",
+    )
+    parser.add_argument(
+        "--physics-steps",
+        type=int,
+        default=PHYSICS_STEPS,
+        help=f"steps per physics-only sample (default {PHYSICS_STEPS})",
+    )
     parser.add_argument("--list", action="store_true", help="list the sections and exit")
-    parser.add_argument("--json", metavar="FILE", help="also write every figure of the table to FILE as JSON")
+    parser.add_argument(
+        "--json", metavar="FILE", help="also write every figure of the table to FILE as JSON"
+    )
     args = parser.parse_args(argv)
     if args.list:
         print("\n".join(discover()))
         return 0
     if args.repeats < 1 or args.physics_steps < 1:
-        print(f"bench: error: --repeats {args.repeats} and --physics-steps {args.physics_steps} must be >= 1",
-              file=sys.stderr)
+        print(
+            f"bench: error: --repeats {args.repeats} and --physics-steps "
+            f"{args.physics_steps} must be >= 1",
+            file=sys.stderr,
+        )
         return 2
     if args.json and not Path(args.json).parent.is_dir():
-        print(f"bench: error: --json {args.json!r}: folder {str(Path(args.json).parent)!r} does not exist",
-              file=sys.stderr)
+        print(
+            f"bench: error: --json {args.json!r}: folder {str(Path(args.json).parent)!r} "
+            f"does not exist",
+            file=sys.stderr,
+        )
         return 2
     return run(args.only, args.repeats, args.physics_steps, args.json)
 

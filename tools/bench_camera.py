@@ -5,9 +5,9 @@ overhead and the wrist camera at 320x240; and a recorded pick_place run (MCAP) w
 camera at 15 Hz of simulated time, in steps per wall second and as a ratio to the physics-only
 baselines (`record_camera_vs_motion`: pictures drawn in the render process, as twin does;
 `record_camera_in_thread_vs_motion`: drawn in the stepping thread). A picture is rendered every 16
-steps at 240 Hz, so a camera run is bound by its pictures: the "render bound" row is the step rate of
-a renderer doing nothing else, from the picture cost alone.
-`python tools/bench_camera.py` runs it alone (with the baseline).
+steps at 240 Hz, so a camera run is bound by its pictures: the "render bound" row is the step rate
+of a renderer doing nothing else, from the picture cost alone. `python tools/bench_camera.py` runs
+it alone (with the baseline).
 """
 
 from __future__ import annotations
@@ -55,9 +55,9 @@ def picture_ms(name: str) -> tuple[float, float]:
 
 
 def recorded_camera_run(folder: Path, *, background: bool = True) -> tuple[float, int]:
-    """(steps/s, pictures) of pick_place recorded to MCAP with the overhead camera, twin built to files
-    finalized excluded: stepping only, as the physics baselines are timed. background False: the
-    pictures drawn in the stepping thread (Twin(camera_background=False))."""
+    """(steps/s, pictures) of pick_place recorded to MCAP with the overhead camera, twin built to
+    files finalized excluded: stepping only, as the physics baselines are timed. background False:
+    the pictures drawn in the stepping thread (Twin(camera_background=False))."""
     config = TwinConfig(cameras=(camera("overhead"),))
     with open_recorders(config, RUN, mcap_path=folder / "camera.mcap") as sinks:
         twin = Twin(config, sinks=sinks, camera_background=background)
@@ -79,8 +79,12 @@ def bench(ctx) -> list[tuple[str, str]]:
         render, png = (statistics.median(s[i] for s in samples) for i in range(2))
         costs[name] = render + png
         ctx.figures[f"camera_{name}_ms_per_picture"] = render + png
-        rows.append((f"one {name} picture, 320x240: render + PNG (median of {repeats})",
-                     f"{render + png:.2f} ms ({render:.2f} + {png:.2f})"))
+        rows.append(
+            (
+                f"one {name} picture, 320x240: render + PNG (median of {repeats})",
+                f"{render + png:.2f} ms ({render:.2f} + {png:.2f})",
+            )
+        )
     with tempfile.TemporaryDirectory(prefix="twin-bench-camera-") as tmp:
         runs, here = [], []
         for _ in range(repeats):  # the two ways take turns: a machine that slows down slows both
@@ -88,15 +92,20 @@ def bench(ctx) -> list[tuple[str, str]]:
             here.append(recorded_camera_run(Path(tmp), background=False)[0])
     rate = statistics.median(r[0] for r in runs)
     ctx.rate_figures("record_camera", rate)
-    label = (f"twin + MCAP + overhead camera at 15 Hz (a picture every {every} steps, {runs[0][1]} pictures), "
-             "rendered in the render process: steps/s")
+    label = (
+        f"twin + MCAP + overhead camera at 15 Hz (a picture every {every} steps, "
+        f"{runs[0][1]} pictures), "
+        "rendered in the render process: steps/s"
+    )
     rows.append((label, ctx.ratio(rate)))
     in_thread = statistics.median(here)
     ctx.rate_figures("record_camera_in_thread", in_thread)
     rows.append(("the same, rendered in the stepping thread: steps/s", ctx.ratio(in_thread)))
     bound = every * 1e3 / costs["overhead"]
     ctx.figures["camera_render_bound_steps_per_s"] = bound
-    rows.append(("render bound: steps/s of a renderer drawing nothing but the pictures", f"{bound:,.0f}"))
+    rows.append(
+        ("render bound: steps/s of a renderer drawing nothing but the pictures", f"{bound:,.0f}")
+    )
     return rows
 
 

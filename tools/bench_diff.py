@@ -33,7 +33,9 @@ def record(path: Path, config: TwinConfig, cycles: int) -> tuple[float, int]:
     """Record pick_place to path: (wall seconds, frames)."""
     params = {"cycles": cycles}
     t0 = time.perf_counter()
-    with open_recorders(config, {"source": "task", "task": "pick_place", "params": params}, mcap_path=path) as sinks:
+    with open_recorders(
+        config, {"source": "task", "task": "pick_place", "params": params}, mcap_path=path
+    ) as sinks:
         rec = record_task(config, "pick_place", params, sinks=sinks)
     return time.perf_counter() - t0, len(rec.frames)
 
@@ -59,14 +61,23 @@ _REPLAY_AND_REPORT_RSS = (
 
 
 def replay_in_child(path: Path) -> tuple[float, float]:
-    """`twin replay PATH` in a fresh process: (wall seconds, that process's peak resident memory in MB)."""
+    """`twin replay PATH` in a fresh process: (wall seconds, that process's peak resident memory in
+    MB)."""
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c", _REPLAY_AND_REPORT_RSS, str(path)], capture_output=True, text=True,
-                          check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", _REPLAY_AND_REPORT_RSS, str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     wall_s = time.perf_counter() - t0
-    peak = [line.split()[1] for line in done.stderr.splitlines() if line.startswith("peak_rss_kib ")]
+    peak = [
+        line.split()[1] for line in done.stderr.splitlines() if line.startswith("peak_rss_kib ")
+    ]
     if done.returncode != 0 or not peak:
-        raise RuntimeError(f"twin replay failed ({done.returncode}): {done.stdout[-300:]}{done.stderr[-300:]}")
+        raise RuntimeError(
+            f"twin replay failed ({done.returncode}): {done.stdout[-300:]}{done.stderr[-300:]}"
+        )
     return wall_s, int(peak[0]) / 1024  # Linux reports KiB
 
 
@@ -81,10 +92,18 @@ def bench(ctx) -> list[tuple[str, str]]:
         record(folder / "shifted.mcap", shifted, cycles)
         record_s = statistics.median([rec_s, rec2_s])
         size_mb = (folder / "golden.mcap").stat().st_size / 1e6
-        same = [diff_once(folder / "golden.mcap", folder / "again.mcap", "exact") for _ in range(ctx.repeats)]
+        same = [
+            diff_once(folder / "golden.mcap", folder / "again.mcap", "exact")
+            for _ in range(ctx.repeats)
+        ]
         replay_s, replay_mb = replay_in_child(folder / "golden.mcap")
-        other = [diff_once(folder / "golden.mcap", folder / "shifted.mcap", "physical") for _ in range(ctx.repeats)]
-    assert all(s[3] for s in same) and not any(o[3] for o in other), "bench runs did not diff as expected"
+        other = [
+            diff_once(folder / "golden.mcap", folder / "shifted.mcap", "physical")
+            for _ in range(ctx.repeats)
+        ]
+    assert all(s[3] for s in same) and not any(o[3] for o in other), (
+        "bench runs did not diff as expected"
+    )
     load_s = statistics.median(s[0] for s in same)
     cmp_s = statistics.median(s[1] for s in same)
     diff_s = statistics.median(s[2] for s in same)
@@ -93,15 +112,23 @@ def bench(ctx) -> list[tuple[str, str]]:
     verdict = "meets" if ratio <= TARGET_RATIO else "MISSES"
     sim_min = frames * config.dt_s / 60
     return [
-        ("long run", (f"pick_place {cycles} cycles, {sim_min:.1f} simulated min, {frames:,} frames, "
-                           f"{size_mb:.1f} MB MCAP")),
+        (
+            "long run",
+            (
+                f"pick_place {cycles} cycles, {sim_min:.1f} simulated min, {frames:,} frames, "
+                f"{size_mb:.1f} MB MCAP"
+            ),
+        ),
         ("record one run (MCAP)", f"{record_s:.2f} s"),
         ("load both files", f"{load_s:.3f} s ({2 * frames / load_s:,.0f} frames/s)"),
         ("compare + report", f"{cmp_s:.3f} s ({frames / cmp_s:,.0f} frame pairs/s)"),
         ("diff, identical runs (exact)", f"{diff_s:.3f} s"),
         ("diff, box 1 mm away (physical)", f"{diff_other_s:.3f} s"),
         ("diff time / record time", f"{ratio:.3f} ({verdict} the target of {TARGET_RATIO})"),
-        ("twin replay of the long run: wall time, peak RSS", f"{replay_s:.2f} s, {replay_mb:.0f} MB"),
+        (
+            "twin replay of the long run: wall time, peak RSS",
+            f"{replay_s:.2f} s, {replay_mb:.0f} MB",
+        ),
     ]
 
 

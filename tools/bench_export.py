@@ -40,12 +40,18 @@ def bench(ctx) -> list[tuple[str, str]]:
         mcap = folder / "run.mcap"
         config = TwinConfig(cameras=(camera("overhead"),))
         params = {"cycles": CYCLES}
-        with open_recorders(config, {"source": "task", "task": "pick_place", "params": params}, mcap_path=mcap) as sinks:
+        with open_recorders(
+            config, {"source": "task", "task": "pick_place", "params": params}, mcap_path=mcap
+        ) as sinks:
             record_task(config, "pick_place", params, sinks=sinks)
         frames = len(load(mcap).frames)
-        parquet = statistics.median(_timed(lambda: write_table(load(mcap), folder / "f.parquet", "parquet"))
-                                    for _ in range(repeats))
-        csv = statistics.median(_timed(lambda: write_table(load(mcap), folder / "f.csv", "csv")) for _ in range(repeats))
+        parquet = statistics.median(
+            _timed(lambda: write_table(load(mcap), folder / "f.parquet", "parquet"))
+            for _ in range(repeats)
+        )
+        csv = statistics.median(
+            _timed(lambda: write_table(load(mcap), folder / "f.csv", "csv")) for _ in range(repeats)
+        )
         written = []
 
         def lerobot(verify: bool) -> None:
@@ -59,10 +65,18 @@ def bench(ctx) -> list[tuple[str, str]]:
         video_mb = sum(p.stat().st_size for p in (folder / "ds" / "videos").rglob("*.mp4")) / 1e6
     return [
         ("export input", f"pick_place {CYCLES} cycles, {frames:,} frames, overhead camera 320x240"),
-        ("twin export --format parquet (load + write)", f"{parquet:.2f} s ({frames / parquet:,.0f} rows/s)"),
+        (
+            "twin export --format parquet (load + write)",
+            f"{parquet:.2f} s ({frames / parquet:,.0f} rows/s)",
+        ),
         ("twin export --format csv (load + write)", f"{csv:.2f} s ({frames / csv:,.0f} rows/s)"),
-        (f"twin export --format lerobot --fps {FPS} (AV1 video)",
-         f"{plain:.2f} s ({ds_frames / plain:,.0f} dataset frames/s, {ds_frames} frames, video {video_mb:.2f} MB)"),
+        (
+            f"twin export --format lerobot --fps {FPS} (AV1 video)",
+            (
+                f"{plain:.2f} s ({ds_frames / plain:,.0f} dataset frames/s, {ds_frames} "
+                f"frames, video {video_mb:.2f} MB)"
+            ),
+        ),
         ("the same with --verify (replay first)", f"{verified:.2f} s"),
     ]
 

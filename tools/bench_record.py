@@ -11,10 +11,11 @@ Each run is timed twice over: its stepping (first Frame to last, what the physic
 times too: `record_*_vs_motion`) and the whole run (recorders started, twin built, stepping, files
 finalized: `record_*_run_vs_motion`), with the start and finish costs on their own rows. The modes
 take turns, repeat by repeat, so a machine that slows down slows them all; and each repeat first
-takes its own sample of the same motion's physics-only baseline (bench.pick_place_physics_steps_per_s),
-so a `record_*_vs_motion` ratio is the median of each repeat's rate over the baseline measured beside
-it. (On this shared machine the baseline alone moved from 34k to 56k steps/s within one minute: a
-ratio to a baseline taken a minute earlier measured the machine as much as the recorder.)
+takes its own sample of the same motion's physics-only baseline
+(bench.pick_place_physics_steps_per_s), so a `record_*_vs_motion` ratio is the median of each
+repeat's rate over the baseline measured beside it. (On this shared machine the baseline alone moved
+from 34k to 56k steps/s within one minute: a ratio to a baseline taken a minute earlier measured the
+machine as much as the recorder.)
 """
 
 from __future__ import annotations
@@ -84,8 +85,16 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
         twin.close()
         waits = sum(getattr(sink, "waits", 0) for sink in sinks)
     t1, cpu_s = time.perf_counter(), _cpu_s() - cpu0
-    return Timed(twin.step_index, clock.last_s - clock.first_s, t1 - t0, clock.first_s - t0, t1 - clock.last_s,
-                 cpu_s, mcap_path.stat().st_size if mcap_path else 0, waits)
+    return Timed(
+        twin.step_index,
+        clock.last_s - clock.first_s,
+        t1 - t0,
+        clock.first_s - t0,
+        t1 - clock.last_s,
+        cpu_s,
+        mcap_path.stat().st_size if mcap_path else 0,
+        waits,
+    )
 
 
 def packed_run() -> tuple[TwinConfig, FrameRows, bytearray, list]:
@@ -105,7 +114,9 @@ def packed_run() -> tuple[TwinConfig, FrameRows, bytearray, list]:
     return config, rows, packed, collector.events
 
 
-def recorder_cpu_us_per_frame(folder: Path, repeats: int, run: tuple, writer: str = "mcap") -> float:
+def recorder_cpu_us_per_frame(
+    folder: Path, repeats: int, run: tuple, writer: str = "mcap"
+) -> float:
     """Process CPU time (all its threads) a writer ("mcap" or "rrd") spends per frame, fed `run`
     (packed_run) as its recorder process feeds it (packed rows, 32 at a time; no physics)."""
     from twin.robot.urdf import urdf_text
@@ -122,12 +133,15 @@ def recorder_cpu_us_per_frame(folder: Path, repeats: int, run: tuple, writer: st
 
         def make():
             return RerunRecorder(folder / "cpu.rrd", config, urdf_text(config.profile))
+
     best = float("inf")
     for _ in range(max(3, repeats)):
         recorder = make()  # the start (static scene, meshes) is not per frame
         t0 = time.process_time()
         for start in range(0, n, 32):
-            recorder.on_rows(rows, memoryview(packed)[start * rows.size:min(n, start + 32) * rows.size])
+            recorder.on_rows(
+                rows, memoryview(packed)[start * rows.size : min(n, start + 32) * rows.size]
+            )
         for event in events:
             recorder.on_event(event)
         recorder.close()
@@ -179,9 +193,15 @@ def naive_logger_steps_per_s(folder: Path, cycles: int = 2) -> float:
             t_ns = step * config.dt_ns
             stream.set_time("step", sequence=step)
             stream.log("joints", rr.Scalars(q))
-            stream.log("box", rr.Transform3D(translation=box[:3], quaternion=rr.Quaternion(xyzw=box[3:7])))
-            writer.add_message(channel, log_time=t_ns, publish_time=t_ns,
-                               data=json.dumps({"step": step, "q": q, "box": box}).encode())
+            stream.log(
+                "box", rr.Transform3D(translation=box[:3], quaternion=rr.Quaternion(xyzw=box[3:7]))
+            )
+            writer.add_message(
+                channel,
+                log_time=t_ns,
+                publish_time=t_ns,
+                data=json.dumps({"step": step, "q": q, "box": box}).encode(),
+            )
 
         try:
             t0 = time.perf_counter()
@@ -213,7 +233,8 @@ def bench(ctx) -> list[tuple[str, str]]:
     with tempfile.TemporaryDirectory(prefix="twin_bench_record_") as tmp:
         folder = Path(tmp)
         runs: dict[str, list[Timed]] = {name: [] for name in modes}
-        motion: list[float] = []  # each repeat's own physics-only baseline, taken just before its modes
+        # each repeat's own physics-only baseline, taken just before its modes
+        motion: list[float] = []
         reads: list[float] = []  # and the reads floor and the hand-written logger, beside it
         naive: list[float] = []
         for _ in range(repeats):  # the modes take turns
@@ -224,15 +245,24 @@ def bench(ctx) -> list[tuple[str, str]]:
             for name, (mcap, rrd) in modes.items():
                 runs[name].append(timed_run(folder, mcap=mcap, rrd=rrd))
         ctx.figures["record_motion_steps_per_s"] = statistics.median(motion)
-        rows.append((f"physics-only steps/s of the same motion, taken beside each repeat (median of {repeats})",
-                     f"{statistics.median(motion):,.0f} ({min(motion):,.0f} .. {max(motion):,.0f})"))
+        rows.append(
+            (
+                (
+                    f"physics-only steps/s of the same motion, taken beside each repeat "
+                    f"(median of {repeats})"
+                ),
+                f"{statistics.median(motion):,.0f} ({min(motion):,.0f} .. {max(motion):,.0f})",
+            )
+        )
 
         def paired(name: str, rates_by_repeat: list[float]) -> None:
-            """NAME_steps_per_s, NAME_vs_idle (to the run's idle baseline) and NAME_vs_motion (the median
-            of the repeats' ratios to the baseline taken beside them) for --json."""
+            """NAME_steps_per_s, NAME_vs_idle (to the run's idle baseline) and NAME_vs_motion (the
+            median of the repeats' ratios to the baseline taken beside them) for --json."""
             ctx.rate_figures(name, statistics.median(rates_by_repeat))
-            ctx.figures[f"{name}_vs_motion"] = statistics.median(r / m for r, m in zip(rates_by_repeat, motion,
-                                                                                          strict=True))
+            ctx.figures[f"{name}_vs_motion"] = statistics.median(
+                r / m for r, m in zip(rates_by_repeat, motion, strict=True)
+            )
+
         steps = runs["twin, no recording"][0].steps
         mcap_bytes = runs["twin + MCAP"][-1].mcap_bytes
         for name, timed in runs.items():
@@ -240,31 +270,70 @@ def bench(ctx) -> list[tuple[str, str]]:
             whole = [t.steps / t.run_s for t in timed]
             rates[name] = statistics.median(stepping)
             cpu_us[name] = statistics.median(t.cpu_s / t.steps * 1e6 for t in timed)
-            key = {"twin, no recording": "record_none", "twin + MCAP": "record_mcap",
-                   "twin + MCAP + Rerun": "record_both"}[name]
+            key = {
+                "twin, no recording": "record_none",
+                "twin + MCAP": "record_mcap",
+                "twin + MCAP + Rerun": "record_both",
+            }[name]
             paired(key, stepping)
             paired(f"{key}_run", whole)
-            rows.append((f"{name}: stepping steps/s (ratio: idle; same motion, paired)",
-                         f"{_rate_text(ctx, key)}; CPU {cpu_us[name]:.1f} us/step (whole run)"))
+            rows.append(
+                (
+                    f"{name}: stepping steps/s (ratio: idle; same motion, paired)",
+                    f"{_rate_text(ctx, key)}; CPU {cpu_us[name]:.1f} us/step (whole run)",
+                )
+            )
             start_ms = statistics.median(t.start_s for t in timed) * 1e3
             finish_ms = statistics.median(t.finish_s for t in timed) * 1e3
             waits = statistics.median(t.waits for t in timed)
-            rows.append((f"{name}: whole run, start and finish included",
-                         f"{_rate_text(ctx, key + '_run')}; start {start_ms:.0f} ms, finish {finish_ms:.0f} ms"
-                         + (f"; the twin waited for a recorder {waits:.0f} times a run" if key != "record_none" else "")))
+            rows.append(
+                (
+                    f"{name}: whole run, start and finish included",
+                    f"{_rate_text(ctx, key + '_run')}; start {start_ms:.0f} ms, finish "
+                    f"{finish_ms:.0f} ms"
+                    + (
+                        f"; the twin waited for a recorder {waits:.0f} times a run"
+                        if key != "record_none"
+                        else ""
+                    ),
+                )
+            )
             if key != "record_none":
                 ctx.figures[f"{key}_start_ms"] = start_ms
                 ctx.figures[f"{key}_finish_ms"] = finish_ms
         plain, with_mcap = rates["twin, no recording"], rates["twin + MCAP"]
-        rows.append(("twin + MCAP: speed relative to no recording (wall; CPU)",
-                     f"{with_mcap / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP']:.2f}x"))
-        rows.append(("MCAP recorder cost per step (wall, in the run)", f"{(1 / with_mcap - 1 / plain) * 1e6:.2f} us"))
+        rows.append(
+            (
+                "twin + MCAP: speed relative to no recording (wall; CPU)",
+                (
+                    f"{with_mcap / plain:.2f}x; "
+                    f"{cpu_us['twin, no recording'] / cpu_us['twin + MCAP']:.2f}x"
+                ),
+            )
+        )
+        rows.append(
+            (
+                "MCAP recorder cost per step (wall, in the run)",
+                f"{(1 / with_mcap - 1 / plain) * 1e6:.2f} us",
+            )
+        )
         if "twin + MCAP + Rerun" in rates:
             both = rates["twin + MCAP + Rerun"]
-            rows.append(("twin + MCAP + Rerun: speed relative to no recording (wall; CPU)",
-                         f"{both / plain:.2f}x; {cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"))
-            rows.append(("MCAP + Rerun recorders cost per step (wall, in the run)",
-                         f"{(1 / both - 1 / plain) * 1e6:.2f} us"))
+            rows.append(
+                (
+                    "twin + MCAP + Rerun: speed relative to no recording (wall; CPU)",
+                    (
+                        f"{both / plain:.2f}x; "
+                        f"{cpu_us['twin, no recording'] / cpu_us['twin + MCAP + Rerun']:.2f}x"
+                    ),
+                )
+            )
+            rows.append(
+                (
+                    "MCAP + Rerun recorders cost per step (wall, in the run)",
+                    f"{(1 / both - 1 / plain) * 1e6:.2f} us",
+                )
+            )
         rows.extend(_user_baselines(ctx, runs, motion, reads, naive))
         run = packed_run()  # one run fed to each writer
         for writer, label in (("mcap", "MCAP"), ("rrd", "Rerun")):
@@ -272,28 +341,47 @@ def bench(ctx) -> list[tuple[str, str]]:
                 continue
             cpu = recorder_cpu_us_per_frame(folder, repeats, run, writer)
             ctx.figures[f"record_{writer}_writer_cpu_us_per_frame"] = cpu
-            rows.append((f"{label} writer CPU per frame (its process, isolated, best of repeats)", f"{cpu:.2f} us"))
+            rows.append(
+                (
+                    f"{label} writer CPU per frame (its process, isolated, best of repeats)",
+                    f"{cpu:.2f} us",
+                )
+            )
         sim_min = steps * TwinConfig().dt_ns * 1e-9 / 60.0
         rows.append(("MCAP bytes per simulated minute", f"{mcap_bytes / sim_min / 1e6:.2f} MB"))
         ctx.figures["mcap_mb_per_sim_min"] = mcap_bytes / sim_min / 1e6
         t0 = time.perf_counter()
         recording = load(folder / "bench.mcap")
         load_s = time.perf_counter() - t0
-        rows.append(("load() per simulated minute", f"{load_s / sim_min * 1000:.1f} ms ({len(recording.frames)} frames)"))
+        rows.append(
+            (
+                "load() per simulated minute",
+                f"{load_s / sim_min * 1000:.1f} ms ({len(recording.frames)} frames)",
+            )
+        )
     return rows
 
 
-def _user_baselines(ctx, runs: dict[str, list[Timed]], motion: list[float], reads: list[float],
-                    naive: list[float]) -> list[tuple[str, str]]:
+def _user_baselines(
+    ctx, runs: dict[str, list[Timed]], motion: list[float], reads: list[float], naive: list[float]
+) -> list[tuple[str, str]]:
     """The reads floor and the hand-written logger, each paired repeat by repeat with the motion
     baseline and with twin + MCAP + Rerun: record_both_vs_reads, record_both_vs_naive for --json."""
+
     def paired(a: list[float], b: list[float]) -> float:
         return statistics.median(x / y for x, y in zip(a, b, strict=True))
 
     ctx.figures["record_reads_steps_per_s"] = statistics.median(reads)
     ctx.figures["record_reads_vs_motion"] = paired(reads, motion)
-    rows = [("the reads floor: the same motion, a Frame's engine reads and nothing else (steps/s)",
-             f"{statistics.median(reads):,.0f} ({ctx.figures['record_reads_vs_motion']:.2f}x same motion)")]
+    rows = [
+        (
+            "the reads floor: the same motion, a Frame's engine reads and nothing else (steps/s)",
+            (
+                f"{statistics.median(reads):,.0f} "
+                f"({ctx.figures['record_reads_vs_motion']:.2f}x same motion)"
+            ),
+        )
+    ]
     if not naive:
         return rows
     both = [t.steps / t.stepping_s for t in runs["twin + MCAP + Rerun"]]
@@ -301,17 +389,37 @@ def _user_baselines(ctx, runs: dict[str, list[Timed]], motion: list[float], read
     ctx.figures["record_naive_vs_motion"] = paired(naive, motion)
     ctx.figures["record_both_vs_reads"] = paired(both, reads)
     ctx.figures["record_both_vs_naive"] = paired(both, naive)
-    rows.append(("a hand-written logger: rr.log of joints and box + one JSON MCAP message a step (steps/s)",
-                 f"{statistics.median(naive):,.0f} ({ctx.figures['record_naive_vs_motion']:.2f}x same motion)"))
-    rows.append(("twin + MCAP + Rerun against the reads floor; against the hand-written logger",
-                 f"{ctx.figures['record_both_vs_reads']:.2f}x; {ctx.figures['record_both_vs_naive']:.2f}x"))
+    rows.append(
+        (
+            (
+                "a hand-written logger: rr.log of joints and box + one JSON MCAP message a "
+                "step (steps/s)"
+            ),
+            (
+                f"{statistics.median(naive):,.0f} "
+                f"({ctx.figures['record_naive_vs_motion']:.2f}x same motion)"
+            ),
+        )
+    )
+    rows.append(
+        (
+            "twin + MCAP + Rerun against the reads floor; against the hand-written logger",
+            (
+                f"{ctx.figures['record_both_vs_reads']:.2f}x; "
+                f"{ctx.figures['record_both_vs_naive']:.2f}x"
+            ),
+        )
+    )
     return rows
 
 
 def _rate_text(ctx, key: str) -> str:
     """'31,250 (0.45x idle, 0.78x same motion)' from the figures paired() wrote."""
     f = ctx.figures
-    return f"{f[key + '_steps_per_s']:,.0f} ({f[key + '_vs_idle']:.2f}x idle, {f[key + '_vs_motion']:.2f}x same motion)"
+    return (
+        f"{f[key + '_steps_per_s']:,.0f} ({f[key + '_vs_idle']:.2f}x idle, "
+        f"{f[key + '_vs_motion']:.2f}x same motion)"
+    )
 
 
 def main() -> int:

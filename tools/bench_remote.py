@@ -1,8 +1,9 @@
 """Benchmark section: the remote API's request path, measured with the official client.
 
-Round-trip sim.getJointPosition calls per second, and stepped sim.step() steps per second, against
-a `twin serve --stepped` subprocess on a free loopback port (targets on a 2-core machine: 5,000
-calls/s and 2,000 steps/s). tools/bench.py calls bench(ctx); `python tools/bench_remote.py` runs it alone.
+Round-trip sim.getJointPosition calls per second, and stepped sim.step() steps per second, against a
+`twin serve --stepped` subprocess on a free loopback port (targets on a 2-core machine: 5,000
+calls/s and 2,000 steps/s). tools/bench.py calls bench(ctx); `python tools/bench_remote.py` runs it
+alone.
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def measure(port: int, calls: int = CALLS, steps: int = STEPS) -> tuple[float, f
 
 
 def server_side_us(requests: int = 20_000) -> float:
-    """Microseconds the server spends on one getJointPosition request (decode, call, encode), no transport."""
+    """Microseconds the server spends on one getJointPosition request (decode, call, encode), no
+    transport."""
     import cbor2
 
     from twin.model.config import TwinConfig
@@ -57,7 +59,9 @@ def server_side_us(requests: int = 20_000) -> float:
     scene = Scene(TwinConfig(), mode="stepped", log=lambda line: None)
     server = Server(scene, port=0, mode="stepped", log=lambda line: None)
     try:
-        raw = cbor2.dumps({"func": "sim.getJointPosition", "args": [11], "argsL": 1, "uuid": "bench"})
+        raw = cbor2.dumps(
+            {"func": "sim.getJointPosition", "args": [11], "argsL": 1, "uuid": "bench"}
+        )
         server.handle(raw, 0.0)
         t0 = time.perf_counter()
         for _ in range(requests):
@@ -74,8 +78,10 @@ def bench(ctx) -> list[tuple[str, str]]:
     calls = statistics.median(s[0] for s in samples)
     steps = statistics.median(s[1] for s in samples)
     return [
-        ("sim.getJointPosition round trips/s (official client, loopback)",
-         f"{calls:,.0f} (target {TARGET_CALLS_PER_S:,})"),
+        (
+            "sim.getJointPosition round trips/s (official client, loopback)",
+            f"{calls:,.0f} (target {TARGET_CALLS_PER_S:,})",
+        ),
         ("stepped sim.step() steps/s", f"{steps:,.0f} (target {TARGET_STEPS_PER_S:,})"),
         ("round-trip latency", f"{1e6 / calls:.0f} µs per call, {1e6 / steps:.0f} µs per step"),
         ("server's share of a call (decode, dispatch, encode)", f"{server_side_us():.1f} µs"),

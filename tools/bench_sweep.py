@@ -37,7 +37,8 @@ from twin.tasks import run_task
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFINITION = ROOT / "recordings" / "sweeps" / "pick_place_jitter.toml"
-SCENARIOS = 150  # the whole golden: a sweep's fixed costs (pool or task start, the last batches) amortized as in use
+# the whole golden: a sweep's fixed costs (pool or task start, the last batches) amortized as in use
+SCENARIOS = 150
 OVERHEAD_SCENARIOS = 48
 
 
@@ -92,8 +93,8 @@ def _local_rate(jobs: int) -> float:
 
 
 def _bare_cpu_s(scenarios: int = OVERHEAD_SCENARIOS) -> float:
-    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and the
-    task, the freed memory kept as a sweep's workers keep it (call in a child)."""
+    """CPU seconds per scenario of the same runs with no sweep around them: a Twin per scenario and
+    the task, the freed memory kept as a sweep's workers keep it (call in a child)."""
     keep_freed_memory()
     spec = _spec(scenarios)
     prep = prepare(spec)
@@ -102,7 +103,8 @@ def _bare_cpu_s(scenarios: int = OVERHEAD_SCENARIOS) -> float:
     for i in range(spec.scenarios):
         values = sampler.values(i)
         twin = Twin(apply_values(prep.config, values))
-        with contextlib.suppress(TwinError):  # a failing scenario is part of the work, as in the sweep
+        # a failing scenario is part of the work, as in the sweep
+        with contextlib.suppress(TwinError):
             run_task(twin, prep.fn, {**spec.params, **task_values(values)})
         twin.close()
     return (time.process_time() - t0) / spec.scenarios
@@ -135,9 +137,9 @@ def _overhead_ms() -> float:
 
 
 def bench(ctx) -> list[tuple[str, str]]:
-    """Each repeat measures its pair back to back (1 then 2 local workers; a new Dask cluster against
-    the mean of the 2-worker pool's runs just before and just after it) and the figures are medians
-    of the pairs' ratios: a busy moment of the shared machine then spoils one pair, not the
+    """Each repeat measures its pair back to back (1 then 2 local workers; a new Dask cluster
+    against the mean of the 2-worker pool's runs just before and just after it) and the figures are
+    medians of the pairs' ratios: a busy moment of the shared machine then spoils one pair, not the
     comparison, and a load that rises or falls through a pair is seen by both sides alike."""
     repeats = ctx.repeats
     one, two, speedups, overheads = [], [], [], []
@@ -147,29 +149,52 @@ def bench(ctx) -> list[tuple[str, str]]:
         speedups.append(two[-1] / one[-1])
         overheads.append(_in_child(_overhead_ms))
     starts, dask, local, vs_local = [], [], [_local_rate(2)], []
-    for _ in range(repeats):  # each Dask run between two of the local pool: the load's drift cancels
+    # each Dask run between two of the local pool: the load's drift cancels
+    for _ in range(repeats):
         starts.append(_dask_rate(dask))
         local.append(_local_rate(2))
         vs_local.append(dask[-1] / statistics.mean(local[-2:]))
     start_s = statistics.median(starts)
     one, two, dask = statistics.median(one), statistics.median(two), statistics.median(dask)
     pairs = vs_local
-    speedup, vs_local, overhead_ms = statistics.median(speedups), statistics.median(vs_local), statistics.median(overheads)
-    ctx.figures.update(sweep_scenarios_per_s=two, sweep_speedup_jobs2=speedup, sweep_dask_vs_local=vs_local,
-                       sweep_overhead_ms_per_scenario=overhead_ms, sweep_scenarios_per_s_jobs1=one,
-                       sweep_dask_scenarios_per_s=dask, sweep_dask_start_s=start_s)
+    speedup, vs_local, overhead_ms = (
+        statistics.median(speedups),
+        statistics.median(vs_local),
+        statistics.median(overheads),
+    )
+    ctx.figures.update(
+        sweep_scenarios_per_s=two,
+        sweep_speedup_jobs2=speedup,
+        sweep_dask_vs_local=vs_local,
+        sweep_overhead_ms_per_scenario=overhead_ms,
+        sweep_scenarios_per_s_jobs1=one,
+        sweep_dask_scenarios_per_s=dask,
+        sweep_dask_start_s=start_s,
+    )
     what = f"{SCENARIOS} scenarios of {DEFINITION.name}, --save none"
     return [
         (f"{what}: scenarios/s, 1 local worker (median of {repeats})", f"{one:.1f}"),
         ("scenarios/s, 2 local workers (pool start included)", f"{two:.1f}"),
-        ("2 workers over 1 (median of the pairs' ratios; goal >= 1.6)",
-         f"{speedup:.2f}x (pairs {min(speedups):.2f}..{max(speedups):.2f})"),
-        ("scenarios/s, Dask LocalCluster of 2 workers (started, warm) / 2 local workers around it",
-         f"{dask:.1f} / {statistics.median(local):.1f}"),
-        ("Dask over 2 local workers (median of the ratios to the runs around it; goal >= 0.9)",
-         f"{vs_local:.2f}x (pairs {min(pairs):.2f}..{max(pairs):.2f})"),
+        (
+            "2 workers over 1 (median of the pairs' ratios; goal >= 1.6)",
+            f"{speedup:.2f}x (pairs {min(speedups):.2f}..{max(speedups):.2f})",
+        ),
+        (
+            (
+                "scenarios/s, Dask LocalCluster of 2 workers (started, warm) / 2 local "
+                "workers around it"
+            ),
+            f"{dask:.1f} / {statistics.median(local):.1f}",
+        ),
+        (
+            "Dask over 2 local workers (median of the ratios to the runs around it; goal >= 0.9)",
+            f"{vs_local:.2f}x (pairs {min(pairs):.2f}..{max(pairs):.2f})",
+        ),
         ("Dask LocalCluster start (2 workers, twin preloaded; median)", f"{start_s:.2f} s"),
-        ("sweep overhead per scenario: CPU time of a 1-worker sweep over the runs alone", f"{overhead_ms:.2f} ms"),
+        (
+            "sweep overhead per scenario: CPU time of a 1-worker sweep over the runs alone",
+            f"{overhead_ms:.2f} ms",
+        ),
     ]
 
 

@@ -38,12 +38,34 @@ def measure(scenarios: int, folder: Path) -> tuple[float, float, float]:
     folder.mkdir(exist_ok=True)
     out = folder / f"s{scenarios}"
     journal = out / "journal.jsonl"
-    cmd = [sys.executable, "-m", "twin", "sweep", "pick_place", "--scenarios", str(scenarios), "--vary",
-           "box.x_m=uniform(0.19,0.21)", "--param", "cycles=1", "--save", "none", "--quiet", "-j", "2",
-           "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "twin",
+        "sweep",
+        "pick_place",
+        "--scenarios",
+        str(scenarios),
+        "--vary",
+        "box.x_m=uniform(0.19,0.21)",
+        "--param",
+        "cycles=1",
+        "--save",
+        "none",
+        "--quiet",
+        "-j",
+        "2",
+        "--out",
+        str(out),
+    ]
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,  # Ctrl-C as in a terminal
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
+    # Ctrl-C as in a terminal
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # noqa: PLW1509
+    )
     try:
         first_s = None
         while first_s is None and proc.poll() is None:
@@ -74,13 +96,25 @@ def bench(ctx) -> list[tuple[str, str]]:
             runs = [measure(n, Path(tmp) / f"r{k}") for k in range(ctx.repeats)]
             first, peak, stop = (statistics.median(r[i] for r in runs) for i in range(3))
             figures[n] = (first, peak, stop)
-            label = f"{n:,} planned scenarios: first result, parent's peak memory, stop after Ctrl-C (medians of {ctx.repeats})"
+            label = (
+                f"{n:,} planned scenarios: first result, parent's peak memory, stop after "
+                f"Ctrl-C (medians of {ctx.repeats})"
+            )
             rows.append((label, f"{first:.2f} s, {peak:.0f} MB, {stop:.2f} s"))
     small, large = figures[SIZES[0]], figures[SIZES[-1]]
-    rows.append(("10M over 100k: time to first result, peak memory (goal: about 1)",
-                 f"{large[0] / small[0]:.2f}x, {large[1] / small[1]:.2f}x"))
-    ctx.figures.update(sweep_first_result_s_10m=large[0], sweep_peak_mb_10m=large[1], sweep_stop_s_10m=large[2],
-                       sweep_first_result_10m_vs_100k=large[0] / small[0], sweep_peak_mb_10m_vs_100k=large[1] / small[1])
+    rows.append(
+        (
+            "10M over 100k: time to first result, peak memory (goal: about 1)",
+            f"{large[0] / small[0]:.2f}x, {large[1] / small[1]:.2f}x",
+        )
+    )
+    ctx.figures.update(
+        sweep_first_result_s_10m=large[0],
+        sweep_peak_mb_10m=large[1],
+        sweep_stop_s_10m=large[2],
+        sweep_first_result_10m_vs_100k=large[0] / small[0],
+        sweep_peak_mb_10m_vs_100k=large[1] / small[1],
+    )
     return rows
 
 

@@ -70,13 +70,22 @@ def bench(ctx) -> list[tuple[str, str]]:
     sim_s = steps * TwinConfig().dt_ns * 1e-9
     ctx.rate_figures("twin", run_rate)
     return [
-        (f"pick_place {CYCLES} cycles, no recording: steps/s (ratio to physics-only)",
-         ctx.ratio(run_rate)),
-        ("pick_place: steps, simulated s, real-time factor",
-         f"{steps}, {sim_s:.2f} s, {run_rate * TwinConfig().dt_ns * 1e-9:.0f}x"),
-        ("twin cost per step over the same motion's stepSimulation (pick_place)",
-         f"{(1 / run_rate - 1 / (ctx.motion_physics_steps_per_s or physics)) * 1e6:.1f} us"),
-        ("twin.step() idle: steps/s (ratio to physics-only)", f"{idle_rate:,.0f} ({idle_rate / physics:.2f}x)"),
+        (
+            f"pick_place {CYCLES} cycles, no recording: steps/s (ratio to physics-only)",
+            ctx.ratio(run_rate),
+        ),
+        (
+            "pick_place: steps, simulated s, real-time factor",
+            f"{steps}, {sim_s:.2f} s, {run_rate * TwinConfig().dt_ns * 1e-9:.0f}x",
+        ),
+        (
+            "twin cost per step over the same motion's stepSimulation (pick_place)",
+            f"{(1 / run_rate - 1 / (ctx.motion_physics_steps_per_s or physics)) * 1e6:.1f} us",
+        ),
+        (
+            "twin.step() idle: steps/s (ratio to physics-only)",
+            f"{idle_rate:,.0f} ({idle_rate / physics:.2f}x)",
+        ),
         ("building a Twin (connect, URDF, scene)", f"{build_ms:.1f} ms"),
     ]
 

@@ -1,15 +1,15 @@
-"""Instructions a step, counted by valgrind's callgrind: the same count every run, where wall time on a
-shared machine moves by a third from one minute to the next.
+"""Instructions a step, counted by valgrind's callgrind: the same count every run, where wall time
+on a shared machine moves by a third from one minute to the next.
 
-    python tools/step_instructions.py            # physics-only, twin alone, + MCAP, + MCAP and Rerun
+    python tools/step_instructions.py           # physics-only, twin alone, + MCAP, + MCAP and Rerun
     python tools/step_instructions.py --modes physics alone
 
-Each mode runs pick_place at 2 and at 4 cycles under callgrind; a step's cost is the difference of the
-twin process's totals over the difference of their steps, so the start (imports, the scene, the
+Each mode runs pick_place at 2 and at 4 cycles under callgrind; a step's cost is the difference of
+the twin process's totals over the difference of their steps, so the start (imports, the scene, the
 recorders) cancels out. `physics` replays the same motion on the bare World as tools/bench.py's
-same-motion baseline does (its actions are taken from a twin run outside valgrind). Only the twin's own
-process is counted: the recorder processes (forked, traced too) work on the other core. Needs valgrind
-(`apt-get install valgrind`); takes about ten minutes.
+same-motion baseline does (its actions are taken from a twin run outside valgrind). Only the twin's
+own process is counted: the recorder processes (forked, traced too) work on the other core. Needs
+valgrind (`apt-get install valgrind`); takes about ten minutes.
 """
 
 from __future__ import annotations
@@ -58,7 +58,9 @@ def run_mode(mode: str, cycles: int, folder: Path) -> int:
         return twin.step_index
     run = {"source": "task", "task": "pick_place", "params": params}
     rrd = folder / f"{mode}{cycles}.rrd" if mode == "both" else None
-    with open_recorders(config, run, mcap_path=folder / f"{mode}{cycles}.mcap", rrd_path=rrd) as sinks:
+    with open_recorders(
+        config, run, mcap_path=folder / f"{mode}{cycles}.mcap", rrd_path=rrd
+    ) as sinks:
         twin = Twin(config, sinks=sinks)
         run_task(twin, TASKS["pick_place"], params)
         twin.close()
@@ -77,9 +79,22 @@ def counted(mode: str, cycles: int, folder: Path) -> tuple[int, int]:
     """(instructions of the twin's process, steps) of one run under callgrind."""
     out = folder / f"{mode}.{cycles}.%p"
     proc = subprocess.run(
-        ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", sys.executable, __file__,
-         "--child", mode, str(cycles), str(folder)],
-        capture_output=True, text=True, env={**os.environ, **ENV}, check=False)
+        [
+            "valgrind",
+            "--tool=callgrind",
+            f"--callgrind-out-file={out}",
+            sys.executable,
+            __file__,
+            "--child",
+            mode,
+            str(cycles),
+            str(folder),
+        ],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **ENV},
+        check=False,
+    )
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("steps ")]
     if proc.returncode != 0 or not lines:
         tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
@@ -97,15 +112,20 @@ def per_step(runs: dict[int, tuple[int, int]]) -> float:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
-    parser.add_argument("--child", nargs=3, metavar=("MODE", "CYCLES", "FOLDER"), help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--child", nargs=3, metavar=("MODE", "CYCLES", "FOLDER"), help=argparse.SUPPRESS
+    )
     args = parser.parse_args(argv)
     if args.child:
         mode, cycles, folder = args.child
         print(f"steps {run_mode(mode, int(cycles), Path(folder))} {os.getpid()}")
         return 0
     if shutil.which("valgrind") is None:
-        print("step_instructions: valgrind is not installed; expected it on PATH (apt-get install valgrind)",
-              file=sys.stderr)
+        print(
+            "step_instructions: valgrind is not installed; expected it on PATH (apt-get "
+            "install valgrind)",
+            file=sys.stderr,
+        )
         return 2
     results: dict[str, float] = {}
     with tempfile.TemporaryDirectory(prefix="twin_instructions_") as tmp:
@@ -115,7 +135,11 @@ def main(argv: list[str] | None = None) -> int:
                 (folder / f"actions{cycles}.pkl").write_bytes(pickle.dumps(motion_actions(cycles)))
         for mode in args.modes:
             results[mode] = per_step({cycles: counted(mode, cycles, folder) for cycles in CYCLES})
-            ratio = f"  ({results['physics'] / results[mode]:.3f}x physics)" if "physics" in results else ""
+            ratio = (
+                f"  ({results['physics'] / results[mode]:.3f}x physics)"
+                if "physics" in results
+                else ""
+            )
             print(f"{mode:8s} {results[mode] / 1000:8.1f}k instructions a step{ratio}", flush=True)
     return 0
 

@@ -10,7 +10,8 @@ if TYPE_CHECKING:
 
 
 def load(path: str | PathLike) -> Recording:
-    """Load an MCAP recording as a twin.model.recording.Recording (frames as numpy columns, commands, events)."""
+    """Load an MCAP recording as a twin.model.recording.Recording (frames as numpy columns,
+    commands, events)."""
     from twin.record.mcap.reader import load as load_mcap
 
     return load_mcap(path)

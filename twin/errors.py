@@ -29,7 +29,8 @@ class OutputError(TwinError):
 
 class HelperError(TwinError):
     """A helper process of the twin (the camera renderer) stopped or failed; the message says which
-    and how (its exit code, or the error it sent). Exit 2, as the input errors it most often follows."""
+    and how (its exit code, or the error it sent). Exit 2, as the input errors it most often
+    follows."""
 
 
 class OutOfReach(TwinError):

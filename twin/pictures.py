@@ -12,7 +12,8 @@ import zlib
 
 import numpy as np
 
-PNG_COMPRESS_LEVEL = 1  # fixed: identical pixels give identical bytes (level 1: 0.36 ms a picture, level 6: 0.9-1.2)
+# fixed: identical pixels give identical bytes (level 1: 0.36 ms a picture, level 6: 0.9-1.2)
+PNG_COMPRESS_LEVEL = 1
 
 
 def encode(rgb: np.ndarray, format: str = "png") -> bytes:
@@ -22,23 +23,33 @@ def encode(rgb: np.ndarray, format: str = "png") -> bytes:
     from PIL import Image
 
     out = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(out, format="JPEG", quality=90)
+    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(
+        out, format="JPEG", quality=90
+    )
     return out.getvalue()
 
 
 def png_bytes(rgb: np.ndarray) -> bytes:
-    """A PNG of (h, w, 3) uint8 pixels: 8-bit RGB, every row unfiltered, zlib level PNG_COMPRESS_LEVEL, no
-    other chunks, so the same pixels always give the same bytes. Written here rather than by Pillow,
-    whose filter search took 1.5-3 ms a 320x240 picture; this takes 0.36 ms (the renderer's flat colours
-    compress well without filters: 3.5 KB)."""
+    """A PNG of (h, w, 3) uint8 pixels: 8-bit RGB, every row unfiltered, zlib level
+    PNG_COMPRESS_LEVEL, no other chunks, so the same pixels always give the same bytes. Written here
+    rather than by Pillow, whose filter search took 1.5-3 ms a 320x240 picture; this takes 0.36 ms
+    (the renderer's flat colours compress well without filters: 3.5 KB)."""
     h, w, _ = rgb.shape
     rows = np.empty((h, 1 + 3 * w), dtype=np.uint8)
     rows[:, 0] = 0  # filter type None
-    pixels = rows[:, 1:].reshape(h, w, 3)  # a view into rows: the renderer's RGBA slice is copied once, strided
+    # a view into rows: the renderer's RGBA slice is copied once, strided
+    pixels = rows[:, 1:].reshape(h, w, 3)
     pixels[...] = rgb
-    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8 bits, truecolour, deflate, no filter choice, no interlace
-    return b"".join((b"\x89PNG\r\n\x1a\n", _png_chunk(b"IHDR", header),
-                     _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)), _png_chunk(b"IEND", b"")))
+    # 8 bits, truecolour, deflate, no filter choice, no interlace
+    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    return b"".join(
+        (
+            b"\x89PNG\r\n\x1a\n",
+            _png_chunk(b"IHDR", header),
+            _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_COMPRESS_LEVEL)),
+            _png_chunk(b"IEND", b""),
+        )
+    )
 
 
 def _png_chunk(kind: bytes, data: bytes) -> bytes:
@@ -46,13 +57,16 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
 
 
 _PIL_FORMATS = {"png": "PNG", "jpeg": "JPEG"}
-_PNG_HEAD = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR"  # the signature, then the IHDR chunk's length and type
+# the signature, then the IHDR chunk's length and type
+_PNG_HEAD = b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR"
 
 
-def decode_rgb(data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None) -> np.ndarray:
-    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height) the
-    header is checked first and nothing else is decoded: ValueError saying what the bytes are instead,
-    also for pixel data Pillow cannot decode."""
+def decode_rgb(
+    data: bytes, format: str | None = None, size_px: tuple[int, int] | None = None
+) -> np.ndarray:
+    """Encoded PNG or JPEG bytes as (h, w, 3) uint8 pixels. With format and size_px (width, height)
+    the header is checked first and nothing else is decoded: ValueError saying what the bytes are
+    instead, also for pixel data Pillow cannot decode."""
     with _open(data, format, size_px) as image:
         if size_px is not None and image.size != tuple(size_px):
             raise ValueError(f"is {image.size[0]}x{image.size[1]} px")
@@ -93,12 +107,16 @@ def _open(data: bytes, format: str | None, size_px: tuple[int, int] | None = Non
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", Image.DecompressionBombWarning)
         try:
-            return Image.open(io.BytesIO(bytes(data)), formats=None if format is None else [_PIL_FORMATS[format]])
+            return Image.open(
+                io.BytesIO(bytes(data)), formats=None if format is None else [_PIL_FORMATS[format]]
+            )
         except Image.DecompressionBombError:
             raise ValueError(f"declares more than {Image.MAX_IMAGE_PIXELS} pixels") from None
         except UnidentifiedImageError:
             what = f"a {_PIL_FORMATS[format]} picture" if format else "a picture"
-            raise ValueError(f"is not {what} ({len(data)} bytes starting {bytes(data[:8])!r})") from None
+            raise ValueError(
+                f"is not {what} ({len(data)} bytes starting {bytes(data[:8])!r})"
+            ) from None
         except Exception as err:  # noqa: BLE001 - a damaged header: SyntaxError, OSError, struct.error, ...
             raise ValueError(f"has a damaged header ({_one_line(err)})") from None
 

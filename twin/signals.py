@@ -1,6 +1,6 @@
-"""SIGTERM and SIGHUP (CI cancelling a job, `timeout`, `docker stop`, a closed terminal) end a command
-the way Ctrl-C does: the stack unwinds, recordings are finalized as `interrupted`, the summary is
-printed, and the exit code is 128 + the signal's number."""
+"""SIGTERM and SIGHUP (CI cancelling a job, `timeout`, `docker stop`, a closed terminal) end a
+command the way Ctrl-C does: the stack unwinds, recordings are finalized as `interrupted`, the
+summary is printed, and the exit code is 128 + the signal's number."""
 
 from __future__ import annotations
 

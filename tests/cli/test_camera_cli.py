@@ -1,4 +1,5 @@
-"""--camera for twin teleop and twin serve: their recordings hold the pictures, and replay them exactly."""
+"""--camera for twin teleop and twin serve: their recordings hold the pictures, and replay them
+exactly."""
 
 from __future__ import annotations
 
@@ -11,8 +12,23 @@ from twin.cli.main import main
 
 def test_teleop_records_the_cameras_pictures(tmp_path, capsys):
     path = tmp_path / "teleop.mcap"
-    code = main(["teleop", "--keys", "d*3 wait", "--key-interval", "0.25", "--camera", "wrist", "--camera-size",
-                 "64x48", "--camera-hz", "8", "--record", str(path)])
+    code = main(
+        [
+            "teleop",
+            "--keys",
+            "d*3 wait",
+            "--key-interval",
+            "0.25",
+            "--camera",
+            "wrist",
+            "--camera-size",
+            "64x48",
+            "--camera-hz",
+            "8",
+            "--record",
+            str(path),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     rec = twin.load(path)
     track = rec.cameras["wrist"]
@@ -28,7 +44,9 @@ def test_teleop_records_the_cameras_pictures(tmp_path, capsys):
 @pytest.mark.slow
 def test_serve_records_the_cameras_pictures(tmp_path):
     path = tmp_path / "remote.mcap"
-    with ServerProcess("--stepped", "--camera", "overhead", "--camera-size", "80x60", "--record", str(path)) as server:
+    with ServerProcess(
+        "--stepped", "--camera", "overhead", "--camera-size", "80x60", "--record", str(path)
+    ) as server:
         sim = server.client().require("sim")
         sim.setStepping(True)
         sim.startSimulation()

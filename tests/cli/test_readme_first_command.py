@@ -1,6 +1,6 @@
-"""The README's first command, as a new user runs it: in a folder with no runs/ yet (a fresh clone has
-none), it records a pick-and-place session to both files. runs/ is the one folder twin makes when it
-is missing; any other folder named for an output must exist."""
+"""The README's first command, as a new user runs it: in a folder with no runs/ yet (a fresh clone
+has none), it records a pick-and-place session to both files. runs/ is the one folder twin makes
+when it is missing; any other folder named for an output must exist."""
 
 from __future__ import annotations
 
@@ -26,8 +26,14 @@ def _readme_main_command() -> list[str]:
 
 
 def _twin(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "twin.cli", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "twin.cli", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
 
 
 def test_the_first_command_records_both_files_where_there_is_no_runs_folder(tmp_path):
@@ -46,8 +52,22 @@ def test_the_first_command_records_both_files_where_there_is_no_runs_folder(tmp_
 
 
 def test_a_sweep_may_write_into_a_missing_runs_folder(tmp_path):
-    done = _twin("sweep", "pick_place", "--scenarios", "2", "--param", "cycles=1", "--vary", "box.x_m=uniform(0.19,0.21)",
-                 "--out", "runs/jitter", "--jobs", "1", "--quiet", cwd=tmp_path)
+    done = _twin(
+        "sweep",
+        "pick_place",
+        "--scenarios",
+        "2",
+        "--param",
+        "cycles=1",
+        "--vary",
+        "box.x_m=uniform(0.19,0.21)",
+        "--out",
+        "runs/jitter",
+        "--jobs",
+        "1",
+        "--quiet",
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "runs" / "jitter" / "summary.json").is_file()
 
@@ -55,8 +75,12 @@ def test_a_sweep_may_write_into_a_missing_runs_folder(tmp_path):
 def test_any_other_missing_folder_is_still_an_error(tmp_path):
     done = _twin("run", "pick_place", "--cycles", "1", "--record", "elsewhere/x.mcap", cwd=tmp_path)
     assert done.returncode == 2
-    assert done.stderr.strip() == ("twin: error: cannot write recording 'elsewhere/x.mcap': folder 'elsewhere' "
-                                   "does not exist; create it first")
+    assert done.stderr.strip() == (
+        "twin: error: cannot write recording 'elsewhere/x.mcap': folder 'elsewhere' "
+        "does not exist; create it first"
+    )
     assert not (tmp_path / "runs").exists() and not (tmp_path / "elsewhere").exists()
-    nested = _twin("run", "pick_place", "--cycles", "1", "--record", "runs/deeper/x.mcap", cwd=tmp_path)
+    nested = _twin(
+        "run", "pick_place", "--cycles", "1", "--record", "runs/deeper/x.mcap", cwd=tmp_path
+    )
     assert nested.returncode == 2 and "folder 'runs/deeper' does not exist" in nested.stderr

@@ -1,5 +1,5 @@
-"""`twin view --web` in a real browser: Debian's chromium (headless, driven by Playwright) opens the URL
-the command prints and shows the recording, its camera pictures beside the 3D view, not Rerun's
+"""`twin view --web` in a real browser: Debian's chromium (headless, driven by Playwright) opens the
+URL the command prints and shows the recording, its camera pictures beside the 3D view, not Rerun's
 welcome page (which the same server shows without the URL's ?url=)."""
 
 from __future__ import annotations
@@ -20,18 +20,26 @@ from support.camera_run import record_camera_run
 
 pytestmark = [
     pytest.mark.slow,  # the web viewer's WASM takes 40-70 s to load here
-    pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Debian's chromium (tools/setup_test_system.sh)"),
+    pytest.mark.skipif(
+        shutil.which("chromium") is None,
+        reason="needs Debian's chromium (tools/setup_test_system.sh)",
+    ),
 ]
 LOAD_TIMEOUT_S = 240
-URL = re.compile(r"serving the web viewer at (http://127\.0\.0\.1:\d+/)(\?url=\S+) \(Ctrl-C to stop\)$")
+URL = re.compile(
+    r"serving the web viewer at (http://127\.0\.0\.1:\d+/)(\?url=\S+) \(Ctrl-C to stop\)$"
+)
 
 
 def _colours(png) -> dict[str, int]:
-    """Pixel counts of the recording's colours: the arm's orange links, the blue box, the joint plots' lines."""
+    """Pixel counts of the recording's colours: the arm's orange links, the blue box, the joint
+    plots' lines."""
     image = np.asarray(Image.open(png).convert("RGB")).astype(int)
     r, g, b = image[..., 0], image[..., 1], image[..., 2]
-    return {"orange": int(((r > 180) & (g > 100) & (g < 200) & (b < 90)).sum()),
-            "blue box": int(((b > 180) & (r < 90) & (g > 90) & (g < 150)).sum())}
+    return {
+        "orange": int(((r > 180) & (g > 100) & (g < 200) & (b < 90)).sum()),
+        "blue box": int(((b > 180) & (r < 90) & (g > 90) & (g < 150)).sum()),
+    }
 
 
 def _shows_recording(colours: dict[str, int]) -> bool:
@@ -40,12 +48,18 @@ def _shows_recording(colours: dict[str, int]) -> bool:
 
 @pytest.fixture
 def web_view(tmp_path):
-    """`twin view CAMERA.rrd --web` as a real process: (its process, the printed URL's page and query)."""
+    """`twin view CAMERA.rrd --web` as a real process: (its process, the printed URL's page and
+    query)."""
     run = record_camera_run(tmp_path)
     env = {**os.environ, "HOME": str(tmp_path), "TMPDIR": str(tmp_path)}
-    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "view", str(run["rrd"]), "--web"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", "view", str(run["rrd"]), "--web"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        env=env,
+    )
     try:
         ready, _, _ = select.select([proc.stdout], [], [], 120)
         line = proc.stdout.readline().strip() if ready else ""
@@ -67,8 +81,10 @@ def test_the_printed_url_opens_the_recording_in_chromium(web_view, tmp_path):
     shots = {"printed": tmp_path / "printed.png", "bare": tmp_path / "bare.png"}
     seen: dict[str, dict[str, int]] = {}
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=[
-            "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])
+        browser = p.chromium.launch(
+            executable_path=shutil.which("chromium"),
+            args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
+        )
         try:
             pages = {}
             for name, url in (("printed", page_url + query), ("bare", page_url)):
@@ -87,5 +103,9 @@ def test_the_printed_url_opens_the_recording_in_chromium(web_view, tmp_path):
                     break
         finally:
             browser.close()
-    assert _shows_recording(seen["printed"]), f"the page never showed the recording: {seen} ({shots['printed']})"
-    assert not _shows_recording(seen["bare"]), f"without ?url= the page is Rerun's welcome page: {seen}"
+    assert _shows_recording(seen["printed"]), (
+        f"the page never showed the recording: {seen} ({shots['printed']})"
+    )
+    assert not _shows_recording(seen["bare"]), (
+        f"without ?url= the page is Rerun's welcome page: {seen}"
+    )

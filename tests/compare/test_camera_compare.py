@@ -27,7 +27,9 @@ def _with_darkened_picture(rec, camera: str, index: int):
 def test_identical_pictures_match_under_every_preset(camera_run):
     rec = twin.load(camera_run["mcap"])
     for preset in ("exact", "tight", "physical", "outcome"):
-        assert compare(rec, twin.load(camera_run["mcap"]), Tolerances.from_preset(preset)).match, preset
+        assert compare(rec, twin.load(camera_run["mcap"]), Tolerances.from_preset(preset)).match, (
+            preset
+        )
 
 
 def test_a_changed_picture_is_the_first_divergence_under_exact_and_tight(camera_run):
@@ -60,7 +62,8 @@ def test_a_missing_picture_differs(camera_run):
     first = compare(golden, candidate, Tolerances.from_preset("exact")).first
     assert first.element == f"overhead #{len(track.data)}" and first.actual == ["missing"]
     assert first.expected == ["picture"]
-    first = compare(candidate, golden, Tolerances.from_preset("exact")).first  # the picture only the candidate has
+    # the picture only the candidate has
+    first = compare(candidate, golden, Tolerances.from_preset("exact")).first
     assert first.expected == ["missing"] and first.actual == ["picture"]
 
 

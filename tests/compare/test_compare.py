@@ -28,8 +28,19 @@ from twin.model.types import Event
 BASE = TwinConfig()
 PARAMS = {"cycles": 1}
 
-FLOAT_COLUMNS = ("joint_q", "joint_qd", "joint_effort", "joint_target", "hold_force_n", "hold_torque_nm", "pad_pose",
-                 "object_poses", "suction_on", "sensed_body", "held_body")
+FLOAT_COLUMNS = (
+    "joint_q",
+    "joint_qd",
+    "joint_effort",
+    "joint_target",
+    "hold_force_n",
+    "hold_torque_nm",
+    "pad_pose",
+    "object_poses",
+    "suction_on",
+    "sensed_body",
+    "held_body",
+)
 
 
 def run(config: TwinConfig = BASE, params: dict = PARAMS):
@@ -68,9 +79,15 @@ def test_same_run_twice_matches_exactly(golden):
 @pytest.mark.parametrize("change", ["link 1 mm", "box 1 mm", "solver iterations"])
 def test_a_small_change_is_caught_no_later_than_it_shows(golden, change):
     config = {
-        "link 1 mm": dataclasses.replace(BASE, profile=dataclasses.replace(BASE.profile, link1_m=0.468)),
-        "box 1 mm": dataclasses.replace(BASE, objects=(SceneObject("box", pos_m=(0.201, 0.7, 0.025)),)),
-        "solver iterations": dataclasses.replace(BASE, engine=EngineParams(num_solver_iterations=40)),
+        "link 1 mm": dataclasses.replace(
+            BASE, profile=dataclasses.replace(BASE.profile, link1_m=0.468)
+        ),
+        "box 1 mm": dataclasses.replace(
+            BASE, objects=(SceneObject("box", pos_m=(0.201, 0.7, 0.025)),)
+        ),
+        "solver iterations": dataclasses.replace(
+            BASE, engine=EngineParams(num_solver_iterations=40)
+        ),
     }[change]
     candidate = run(config)
     shows_at = first_differing_step(golden.frames, candidate.frames)
@@ -109,14 +126,24 @@ def test_outcome_fails_when_the_box_lands_elsewhere(golden):
 
 def test_tolerance_decides_and_the_first_divergence_carries_the_numbers(golden):
     shifted = copy.deepcopy(golden)
-    shifted.frames.joint_q[100:, 1] += 2e-4  # elbow 0.2 mrad off from step 100 on (physical allows 0.25)
+    # elbow 0.2 mrad off from step 100 on (physical allows 0.25)
+    shifted.frames.joint_q[100:, 1] += 2e-4
     assert compare(golden, shifted, Tolerances.from_preset("physical")).match
-    result = compare(golden, shifted, Tolerances.from_preset("physical").with_overrides(["joints.position=1e-4"]))
+    result = compare(
+        golden, shifted, Tolerances.from_preset("physical").with_overrides(["joints.position=1e-4"])
+    )
     first = result.first
-    assert (first.step, first.name, first.element, first.unit) == (100, "joints.position", "MTB_axis2", "rad")
+    assert (first.step, first.name, first.element, first.unit) == (
+        100,
+        "joints.position",
+        "MTB_axis2",
+        "rad",
+    )
     assert first.difference == pytest.approx(2e-4) and first.tolerance == 1e-4
     assert first.t_s == pytest.approx(100 * BASE.dt_ns * 1e-9)
-    assert first.expected == [golden.frames.joint_q[100, 1]] and first.actual == [shifted.frames.joint_q[100, 1]]
+    assert first.expected == [golden.frames.joint_q[100, 1]] and first.actual == [
+        shifted.frames.joint_q[100, 1]
+    ]
 
 
 def test_angles_wrap_and_quaternion_sign_does_not_matter(golden):
@@ -130,8 +157,9 @@ def test_angles_wrap_and_quaternion_sign_does_not_matter(golden):
 def test_a_decimated_golden_compares_on_its_steps(golden):
     every_10th = copy.deepcopy(golden)
     keep = np.r_[np.arange(0, len(golden.frames), 10), len(golden.frames) - 1]
-    every_10th.frames = FrameColumns(**{f.name: getattr(golden.frames, f.name)[keep]
-                                        for f in dataclasses.fields(FrameColumns)})
+    every_10th.frames = FrameColumns(
+        **{f.name: getattr(golden.frames, f.name)[keep] for f in dataclasses.fields(FrameColumns)}
+    )
     result = compare(every_10th, golden)
     assert result.match and result.steps_compared == len(keep)
 
@@ -164,7 +192,9 @@ def test_other_scene_objects_or_time_step_are_not_comparable(golden):
     with pytest.raises(NotComparable, match="scene objects"):
         compare(golden, other)
     other.config = dataclasses.replace(BASE, dt_ns=2_000_000)
-    with pytest.raises(NotComparable, match="time step 2000000 ns differs from the golden's 4166667 ns"):
+    with pytest.raises(
+        NotComparable, match="time step 2000000 ns differs from the golden's 4166667 ns"
+    ):
         compare(golden, other)
 
 
@@ -178,7 +208,10 @@ def test_events_pair_by_kind_and_body_in_order_within_the_window():
     matched, shifted, diffs = match_events(golden, candidate, window_steps=5)
     assert (matched, shifted) == (2, 1)
     assert [(d.kind, d.event_kind, d.expected_step, d.actual_step) for d in diffs] == [
-        ("moved", "release", 50, 80), ("missing", "attach", 90, None), ("extra", "break", None, 99)]
+        ("moved", "release", 50, 80),
+        ("missing", "attach", 90, None),
+        ("extra", "break", None, 99),
+    ]
     assert match_events(golden, candidate, window_steps=40)[0] == 3
 
 
@@ -198,17 +231,26 @@ def test_reports_in_every_format(golden):
     md = render_markdown(result)
     assert md.startswith("# twin diff: MISMATCH") and "step 700" in md and "pad.position" in md
     data = json.loads(render_json(result))
-    assert data["match"] is False and data["first"]["step"] == 700 and data["first"]["field"] == "position"
+    assert (
+        data["match"] is False
+        and data["first"]["step"] == 700
+        and data["first"]["field"] == "position"
+    )
     suite = ET.fromstring(render_junit(result)).find("testsuite")
     failed = [c.get("name") for c in suite.findall("testcase") if c.find("failure") is not None]
     assert failed == ["pad.position"] and suite.get("failures") == "1"
 
 
-@pytest.mark.parametrize(("spec", "expected"), [
-    ("joints.position", "malformed"), ("joints.position=abc", "expected a number >= 0 or inf"),
-    ("joints.pos=1e-3", "unknown field 'joints.pos'"), ("pad.position=-1", "expected a number >= 0"),
-    ("a=b=c", "malformed"),
-])
+@pytest.mark.parametrize(
+    ("spec", "expected"),
+    [
+        ("joints.position", "malformed"),
+        ("joints.position=abc", "expected a number >= 0 or inf"),
+        ("joints.pos=1e-3", "unknown field 'joints.pos'"),
+        ("pad.position=-1", "expected a number >= 0"),
+        ("a=b=c", "malformed"),
+    ],
+)
 def test_malformed_tolerances_name_the_value(spec, expected):
     with pytest.raises(ConfigError, match=expected) as err:
         Tolerances.from_preset("physical").with_overrides([spec])
@@ -224,8 +266,11 @@ def test_tolerance_overrides_by_field_channel_and_inf():
         Tolerances.from_preset("loose")
 
 
-unit_quats = st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4).filter(
-    lambda v: sum(x * x for x in v) > 0.01).map(lambda v: np.array(v) / np.linalg.norm(v))
+unit_quats = (
+    st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4)
+    .filter(lambda v: sum(x * x for x in v) > 0.01)
+    .map(lambda v: np.array(v) / np.linalg.norm(v))
+)
 
 
 @settings(max_examples=60, deadline=None)

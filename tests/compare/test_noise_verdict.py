@@ -1,4 +1,5 @@
-"""The default `noise` verdict and what reports say: full precision, numeric command data, likely causes."""
+"""The default `noise` verdict and what reports say: full precision, numeric command data, likely
+causes."""
 
 from __future__ import annotations
 
@@ -40,13 +41,15 @@ def test_the_floor_comes_from_a_perturbed_run(run):
     assert nudged.config.engine.gravity_m_s2[2] < run.config.engine.gravity_m_s2[2]
     assert nudged.commands == run.commands
     floor = judge(run, run, Tolerances.from_preset(DEFAULT), remade).floor
-    assert max(float(e[-1]) for e in floor.envelopes.values()) > 0  # the nudge moved the run's last bits
+    # the nudge moved the run's last bits
+    assert max(float(e[-1]) for e in floor.envelopes.values()) > 0
 
 
 def test_a_last_bit_difference_prints_in_full_beside_fail(run):
     other = _copy(run)
     k = int(next(i for i, q in enumerate(run.frames.joint_q[:, 0]) if abs(q) > 0.5))
-    other.frames.joint_q[k, 0] = math.nextafter(float(run.frames.joint_q[k, 0]), math.inf)  # one ulp: 1e-16 rad
+    # one ulp: 1e-16 rad
+    other.frames.joint_q[k, 0] = math.nextafter(float(run.frames.joint_q[k, 0]), math.inf)
     result = compare(run, other, Tolerances.from_preset("exact"))
     assert not result.match and result.first.difference > 0
     text = render_text(result)
@@ -55,7 +58,11 @@ def test_a_last_bit_difference_prints_in_full_beside_fail(run):
 
 def test_event_data_compares_numerically_under_tight_and_noise(run):
     other = _copy(run)
-    i = next(k for k, c in enumerate(run.commands) if c.kind == "event" and c.args.get("kind") == "placed")
+    i = next(
+        k
+        for k, c in enumerate(run.commands)
+        if c.kind == "event" and c.args.get("kind") == "placed"
+    )
     c = run.commands[i]
     data = {**c.args["data"], "error_m": c.args["data"]["error_m"] + 1e-12}
     other.commands[i] = Command(c.step, c.kind, {**c.args, "data": data})
@@ -86,7 +93,8 @@ def test_the_likely_cause_acts_on_the_diverging_field(run):
     assert result.first.element == joint
     assert f"joint='{joint}'" in result.likely_cause and "event(" not in result.likely_cause
     other = _copy(run)
-    other.frames.object_poses[k:, 0, 0] += 1e-3  # the box: any joint or suction command may explain it
+    # the box: any joint or suction command may explain it
+    other.frames.object_poses[k:, 0, 0] += 1e-3
     result = compare(run, other, Tolerances.from_preset("tight"))
     assert result.likely_cause and "event(" not in result.likely_cause
 

@@ -16,12 +16,23 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_readme_pandas_example(tmp_path):
     pytest.importorskip("matplotlib")
     page = (ROOT / "docs" / "how-to" / "datasets.md").read_text()
-    code = re.search(r"```python\n(import matplotlib\.pyplot as plt\n.*?)```", page, re.DOTALL).group(1)
-    claimed = re.search(r"<!-- doctest: output -->\n```text.*\n(.*?)\n```", page[page.index(code):]).group(1)
+    code = re.search(
+        r"```python\n(import matplotlib\.pyplot as plt\n.*?)```", page, re.DOTALL
+    ).group(1)
+    claimed = re.search(
+        r"<!-- doctest: output -->\n```text.*\n(.*?)\n```", page[page.index(code) :]
+    ).group(1)
     (tmp_path / "recordings").symlink_to(ROOT / "recordings")
     (tmp_path / "docs" / "img").mkdir(parents=True)
-    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                          env={**os.environ, "MPLBACKEND": "Agg", "HOME": str(tmp_path)}, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "MPLBACKEND": "Agg", "HOME": str(tmp_path)},
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == claimed
     png = (tmp_path / "docs" / "img" / "pick_place_joints.png").read_bytes()

@@ -21,9 +21,12 @@ GOLDEN = str(Path(__file__).resolve().parents[2] / "recordings" / "pick_place_mt
 
 
 def _frame_values(rec) -> np.ndarray:
-    """Every Frame field of every frame as one float64 matrix, in field order (as the table lays them)."""
+    """Every Frame field of every frame as one float64 matrix, in field order (as the table lays
+    them)."""
     n = len(rec.frames)
-    return np.column_stack([getattr(rec.frames, f.name).reshape(n, -1).astype(np.float64) for f in FRAME_FIELDS])
+    return np.column_stack(
+        [getattr(rec.frames, f.name).reshape(n, -1).astype(np.float64) for f in FRAME_FIELDS]
+    )
 
 
 def test_frames_table_has_one_row_per_frame_and_the_frames_values(pick_place_mcap):
@@ -33,7 +36,9 @@ def test_frames_table_has_one_row_per_frame_and_the_frames_values(pick_place_mca
     assert table.num_rows == len(rec.frames)
     names = frame_column_names(["box"])
     assert table.column_names == [*names, "suction.command"]
-    got = np.column_stack([table.column(c).to_numpy(zero_copy_only=False).astype(np.float64) for c in names])
+    got = np.column_stack(
+        [table.column(c).to_numpy(zero_copy_only=False).astype(np.float64) for c in names]
+    )
     assert got.tobytes() == _frame_values(rec).tobytes()
     assert table.column("step").type == "int64" and table.column("suction.on").type == "bool"
     assert table.column("suction.held").type == "int32"
@@ -41,9 +46,19 @@ def test_frames_table_has_one_row_per_frame_and_the_frames_values(pick_place_mca
 
 def test_column_names_carry_units_by_joint_type():
     names = frame_column_names(["box", "pad"])
-    for expected in ("joint.shoulder.position_rad", "joint.z.position_m", "joint.z.velocity_m_s",
-                     "joint.elbow.effort_Nm", "joint.z.effort_N", "joint.wrist.target_rad", "hold.force_z_N",
-                     "hold.torque_x_Nm", "pad.qw", "box.x_m", "object.pad.z_m"):
+    for expected in (
+        "joint.shoulder.position_rad",
+        "joint.z.position_m",
+        "joint.z.velocity_m_s",
+        "joint.elbow.effort_Nm",
+        "joint.z.effort_N",
+        "joint.wrist.target_rad",
+        "hold.force_z_N",
+        "hold.torque_x_Nm",
+        "pad.qw",
+        "box.x_m",
+        "object.pad.z_m",
+    ):
         assert expected in names
     assert len(names) == len(set(names))
 
@@ -65,7 +80,12 @@ def test_suction_command_follows_the_commands(pick_place_mcap):
 def test_suction_command_of_a_key_session(tmp_path, capsys):
     """Keys switch suction through the recording's key map (seed001: `3` on and down, `5` off)."""
     mcap = tmp_path / "keys.mcap"
-    assert twin(capsys, "teleop", "--robot", "seed001", "--keys", "3 wait*2 5 wait", "--record", mcap)[0] == 0
+    assert (
+        twin(capsys, "teleop", "--robot", "seed001", "--keys", "3 wait*2 5 wait", "--record", mcap)[
+            0
+        ]
+        == 0
+    )
     rec = twin_pkg.load(mcap)
     assert {c.kind for c in rec.commands} == {"key"}
     table = rec.to_arrow()
@@ -115,16 +135,22 @@ def test_export_parquet_and_csv_of_a_golden(tmp_path, capsys):
     assert len(rows) == len(rec.frames)
     table = rec.to_arrow()
     assert list(rows[0]) == table.column_names
-    for name in table.column_names:  # every CSV value reads back to the same value (floats: the same doubles)
+    # every CSV value reads back to the same value (floats: the same doubles)
+    for name in table.column_names:
         want = table.column(name).to_pylist()
-        got = [r[name] == "true" if isinstance(w, bool) else type(w)(r[name]) for r, w in zip(rows, want, strict=True)]
+        got = [
+            r[name] == "true" if isinstance(w, bool) else type(w)(r[name])
+            for r, w in zip(rows, want, strict=True)
+        ]
         assert got == want, name
     assert not list(tmp_path.glob("*.partial"))
 
 
 def test_export_parquet_of_a_decimated_run(tmp_path, capsys):
     mcap = tmp_path / "rate4.mcap"
-    assert twin(capsys, "run", "pick_place", "--cycles", "1", "--rate", "4", "--record", mcap)[0] == 0
+    assert (
+        twin(capsys, "run", "pick_place", "--cycles", "1", "--rate", "4", "--record", mcap)[0] == 0
+    )
     rec = twin_pkg.load(mcap)
     out = tmp_path / "rate4.parquet"
     assert twin(capsys, "export", mcap, "--format", "parquet", "-o", out)[0] == 0
@@ -134,29 +160,43 @@ def test_export_parquet_of_a_decimated_run(tmp_path, capsys):
     assert np.all(np.diff(steps)[:-1] == 4) and steps[-1] == rec.frames.step[-1]
     assert table.schema.metadata[b"twin.rate_steps"] == b"4"
     events = tmp_path / "events.csv"
-    assert twin(capsys, "export", mcap, "--format", "csv", "--table", "events", "-o", events)[0] == 0
+    assert (
+        twin(capsys, "export", mcap, "--format", "csv", "--table", "events", "-o", events)[0] == 0
+    )
     with open(events, newline="") as f:
         assert len(list(csv.DictReader(f))) == len(rec.events)
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["--format", "xlsx", "-o", "x.xlsx"], "invalid choice: 'xlsx'"),
-    (["--format", "parquet", "-o", "x.csv"], "should end in .parquet"),
-    (["--format", "csv", "--fps", "30", "-o", "x.csv"], "--fps is for --format lerobot"),
-    (["--format", "parquet", "--verify", "-o", "x.parquet"], "--verify is for --format lerobot"),
-    (["--format", "parquet", "-o", "missing/x.parquet"], "folder 'missing' does not exist"),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--format", "xlsx", "-o", "x.xlsx"], "invalid choice: 'xlsx'"),
+        (["--format", "parquet", "-o", "x.csv"], "should end in .parquet"),
+        (["--format", "csv", "--fps", "30", "-o", "x.csv"], "--fps is for --format lerobot"),
+        (
+            ["--format", "parquet", "--verify", "-o", "x.parquet"],
+            "--verify is for --format lerobot",
+        ),
+        (["--format", "parquet", "-o", "missing/x.parquet"], "folder 'missing' does not exist"),
+    ],
+)
 def test_bad_table_exports_are_one_line_exit_2(tmp_path, capsys, monkeypatch, argv, expected):
     monkeypatch.chdir(tmp_path)
     code, _, err = twin(capsys, "export", GOLDEN, *argv)
-    assert code == 2 and err.count("\n") == 1 and err.startswith("twin: error: ") and expected in err, err
+    assert (
+        code == 2 and err.count("\n") == 1 and err.startswith("twin: error: ") and expected in err
+    ), err
     assert list(tmp_path.iterdir()) == []
 
 
 def test_export_of_two_files_or_a_missing_one_is_refused(tmp_path, capsys):
-    code, _, err = twin(capsys, "export", GOLDEN, GOLDEN, "--format", "parquet", "-o", tmp_path / "x.parquet")
+    code, _, err = twin(
+        capsys, "export", GOLDEN, GOLDEN, "--format", "parquet", "-o", tmp_path / "x.parquet"
+    )
     assert code == 2 and "writes one recording; got 2 files" in err
-    code, _, err = twin(capsys, "export", tmp_path / "nope.mcap", "--format", "csv", "-o", tmp_path / "x.csv")
+    code, _, err = twin(
+        capsys, "export", tmp_path / "nope.mcap", "--format", "csv", "-o", tmp_path / "x.csv"
+    )
     assert code == 2 and err.startswith("twin: error: ") and err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
 

@@ -1,6 +1,6 @@
 """The stored configuration's schema and the JSON and TOML files twin reads: every bad value, every
-nesting depth and every degenerate camera is one ConfigError line, never a TypeError, RecursionError or
-ZeroDivisionError traceback."""
+nesting depth and every degenerate camera is one ConfigError line, never a TypeError, RecursionError
+or ZeroDivisionError traceback."""
 
 from __future__ import annotations
 
@@ -23,14 +23,21 @@ from twin.model.json_values import (
     shown,
 )
 
-SCHEMAS = {"config": C.CONFIG_SCHEMA, "profile": C.PROFILE_SCHEMA, "object": C.OBJECT_SCHEMA,
-           "engine": C.ENGINE_SCHEMA, "suction": C.SUCTION_SCHEMA, "camera": C.CAMERA_SCHEMA}
+SCHEMAS = {
+    "config": C.CONFIG_SCHEMA,
+    "profile": C.PROFILE_SCHEMA,
+    "object": C.OBJECT_SCHEMA,
+    "engine": C.ENGINE_SCHEMA,
+    "suction": C.SUCTION_SCHEMA,
+    "camera": C.CAMERA_SCHEMA,
+}
 WRONG = (7, 1.5, "x", None, True, [7], [[7]], {"a": 1}, [], {})
 
 
 @pytest.mark.parametrize("schema", sorted(SCHEMAS))
 def test_every_field_kind_says_what_it_expects(schema):
-    """expected() hashed a nested schema (a dict) or a list of one: a TypeError while wording the error."""
+    """expected() hashed a nested schema (a dict) or a list of one: a TypeError while wording the
+    error."""
     for name, spec in SCHEMAS[schema].items():
         text = spec.expected()
         assert isinstance(text, str) and text and "kind" not in text, (schema, name, text)
@@ -59,17 +66,27 @@ def test_objects_7_names_the_field_and_what_it_should_be():
     data = {**json.loads(json.dumps(TwinConfig().to_dict())), "objects": 7}
     with pytest.raises(ConfigError) as err:
         TwinConfig.from_dict(data)
-    assert str(err.value) == ("twin.config field objects = 7 is invalid; expected a list of at most 100 JSON "
-                              "objects")
+    assert str(err.value) == (
+        "twin.config field objects = 7 is invalid; expected a list of at most 100 JSON objects"
+    )
 
 
-# -- nesting ------------------------------------------------------------------------------------------
+# -- nesting ---------------------------------------------------------------------------------------
+
 
 def test_nesting_depth_and_all_finite_walk_without_recursion():
     deep = json.loads("[" * 900 + "1.5" + "]" * 900)
     assert nesting_depth(deep, 10_000) == 900 and nesting_depth(deep) == MAX_DEPTH + 1
-    assert nesting_depth(7) == 0 and nesting_depth([]) == 1 and nesting_depth({"a": [1, {"b": []}]}) == 4
-    assert all_finite(deep) and not all_finite([deep, [math.nan]]) and not all_finite({"a": {"b": -math.inf}})
+    assert (
+        nesting_depth(7) == 0
+        and nesting_depth([]) == 1
+        and nesting_depth({"a": [1, {"b": []}]}) == 4
+    )
+    assert (
+        all_finite(deep)
+        and not all_finite([deep, [math.nan]])
+        and not all_finite({"a": {"b": -math.inf}})
+    )
     assert shown(deep) == "(a value nested too deeply to show)" or shown(deep).startswith("[[[")
 
 
@@ -81,13 +98,18 @@ def test_json_and_toml_text_nested_deeper_than_the_limit_is_one_line(depth):
     else:
         with pytest.raises(ConfigError) as err:
             load_json_text(text, "x.json cannot be read")
-        assert str(err.value) == (f"x.json cannot be read: arrays or tables nest more than {MAX_DEPTH} levels "
-                                  f"deep; twin reads at most {MAX_DEPTH}")
+        assert str(err.value) == (
+            f"x.json cannot be read: arrays or tables nest more than {MAX_DEPTH} levels "
+            f"deep; twin reads at most {MAX_DEPTH}"
+        )
     toml = "a = " + "[" * (depth - 1) + "]" * (depth - 1)  # the file itself is a table: one level
     if depth <= MAX_DEPTH:
         assert nesting_depth(load_toml_text(toml, "f")) == depth
     else:
-        with pytest.raises(ConfigError, match=f"y.toml is not valid TOML: arrays or tables nest more than {MAX_DEPTH}"):
+        with pytest.raises(
+            ConfigError,
+            match=f"y.toml is not valid TOML: arrays or tables nest more than {MAX_DEPTH}",
+        ):
             load_toml_text(toml, "y.toml is not valid TOML")
     inline = "a = " + "{b = " * depth + "1" + "}" * depth
     with pytest.raises(ConfigError, match="nest more than"):
@@ -95,7 +117,9 @@ def test_json_and_toml_text_nested_deeper_than_the_limit_is_one_line(depth):
 
 
 def test_malformed_json_and_toml_are_one_line_naming_the_file():
-    with pytest.raises(ConfigError, match=r"^k.json cannot be read: Expecting value: line 1 column 1 \(char 0\)$"):
+    with pytest.raises(
+        ConfigError, match=r"^k.json cannot be read: Expecting value: line 1 column 1 \(char 0\)$"
+    ):
         load_json_text("", "k.json cannot be read")
     with pytest.raises(ConfigError, match=r"^k.json cannot be read: .*"):
         load_json_text(b"\xff\xfe\xfa", "k.json cannot be read")
@@ -109,7 +133,8 @@ DEEP_FILES = {
     "robot.json": '{"urdf": "r.urdf", "x": ' + "[" * 5000 + "]" * 5000 + "}",
     "keys.toml": "[keys]\na = " + "[" * 5000 + "]" * 5000 + "\n",
     "keys.json": '{"keys": {"a": ' + "[" * 5000 + "]" * 5000 + "}}",
-    "keys_900.json": '{"keys": {"a": ' + "[" * 900 + "]" * 900 + "}}",  # parses: refused by the limit
+    # parses: refused by the limit
+    "keys_900.json": '{"keys": {"a": ' + "[" * 900 + "]" * 900 + "}}",
 }
 
 
@@ -117,25 +142,43 @@ DEEP_FILES = {
 def test_deeply_nested_profile_and_key_map_files_are_one_line_exit_2(tmp_path, capsys, name):
     path = tmp_path / name
     path.write_text(DEEP_FILES[name])
-    argv = (["run", "pick_place", "--robot", str(path), "--no-record"] if name.startswith("robot")
-            else ["teleop", "--keymap", str(path), "--keys", "wait"])
+    argv = (
+        ["run", "pick_place", "--robot", str(path), "--no-record"]
+        if name.startswith("robot")
+        else ["teleop", "--keymap", str(path), "--keys", "wait"]
+    )
     assert main(argv) == 2
     _out, err = capsys.readouterr()
     assert "Traceback" not in err and err.count("\n") == 1 and err.startswith("twin: error: "), err
-    assert str(path) in err and f"arrays or tables nest more than {MAX_DEPTH} levels deep" in err, err
+    assert str(path) in err and f"arrays or tables nest more than {MAX_DEPTH} levels deep" in err, (
+        err
+    )
     assert len(err) < 300
 
 
-# -- cameras ----------------------------------------------------------------------------------------------
+# -- cameras ---------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize(("change", "said"), [
-    ({"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 1.0)}, "are 0 m apart"),
-    ({"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 1.0 + 1e-9)}, "m apart; expected a target at least"),
-    ({"up": (0.0, 0.0, 0.0)}, "up [0.0, 0.0, 0.0] is no direction"),
-    ({"up": (1e-300, 0.0, 0.0)}, "is no direction"),
-    ({"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 0.0), "up": (0.0, 0.0, 3.0)}, "is along the view direction"),
-    ({"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 0.0), "up": (0.0, 1e-8, -1.0)}, "is along the view"),
-])
+
+@pytest.mark.parametrize(
+    ("change", "said"),
+    [
+        ({"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 1.0)}, "are 0 m apart"),
+        (
+            {"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 1.0 + 1e-9)},
+            "m apart; expected a target at least",
+        ),
+        ({"up": (0.0, 0.0, 0.0)}, "up [0.0, 0.0, 0.0] is no direction"),
+        ({"up": (1e-300, 0.0, 0.0)}, "is no direction"),
+        (
+            {"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 0.0), "up": (0.0, 0.0, 3.0)},
+            "is along the view direction",
+        ),
+        (
+            {"eye_m": (0.0, 0.0, 1.0), "target_m": (0.0, 0.0, 0.0), "up": (0.0, 1e-8, -1.0)},
+            "is along the view",
+        ),
+    ],
+)
 def test_a_camera_that_cannot_look_anywhere_is_refused(change, said):
     camera = CameraSpec("c", **change)
     with pytest.raises(ConfigError, match="camera 'c': ") as err:
@@ -149,5 +192,9 @@ def test_a_camera_that_cannot_look_anywhere_is_refused(change, said):
 def test_the_built_in_cameras_and_near_degenerate_ones_pass():
     for camera in CAMERAS.values():
         check_camera_view(camera)
-        check_camera_view(CameraSpec("p", mount="pad", eye_m=camera.eye_m, target_m=camera.target_m, up=camera.up))
-    check_camera_view(CameraSpec("c", eye_m=(0.0, 0.0, 1.0), target_m=(0.0, 0.0, 0.0), up=(0.0, 1e-3, 1.0)))
+        check_camera_view(
+            CameraSpec("p", mount="pad", eye_m=camera.eye_m, target_m=camera.target_m, up=camera.up)
+        )
+    check_camera_view(
+        CameraSpec("c", eye_m=(0.0, 0.0, 1.0), target_m=(0.0, 0.0, 0.0), up=(0.0, 1e-3, 1.0))
+    )

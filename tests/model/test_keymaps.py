@@ -1,4 +1,5 @@
-"""Key maps: the seeds' bindings act as the reports describe, user files are checked entry by entry."""
+"""Key maps: the seeds' bindings act as the reports describe, user files are checked entry by
+entry."""
 
 import json
 import math
@@ -54,7 +55,8 @@ def _positions_after(profile: str, keys: list[str]) -> tuple[tuple[float, ...], 
 def test_seed000_keys_do_what_report_000_s_lua_does():
     """Its sysCall_actuation: angle1/angle2/d from 0, joints set at once (sim.setJointPosition)."""
     q, t = _positions_after("seed000", ["d", "d", "a"])
-    assert q[0] == pytest.approx(DEG) and t[0] == pytest.approx(DEG) and q[1] == 0.0  # a jump, no motion
+    # a jump, no motion
+    assert q[0] == pytest.approx(DEG) and t[0] == pytest.approx(DEG) and q[1] == 0.0
     q, _ = _positions_after("seed000", ["e", "q", "q"])
     assert q[1] == pytest.approx(-DEG) and q[0] == 0.0
     q, _ = _positions_after("seed000", ["5"])
@@ -70,7 +72,8 @@ def test_seed000_keys_do_what_report_000_s_lua_does():
 
 
 def test_seed001_arrows_do_what_report_001_s_lua_does():
-    """deg3 = deg2 - deg1 after left/right, deg1 - deg2 after up/down: the pad does not keep its heading."""
+    """deg3 = deg2 - deg1 after left/right, deg1 - deg2 after up/down: the pad does not keep its
+    heading."""
     t, _ = _targets_after("seed001", ["left", "left", "up"])
     shoulder, elbow, _z, wrist = t
     assert (shoulder, elbow, wrist) == pytest.approx((2 * DEG, DEG, DEG))  # deg3 = deg1 - deg2
@@ -91,10 +94,11 @@ def test_mtb_map_lowers_and_raises_in_each_scene_s_own_z(name):
 
 
 def test_seed000_keys_take_hold_when_the_stop_sets_the_pad_into_the_box():
-    """Report 000's keys as its Lua does them: 5 sets joint3 to its stop (0.084, 2.4 cm below the loop's
-    0.06 on the box: the pad's sensor starts inside the box) and 8 switches suction on with a lift. With
-    suction on up high, 5 takes hold (the sensor sees the box it starts in, as CoppeliaSim's does) and
-    8 lifts the box; 5 before 8 leaves the box where it is (suction comes on only as the pad lifts)."""
+    """Report 000's keys as its Lua does them: 5 sets joint3 to its stop (0.084, 2.4 cm below the
+    loop's 0.06 on the box: the pad's sensor starts inside the box) and 8 switches suction on with a
+    lift. With suction on up high, 5 takes hold (the sensor sees the box it starts in, as
+    CoppeliaSim's does) and 8 lifts the box; 5 before 8 leaves the box where it is (suction comes on
+    only as the pad lifts)."""
     p = PROFILES["seed000"]
     for keys, held in (("d*47 q*126 8 5 8", 0), ("d*47 q*126 5 8", -1)):
         twin = Twin(TwinConfig(profile=p, keymap=keymap_for(p)))
@@ -105,7 +109,8 @@ def test_seed000_keys_take_hold_when_the_stop_sets_the_pad_into_the_box():
             assert twin.suction_pad.held == held, keys
             box = twin.object_pose("box")
             assert math.dist(box[:2], (0.2, 0.7)) < 0.002
-            assert (box[2] > 0.1) if held == 0 else abs(box[2] - 0.025) < 1e-3  # lifted with the pad, or left
+            # lifted with the pad, or left
+            assert (box[2] > 0.1) if held == 0 else abs(box[2] - 0.025) < 1e-3
         finally:
             twin.close()
 
@@ -119,17 +124,36 @@ def test_quit_keys_never_steal_a_bound_key():
 
 
 def test_parse_keys_tokens_and_repeats():
-    assert parse_keys("d*3 up  x * **2 wait*2 esc") == ["d", "d", "d", "up", "x", "*", "*", "*", "wait", "wait", "esc"]
+    assert parse_keys("d*3 up  x * **2 wait*2 esc") == [
+        "d",
+        "d",
+        "d",
+        "up",
+        "x",
+        "*",
+        "*",
+        "*",
+        "wait",
+        "wait",
+        "esc",
+    ]
     assert parse_keys("") == []
-    for bad, shown in (("dd", "'dd'"), ("up*0", "*1 to *100000"), ("d*100001", "*1 to *100000"), ("Up", "'Up'")):
+    for bad, shown in (
+        ("dd", "'dd'"),
+        ("up*0", "*1 to *100000"),
+        ("d*100001", "*1 to *100000"),
+        ("Up", "'Up'"),
+    ):
         with pytest.raises(ConfigError, match=r".*" + shown.replace("*", r"\*")):
             parse_keys(bad)
 
 
 def test_user_keymap_toml_with_degrees_and_extends(tmp_path):
     path = tmp_path / "mine.toml"
-    path.write_text('extends = "seed000"\n[keys]\nw = [["jog", "elbow", "2.5deg"]]\n'
-                    'x = [["target", "MTB_axis3", 0.1], ["signal", "lamp", 3]]\nd = ["jog", "shoulder", 0.1]\n')
+    path.write_text(
+        'extends = "seed000"\n[keys]\nw = [["jog", "elbow", "2.5deg"]]\n'
+        'x = [["target", "MTB_axis3", 0.1], ["signal", "lamp", 3]]\nd = ["jog", "shoulder", 0.1]\n'
+    )
     keymap = load_keymap(path, PROFILES["mtb"])
     assert keymap["w"] == [["jog", "elbow", math.radians(2.5)]]
     assert keymap["x"] == [["target", "z", 0.1], ["signal", "lamp", 3]]
@@ -139,9 +163,13 @@ def test_user_keymap_toml_with_degrees_and_extends(tmp_path):
 
 def test_user_keymap_json(tmp_path):
     path = tmp_path / "mine.json"
-    path.write_text(json.dumps({"keys": {"space": [["suction", 1]], "left": [["jog_keep_heading", "AB", 0.2]]}}))
+    path.write_text(
+        json.dumps({"keys": {"space": [["suction", 1]], "left": [["jog_keep_heading", "AB", 0.2]]}})
+    )
     assert load_keymap(path, PROFILES["seed002"]) == {
-        "left": [["jog_keep_heading", "shoulder", 0.2]], "space": [["suction", 1]]}
+        "left": [["jog_keep_heading", "shoulder", 0.2]],
+        "space": [["suction", 1]],
+    }
 
 
 BAD_ENTRIES = [
@@ -154,9 +182,9 @@ BAD_ENTRIES = [
     ('[keys]\nk = [["suction", 2]]', "suction value 2"),
     ('[keys]\nk = [["signal", "lamp", 1.5]]', "signal value 1.5"),
     ('[keys]\nesc = [["suction", 1]]', "key 'esc' is not a key name"),
-    ('[keys]\nk = []', "non-empty list of actions"),
+    ("[keys]\nk = []", "non-empty list of actions"),
     ('[keys]\nk = [["jog", "elbow", 1]', "cannot be read"),
-    ('keys = 3', "expected a table `keys`"),
+    ("keys = 3", "expected a table `keys`"),
     ('extends = "robot9"\n[keys]\nk = [["suction", 1]]', "extends 'robot9' is unknown"),
     ('colour = 1\n[keys]\nk = [["suction", 1]]', "unknown entries ['colour']"),
 ]
@@ -175,13 +203,47 @@ def test_bad_keymap_file_on_the_command_line_exits_2_and_records_nothing(tmp_pat
     path = tmp_path / "bad.toml"
     path.write_text('[keys]\nk = [["jog", "knee", 1]]\n')
     rec = tmp_path / "run.mcap"
-    out = subprocess.run([sys.executable, "-m", "twin.cli", "teleop", "--keymap", str(path), "--keys", "k", "--record",
-                          str(rec)], check=False, capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "teleop",
+            "--keymap",
+            str(path),
+            "--keys",
+            "k",
+            "--record",
+            str(rec),
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2
-    assert out.stderr.count("\n") == 1 and "unknown joint 'knee'" in out.stderr and "Traceback" not in out.stderr
+    assert (
+        out.stderr.count("\n") == 1
+        and "unknown joint 'knee'" in out.stderr
+        and "Traceback" not in out.stderr
+    )
     assert not rec.exists()
-    missing = subprocess.run([sys.executable, "-m", "twin.cli", "teleop", "--keymap", str(tmp_path / "no.toml"),
-                              "--keys", "k"], check=False, capture_output=True, text=True, timeout=60)
+    missing = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "teleop",
+            "--keymap",
+            str(tmp_path / "no.toml"),
+            "--keys",
+            "k",
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert missing.returncode == 2 and "does not exist" in missing.stderr
 
 
@@ -193,7 +255,9 @@ def test_window_key_events_count_each_press_once():
     assert decode_key_events({a: rel}, down) == []  # its release is not a second press
     assert decode_key_events({a: rel}, down) == ["a"]  # a quick tap seen only as released
     assert decode_key_events({a: trig | rel}, down) == ["a"]
-    assert decode_key_events({pb.B3G_LEFT_ARROW: trig, pb.B3G_SHIFT: is_down, ord("d"): trig}, down) == ["D", "left"]
+    assert decode_key_events(
+        {pb.B3G_LEFT_ARROW: trig, pb.B3G_SHIFT: is_down, ord("d"): trig}, down
+    ) == ["D", "left"]
     assert decode_key_events({27: trig, pb.B3G_F1 + 1: trig, 7: trig}, down) == ["esc", "f2"]
 
 
@@ -202,5 +266,7 @@ def test_readme_example_keymap_loads(tmp_path):
     path = tmp_path / "example.toml"
     path.write_text(re.search(r"```toml\n(.*?)```", readme, re.DOTALL).group(1))
     keymap = load_keymap(path, PROFILES["mtb"])
-    assert keymap["w"] == [["jog", "elbow", math.radians(2)]] and keymap["n"] == [["signal", "lamp", 1]]
+    assert keymap["w"] == [["jog", "elbow", math.radians(2)]] and keymap["n"] == [
+        ["signal", "lamp", 1]
+    ]
     assert keymap["left"] == [["jog_keep_heading", "shoulder", math.radians(1)]] and "g" in keymap

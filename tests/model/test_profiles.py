@@ -1,4 +1,5 @@
-"""Robot profiles: every variant's joint names resolve; each built-in URDF loads with its real dynamics."""
+"""Robot profiles: every variant's joint names resolve; each built-in URDF loads with its real
+dynamics."""
 
 from __future__ import annotations
 
@@ -73,7 +74,8 @@ def test_malformed_profile_dict_raises_config_error():
 
 
 def _urdf_links(text: str) -> dict[str, dict]:
-    """Mass, diagonal inertia and inertial origin of every link, read straight from the URDF text."""
+    """Mass, diagonal inertia and inertial origin of every link, read straight from the URDF
+    text."""
     out = {}
     for link in ET.fromstring(text).iter("link"):
         inertial = link.find("inertial")
@@ -103,7 +105,8 @@ def test_urdf_loads_with_its_real_masses_and_inertias(profile_name):
         assert world.urdf_text == urdf_from_profile(profile)
         expected = _urdf_links(world.urdf_text)
         loaded = _loaded_links(world)
-        assert sorted(loaded) == sorted(n for n in expected if n != "MTB_base")  # the fixed base is not simulated
+        # the fixed base is not simulated
+        assert sorted(loaded) == sorted(n for n in expected if n != "MTB_base")
         for link, info in loaded.items():
             mass, inertia, origin = info[0], info[2], info[3]
             assert mass == pytest.approx(expected[link]["mass"], rel=1e-12), link
@@ -115,7 +118,8 @@ def test_urdf_loads_with_its_real_masses_and_inertias(profile_name):
 
 
 def test_without_the_inertia_flag_pybullet_would_invent_inertias(tmp_path):
-    """Guards the test above: PyBullet's default load replaces the URDF's inertias, so it can fail."""
+    """Guards the test above: PyBullet's default load replaces the URDF's inertias, so it can
+    fail."""
     profile = PROFILES["mtb"]
     path = tmp_path / "mtb.urdf"
     path.write_text(urdf_from_profile(profile))
@@ -150,8 +154,12 @@ def test_urdf_joints_carry_the_profile_names_limits_and_link_lengths(profile_nam
             assert (float(limit.get("lower")), float(limit.get("upper"))) == (lo, hi)
     axes = [joint.find("axis").get("xyz") for joint in joints]
     signs = profile.axis_signs
-    assert axes == [f"0 0 {'1' if signs[0] > 0 else '-1'}", f"0 0 {'1' if signs[1] > 0 else '-1'}",
-                    f"0 0 {'-1' if signs[2] > 0 else '1'}", f"0 0 {'1' if signs[3] > 0 else '-1'}"]
+    assert axes == [
+        f"0 0 {'1' if signs[0] > 0 else '-1'}",
+        f"0 0 {'1' if signs[1] > 0 else '-1'}",
+        f"0 0 {'-1' if signs[2] > 0 else '1'}",
+        f"0 0 {'1' if signs[3] > 0 else '-1'}",
+    ]
     elbow_xyz = [float(v) for v in joints[1].find("origin").get("xyz").split()]
     z_xyz = [float(v) for v in joints[2].find("origin").get("xyz").split()]
     assert math.hypot(*elbow_xyz[:2]) == profile.link1_m
@@ -161,8 +169,11 @@ def test_urdf_joints_carry_the_profile_names_limits_and_link_lengths(profile_nam
 def test_the_seed_profiles_carry_the_reports_link_lengths():
     lengths = {name: (p.link1_m, p.link2_m) for name, p in PROFILES.items()}
     assert lengths == {
-        "mtb": (0.467, 0.4005), "seed000": (0.8, 0.8), "seed001": (0.467, 0.401),
-        "seed002": (0.5, 0.5), "seed003": (0.468, 0.4),
+        "mtb": (0.467, 0.4005),
+        "seed000": (0.8, 0.8),
+        "seed001": (0.467, 0.401),
+        "seed002": (0.5, 0.5),
+        "seed003": (0.468, 0.4),
     }
     assert PROFILES["seed003"].suction_signals[0] == "suctionPad"
 
@@ -178,12 +189,20 @@ def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
     try:
         w = twin._world  # the engine, looked at directly (white-box)
         z_lo, z_hi = twin.profile.joint_limits()[2]
-        for q in [(0.3, -1.1, z_lo + 0.25 * (z_hi - z_lo), 0.7), (-2.5, 2.0, z_hi, -3.0), (1.9, 0.4, z_lo, 2.2)]:
+        for q in [
+            (0.3, -1.1, z_lo + 0.25 * (z_hi - z_lo), 0.7),
+            (-2.5, 2.0, z_hi, -3.0),
+            (1.9, 0.4, z_lo, 2.2),
+        ]:
             for joint, value in enumerate(q):
                 twin.set_joint_position(joint, value)
             fk = kinematics.fk(twin.profile, q)
-            pos, orn = pb.getLinkState(w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client)[4:6]
-            assert pos == pytest.approx((fk.x_m, fk.y_m, fk.z_m + twin.profile.pad_length_m), abs=1e-6)
+            pos, orn = pb.getLinkState(
+                w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client
+            )[4:6]
+            assert pos == pytest.approx(
+                (fk.x_m, fk.y_m, fk.z_m + twin.profile.pad_length_m), abs=1e-6
+            )
             yaw = pb.getEulerFromQuaternion(orn)[2]
             assert abs(kinematics.wrap_rad(yaw - fk.heading_rad)) < 1e-6
             assert twin.pad_position() == pytest.approx((fk.x_m, fk.y_m, fk.z_m), abs=1e-12)
@@ -194,7 +213,8 @@ def test_the_simulated_pad_sits_where_the_kinematics_put_it(profile_name):
 def test_a_profiles_own_joint_names_win_over_other_variants_aliases():
     from dataclasses import replace
 
-    # a user robot whose Z joint is called joint4 and its wrist joint3 (seed000's names for wrist and Z)
+    # a user robot whose Z joint is called joint4 and its wrist joint3 (seed000's names for wrist
+    # and Z)
     swapped = replace(PROFILES["mtb"], name="user", joint_names=("s", "e", "joint4", "joint3"))
     assert swapped.joint_index("joint3") == 3 and swapped.joint_index("/joint4") == 2
     assert swapped.joint_index("MTB_axis1") == 0  # other variants' aliases still resolve

@@ -22,7 +22,9 @@ from support.cli import TWIN
 
 
 def _twin(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([*TWIN, *args], capture_output=True, text=True, timeout=timeout, cwd=cwd, check=False)
+    return subprocess.run(
+        [*TWIN, *args], capture_output=True, text=True, timeout=timeout, cwd=cwd, check=False
+    )
 
 
 def _one_line_error(done: subprocess.CompletedProcess, *words: str) -> None:
@@ -46,13 +48,18 @@ def test_view_refuses_to_convert_onto_its_source_also_through_a_hard_link(golden
     _one_line_error(_twin("view", str(source), "--rrd", str(source)), "should end in .rrd")
     link = tmp_path / "link.rrd"
     os.link(source, link)
-    _one_line_error(_twin("view", str(source), "--rrd", str(link)), "would overwrite its input", "same file")
+    _one_line_error(
+        _twin("view", str(source), "--rrd", str(link)), "would overwrite its input", "same file"
+    )
     assert source.read_bytes() == before
 
 
 def test_an_explicit_missing_folder_is_an_error_before_any_work(tmp_path):
     missing = tmp_path / "no" / "such"
-    for args in (["--record", str(missing / "x.mcap")], ["--no-record", "--rrd", str(missing / "x.rrd")]):
+    for args in (
+        ["--record", str(missing / "x.mcap")],
+        ["--no-record", "--rrd", str(missing / "x.rrd")],
+    ):
         done = _twin("run", "pick_place", *args)
         _one_line_error(done, str(missing))
         assert done.stdout == ""  # nothing ran
@@ -71,8 +78,13 @@ def test_the_default_folder_is_still_created(tmp_path):
 def _start_endless(tmp_path: Path, *record: str) -> subprocess.Popen:
     task = tmp_path / "endless.py"
     task.write_text(ENDLESS)
-    proc = subprocess.Popen([*TWIN, "run", str(task), *record], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [*TWIN, "run", str(task), *record],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     for line in proc.stdout:
         if line.startswith("t_s=") and float(line[4:]) >= 3.0:
             break
@@ -92,7 +104,11 @@ def test_a_killed_re_record_leaves_the_old_file_and_a_partial_file_recover_finds
     _kill_group(_start_endless(tmp_path, "--record", str(target), "--rrd", str(tmp_path / "g.rrd")))
     assert target.read_bytes() == before  # the golden is untouched
     partial = tmp_path / "g.mcap.partial"
-    assert partial.is_file() and (tmp_path / "g.rrd.partial").is_file() and not (tmp_path / "g.rrd").exists()
+    assert (
+        partial.is_file()
+        and (tmp_path / "g.rrd.partial").is_file()
+        and not (tmp_path / "g.rrd").exists()
+    )
     # g.mcap exists: recover needs to be told where to write
     _one_line_error(_twin("recover", str(target)), "-o")
     done = _twin("recover", str(partial), "-o", str(tmp_path / "fixed.mcap"))
@@ -120,9 +136,16 @@ def test_recover_checks_its_output_path(golden, tmp_path):
     shutil.copy(golden, source)
     os.link(source, tmp_path / "link.mcap")
     before = source.read_bytes()
-    _one_line_error(_twin("recover", str(source), "-o", str(tmp_path / "link.mcap")), "would overwrite its input")
-    _one_line_error(_twin("recover", str(source), "-o", str(tmp_path / "none" / "x.mcap")), "does not exist")
-    _one_line_error(_twin("recover", str(source), "-o", str(tmp_path / "x.rrd")), "should end in .mcap")
+    _one_line_error(
+        _twin("recover", str(source), "-o", str(tmp_path / "link.mcap")),
+        "would overwrite its input",
+    )
+    _one_line_error(
+        _twin("recover", str(source), "-o", str(tmp_path / "none" / "x.mcap")), "does not exist"
+    )
+    _one_line_error(
+        _twin("recover", str(source), "-o", str(tmp_path / "x.rrd")), "should end in .mcap"
+    )
     assert source.read_bytes() == before
     assert not (tmp_path / "none").exists()
 

@@ -55,7 +55,10 @@ def test_event_data_marshal_cannot_carry_still_arrives(tmp_path):
 def test_a_writer_that_cannot_start_fails_at_once_in_one_line(tmp_path):
     (tmp_path / "a_file").write_text("not a folder")
     impossible = tmp_path / "a_file" / "x.mcap"
-    with pytest.raises(RecordingError) as err, open_recorders(TwinConfig(), RUN, mcap_path=impossible):
+    with (
+        pytest.raises(RecordingError) as err,
+        open_recorders(TwinConfig(), RUN, mcap_path=impossible),
+    ):
         pytest.fail("the block must not run when the recorder cannot start")
     assert "a_file" in str(err.value) and "\n" not in str(err.value)
 
@@ -74,10 +77,13 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
             twin.wait(5.0)
             os.kill(os.getpid(), signal.SIGKILL)
     """)
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
     assert done.returncode == -signal.SIGKILL, done.stderr
     partial = partial_path(path)  # the file is renamed to path only when finalized
-    _wait_until_settled(partial)  # the orphaned recorder writes what it got once it sees the pipe close
+    # the orphaned recorder writes what it got once it sees the pipe close
+    _wait_until_settled(partial)
     assert not path.exists()
     kept = scan(partial, strict=False)
     assert not kept.complete and S.META_FINALIZED not in kept.metadata
@@ -88,7 +94,8 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
 
 
 def twin_seconds(_path) -> float:
-    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run shows."""
+    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run
+    shows."""
     twin = Twin()
     twin.move_to(0.3, 0.3)
     twin.wait(5.0)
@@ -106,16 +113,19 @@ def _wait_until_settled(path, timeout_s: float = 10.0) -> None:
 
 
 def test_a_writer_error_mid_run_is_one_line_and_keeps_what_came_before(tmp_path):
-    """A full disk, for real: the recorder may write only so many bytes (RLIMIT_FSIZE), then gets EFBIG."""
+    """A full disk, for real: the recorder may write only so many bytes (RLIMIT_FSIZE), then gets
+    EFBIG."""
     path = tmp_path / "full.mcap"
     script = textwrap.dedent(f"""
         import resource, signal, sys
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit: EFBIG, no signal
         resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, resource.RLIM_INFINITY))
         from twin.cli import main
         sys.exit(main(["run", "pick_place", "--cycles", "4", "--record", {str(path)!r}]))
     """)
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False
+    )
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
     assert "recording stopped by a writer error" in done.stderr
@@ -139,5 +149,7 @@ def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
     path = tmp_path / "keep.mcap"
     path.write_bytes(b"an earlier recording")
     with pytest.raises(RecordingError, match="no_such_mesh.stl"):
-        McapRecorder(path, TwinConfig(), RUN, urdf="<robot/>", meshes=[tmp_path / "no_such_mesh.stl"])
+        McapRecorder(
+            path, TwinConfig(), RUN, urdf="<robot/>", meshes=[tmp_path / "no_such_mesh.stl"]
+        )
     assert path.read_bytes() == b"an earlier recording"

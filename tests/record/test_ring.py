@@ -1,5 +1,6 @@
-"""The ring of rows the twin shares with its recorder processes: rows come back as they went in, across
-the ring's end, and a recorder that falls behind makes the twin wait rather than lose or overwrite rows."""
+"""The ring of rows the twin shares with its recorder processes: rows come back as they went in,
+across the ring's end, and a recorder that falls behind makes the twin wait rather than lose or
+overwrite rows."""
 
 from __future__ import annotations
 
@@ -26,7 +27,8 @@ def test_rows_come_back_in_order_across_the_rings_end():
     twin.close()
     assert ring.publish(8) == [0]
     runs = ring.runs(3, 8)
-    assert [rows.count(run) for run in runs] == [2, 3]  # rows 3-4 at the ring's end, 5-7 from its start
+    # rows 3-4 at the ring's end, 5-7 from its start
+    assert [rows.count(run) for run in runs] == [2, 3]
     steps = np.concatenate([rows.records(run)["step"] for run in runs])
     assert steps.tolist() == [f.step for f in frames[3:8]]
     assert rows.frame(runs[1], 2) == frames[7]
@@ -42,8 +44,9 @@ def test_a_run_longer_than_the_ring_makes_the_same_bytes_as_the_in_process_write
 
 
 def test_a_recorder_behind_the_twin_is_woken_and_waited_for(tmp_path, monkeypatch):
-    """A recorder whose timer wakes it every 0.3 s would let the twin run ~1,000 frames ahead: the twin
-    wakes it instead (once half its slack is used, and when it must wait), and nothing is lost."""
+    """A recorder whose timer wakes it every 0.3 s would let the twin run ~1,000 frames ahead: the
+    twin wakes it instead (once half its slack is used, and when it must wait), and nothing is
+    lost."""
     monkeypatch.setattr(process, "POLL_S", 0.3)  # the recorders are forked: they see it
     monkeypatch.setattr(process, "IDLE_POLL_S", 0.3)
     made = []

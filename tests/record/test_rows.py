@@ -38,8 +38,9 @@ def test_rows_give_back_every_frame_and_the_columns_bit_for_bit(n_objects):
     for copy in (True, False):
         columns = rows.columns(bytes(buf), copy=copy)
         if expected is not None:
-            assert FrameColumns(**{name: np.ascontiguousarray(getattr(columns, name)) for name in Frame._fields}
-                                ).equals(expected)
+            assert FrameColumns(
+                **{name: np.ascontiguousarray(getattr(columns, name)) for name in Frame._fields}
+            ).equals(expected)
         assert columns.object_poses.shape == (5, n_objects, 7)
 
 
@@ -48,4 +49,6 @@ def test_a_sink_without_on_rows_gets_each_frame_in_order():
     frames = [_frame(i, 1) for i in range(3)]
     collector = FrameCollector()
     Sink.on_rows(collector, rows, b"".join(rows.pack(f) for f in frames))
-    assert [f.step for f in collector.frames] == [0, 1, 2] and repr(collector.frames) == repr(frames)
+    assert [f.step for f in collector.frames] == [0, 1, 2] and repr(collector.frames) == repr(
+        frames
+    )

@@ -44,30 +44,53 @@ def test_simx_start_gives_minus_one_when_no_server_answers_within_its_timeout():
 
 def test_the_legacy_calls_and_return_codes(cid, server):
     assert vrep.simxGetConnectionId(cid) == cid
-    assert vrep.simxAddStatusbarMessage(cid, "legacy hello", vrep.simx_opmode_oneshot) == vrep.simx_return_ok
+    assert (
+        vrep.simxAddStatusbarMessage(cid, "legacy hello", vrep.simx_opmode_oneshot)
+        == vrep.simx_return_ok
+    )
     server.wait_for(r"\[info\] client \d+: legacy hello")
     rc, shoulder = vrep.simxGetObjectHandle(cid, "Revolute_joint", WAIT)
     assert rc == vrep.simx_return_ok and shoulder == 11
     rc, elbow = vrep.simxGetObjectHandle(cid, "Revolute_joint1", WAIT)
     assert rc == vrep.simx_return_ok and elbow == 12
-    assert vrep.simxGetObjectHandle(cid, "no_such_joint", WAIT) == (vrep.simx_return_remote_error_flag, 0)
+    assert vrep.simxGetObjectHandle(cid, "no_such_joint", WAIT) == (
+        vrep.simx_return_remote_error_flag,
+        0,
+    )
     assert vrep.simxGetIntegerSignal(cid, "pad_switch", vrep.simx_opmode_streaming) == (
-        vrep.simx_return_novalue_flag, 0)
+        vrep.simx_return_novalue_flag,
+        0,
+    )
     assert vrep.simxSetIntegerSignal(cid, "pad_switch", 1, WAIT) == vrep.simx_return_ok
-    assert vrep.simxGetIntegerSignal(cid, "pad_switch", vrep.simx_opmode_buffer) == (vrep.simx_return_ok, 1)
+    assert vrep.simxGetIntegerSignal(cid, "pad_switch", vrep.simx_opmode_buffer) == (
+        vrep.simx_return_ok,
+        1,
+    )
     assert vrep.simxSetJointPosition(cid, elbow, 0.25, WAIT) == vrep.simx_return_ok
-    assert vrep.simxGetJointPosition(cid, elbow, WAIT) == (vrep.simx_return_ok, pytest.approx(0.25, abs=1e-12))
+    assert vrep.simxGetJointPosition(cid, elbow, WAIT) == (
+        vrep.simx_return_ok,
+        pytest.approx(0.25, abs=1e-12),
+    )
     rc, pad = vrep.simxGetObjectHandle(cid, "suctionPad", WAIT)
     rc, xyz = vrep.simxGetObjectPosition(cid, pad, -1, WAIT)
     assert rc == vrep.simx_return_ok and len(xyz) == 3
     rc, euler = vrep.simxGetObjectOrientation(cid, pad, -1, WAIT)
     # seed001's scene: link 1 along +y at zero, joints turning clockwise seen from above
     assert euler == pytest.approx([0.0, 0.0, math.pi / 2 - 0.25], abs=1e-9)
-    assert vrep.simxSetJointTargetPosition(cid, shoulder, "far", WAIT) == vrep.simx_return_remote_error_flag
-    assert vrep.simxSetJointTargetPosition(cid, shoulder, 0.1, 0x090000) == vrep.simx_return_illegal_opmode_flag
+    assert (
+        vrep.simxSetJointTargetPosition(cid, shoulder, "far", WAIT)
+        == vrep.simx_return_remote_error_flag
+    )
+    assert (
+        vrep.simxSetJointTargetPosition(cid, shoulder, 0.1, 0x090000)
+        == vrep.simx_return_illegal_opmode_flag
+    )
     rc, ping_ms = vrep.simxGetPingTime(cid)
     assert rc == vrep.simx_return_ok and ping_ms >= 0
-    assert vrep.simxSetJointTargetPosition(99, shoulder, 0.1, WAIT) == vrep.simx_return_initialize_error_flag
+    assert (
+        vrep.simxSetJointTargetPosition(99, shoulder, 0.1, WAIT)
+        == vrep.simx_return_initialize_error_flag
+    )
 
 
 def test_synchronous_mode_triggers_one_step_at_a_time(cid):

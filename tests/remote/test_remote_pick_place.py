@@ -22,7 +22,8 @@ MAX_STEPS = 2400  # 10 s of simulated time per move
 
 
 class Arm:
-    """Client-side motion over the remote API: joint targets, then sim.step() until they are reached."""
+    """Client-side motion over the remote API: joint targets, then sim.step() until they are
+    reached."""
 
     def __init__(self, sim) -> None:
         self.sim = sim
@@ -36,12 +37,18 @@ class Arm:
         for _ in range(MAX_STEPS):
             self.sim.step()
             self.steps += 1
-            if all(abs(self.sim.getJointPosition(self.joints[j]) - q) < TOL_RAD for j, q in targets.items()):
+            if all(
+                abs(self.sim.getJointPosition(self.joints[j]) - q) < TOL_RAD
+                for j, q in targets.items()
+            ):
                 return
         raise AssertionError(f"joints did not reach {targets} in {MAX_STEPS} steps")
 
     def over(self, x_m: float, y_m: float) -> None:
-        current = (self.sim.getJointPosition(self.joints[0]), self.sim.getJointPosition(self.joints[1]))
+        current = (
+            self.sim.getJointPosition(self.joints[0]),
+            self.sim.getJointPosition(self.joints[1]),
+        )
         sol = kinematics.choose(kinematics.ik(self.profile, x_m, y_m), current)
         wrist = kinematics.wrist_for_heading(self.profile, sol, 0.0)
         self.settle({0: sol.shoulder_rad, 1: sol.elbow_rad, 3: wrist})
@@ -79,8 +86,10 @@ def test_stepped_pick_and_place_places_the_box_and_the_recording_replays_exactly
         sim.stopSimulation()
         server.wait_for(r"simulation stopped: run 1 lasted \d+ steps .*recorded .*session\.mcap")
 
-        # a second run, recorded under a numbered name, set up while stopped and stopped while holding
-        assert sim.getObjectPosition(box, sim.handle_world)[:2] == pytest.approx(PICK_M, abs=1e-3)  # reset
+        # a second run, recorded under a numbered name, set up while stopped and stopped while
+        # holding
+        # reset
+        assert sim.getObjectPosition(box, sim.handle_world)[:2] == pytest.approx(PICK_M, abs=1e-3)
         sol = kinematics.ik(arm.profile, *PICK_M)[0]
         sim.setJointPosition(arm.joints[0], sol.shoulder_rad)
         sim.setJointPosition(arm.joints[1], sol.elbow_rad)
@@ -91,20 +100,27 @@ def test_stepped_pick_and_place_places_the_box_and_the_recording_replays_exactly
         for _ in range(3):
             sim.step()
         sim.stopSimulation()
-        server.wait_for(r"simulation stopped: run 2 lasted 3 steps .*released box; recorded .*session-2\.mcap")
+        server.wait_for(
+            r"simulation stopped: run 2 lasted 3 steps .*released box; recorded .*session-2\.mcap"
+        )
 
     rec = load(record)
     assert rec.run["source"] == "remote"
     assert rec.config.profile.name == "mtb"
     assert int(rec.frames.step[-1]) == round(t_s / rec.config.dt_s)
-    assert tuple(rec.frames.object_poses[-1][0][:3]) == (x, y, z)  # what the client read is what was recorded
+    # what the client read is what was recorded
+    assert tuple(rec.frames.object_poses[-1][0][:3]) == (x, y, z)
     kinds = [e.kind for e in rec.events]
     assert kinds.count("attach") == 1 and "release" in kinds and "log" in kinds
-    assert {c.kind for c in rec.commands} == {"joint_target", "signal", "event"}  # event: the client's addLog
-    assert all(rec.commands[i].step <= rec.commands[i + 1].step for i in range(len(rec.commands) - 1))
+    # event: the client's addLog
+    assert {c.kind for c in rec.commands} == {"joint_target", "signal", "event"}
+    assert all(
+        rec.commands[i].step <= rec.commands[i + 1].step for i in range(len(rec.commands) - 1)
+    )
     second = load(tmp_path / "session-2.mcap")
     assert len(second.frames) == 4
-    assert [c.step for c in second.commands] == [0, 0, 0, 0]  # given while stopped: step 0 of the run
+    # given while stopped: step 0 of the run
+    assert [c.step for c in second.commands] == [0, 0, 0, 0]
     assert [e.kind for e in second.events] == ["attach"]
 
     for path in (record, tmp_path / "session-2.mcap"):

@@ -48,25 +48,54 @@ def test_require_gives_functions_and_the_constants(sim):
     assert sim.simulation_stopped == 0
     assert sim.simulation_advancing_running == 17
     assert sim.getSimulationState() == sim.simulation_stopped
-    for name in ("getObject", "getObjectHandle", "setJointTargetPosition", "setJointPosition", "getJointPosition",
-                 "setInt32Signal", "getInt32Signal", "clearInt32Signal", "startSimulation", "stopSimulation",
-                 "pauseSimulation", "getSimulationTime", "setStepping", "step", "getObjectPosition",
-                 "getObjectOrientation", "addLog"):
+    for name in (
+        "getObject",
+        "getObjectHandle",
+        "setJointTargetPosition",
+        "setJointPosition",
+        "getJointPosition",
+        "setInt32Signal",
+        "getInt32Signal",
+        "clearInt32Signal",
+        "startSimulation",
+        "stopSimulation",
+        "pauseSimulation",
+        "getSimulationTime",
+        "setStepping",
+        "step",
+        "getObjectPosition",
+        "getObjectOrientation",
+        "addLog",
+    ):
         assert callable(getattr(sim, name)), name
 
 
 def test_objects_joints_signals_and_poses(sim):
     h1 = sim.getObject("/MTB_axis1")
     assert h1 == sim.getObjectHandle("MTB_axis1") == sim.getObject("/MTB_Robot/MTB_axis1")
-    assert len({h1, sim.getObject("/MTB_axis2"), sim.getObject("/MTB_axis3"), sim.getObject("/MTB_axis4")}) == 4
+    assert (
+        len(
+            {
+                h1,
+                sim.getObject("/MTB_axis2"),
+                sim.getObject("/MTB_axis3"),
+                sim.getObject("/MTB_axis4"),
+            }
+        )
+        == 4
+    )
     box = sim.getObject("/box")
     assert box == sim.getObject("/Cuboid")
-    assert sim.getObjectPosition(box, sim.handle_world) == pytest.approx([0.2, 0.7, 0.025], abs=1e-3)
+    assert sim.getObjectPosition(box, sim.handle_world) == pytest.approx(
+        [0.2, 0.7, 0.025], abs=1e-3
+    )
     sim.setJointPosition(sim.getObject("/MTB_axis2"), 0.5)
     assert sim.getJointPosition(sim.getObject("/MTB_axis2")) == pytest.approx(0.5, abs=1e-12)
     pad = sim.getObject("/suctionPad")
     x, y, _ = sim.getObjectPosition(pad, -1)
-    assert (x, y) == pytest.approx((0.467 + 0.4005 * math.cos(0.5), 0.4005 * math.sin(0.5)), abs=1e-9)
+    assert (x, y) == pytest.approx(
+        (0.467 + 0.4005 * math.cos(0.5), 0.4005 * math.sin(0.5)), abs=1e-9
+    )
     assert sim.getObjectOrientation(pad, -1) == pytest.approx([0.0, 0.0, 0.5], abs=1e-9)
     # relative to the pad, the pad is at its own origin
     assert sim.getObjectPosition(pad, pad) == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
@@ -144,8 +173,14 @@ def test_bad_input_gets_an_error_naming_the_problem_and_the_server_goes_on(serve
         (b"\xff\x00garbage", "not valid CBOR"),
         (cbor2.dumps([1, 2, 3]), "expected a CBOR map, got list"),
         (cbor2.dumps({"func": "sim.getSimulationState", "args": []}), "version does not match"),
-        (cbor2.dumps({"func": 7, "args": [], "uuid": raw.uuid}), "'func' must be a non-empty string"),
-        (cbor2.dumps({"func": "sim.getJointPosition", "args": 5, "uuid": raw.uuid}), "'args' must be an array"),
+        (
+            cbor2.dumps({"func": 7, "args": [], "uuid": raw.uuid}),
+            "'func' must be a non-empty string",
+        ),
+        (
+            cbor2.dumps({"func": "sim.getJointPosition", "args": 5, "uuid": raw.uuid}),
+            "'args' must be an array",
+        ),
         (b"\x00" * (10 * 1024 * 1024), "exceeds the limit"),
         (b"\x81" * 1000 + b"\x00", "nesting depth (32)"),
         (b"\x5b" + (1 << 60).to_bytes(8, "big") + b"abc", "not valid CBOR"),
@@ -154,14 +189,20 @@ def test_bad_input_gets_an_error_naming_the_problem_and_the_server_goes_on(serve
         reply = raw.raw(data)
         assert expected in reply.get("err", ""), (expected, reply)
         good()
-    raw.socket.send_multipart([cbor2.dumps({"func": "sim.getSimulationState", "args": [], "uuid": raw.uuid}), b"x"])
+    raw.socket.send_multipart(
+        [cbor2.dumps({"func": "sim.getSimulationState", "args": [], "uuid": raw.uuid}), b"x"]
+    )
     assert "2 message parts" in cbor2.loads(raw.socket.recv())["err"]
     good()
     # a v1 client also gets the answer in the shape it understands
     assert raw.raw(cbor2.dumps({"func": "sim.getSimulationState", "args": []}))["success"] is False
     calls = [
         ("sim.noSuchFunction", [], "No such function: sim.noSuchFunction"),
-        ("sim.getJointPosition", ["MTB_axis1"], "argument 1 (handle) is 'MTB_axis1'; expected an integer"),
+        (
+            "sim.getJointPosition",
+            ["MTB_axis1"],
+            "argument 1 (handle) is 'MTB_axis1'; expected an integer",
+        ),
         ("sim.getJointPosition", [11, 12], "expected 1 argument(s) (handle: int), got 2"),
         ("sim.setJointTargetPosition", [11], "expected 2..3 argument(s)"),
         ("sim.setJointTargetPosition", [11, float("nan")], "expected a finite number"),

@@ -1,4 +1,5 @@
-"""Kinematics properties over the whole workspace of every built-in profile (pure math, no physics)."""
+"""Kinematics properties over the whole workspace of every built-in profile (pure math, no
+physics)."""
 
 from __future__ import annotations
 
@@ -54,8 +55,12 @@ def test_ik_returns_exactly_the_branches_within_the_limits(name, rf, angle):
     profile = PROFILES[name]
     (s_lo, s_hi), (e_lo, e_hi) = profile.joint_limits()[:2]
     x, y = _point(profile, rf, angle)
-    within = [b for b in k.ik_branches(profile, x, y)
-              if s_lo - 1e-12 <= b.shoulder_rad <= s_hi + 1e-12 and e_lo - 1e-12 <= b.elbow_rad <= e_hi + 1e-12]
+    within = [
+        b
+        for b in k.ik_branches(profile, x, y)
+        if s_lo - 1e-12 <= b.shoulder_rad <= s_hi + 1e-12
+        and e_lo - 1e-12 <= b.elbow_rad <= e_hi + 1e-12
+    ]
     if not within:
         with pytest.raises(OutOfReach, match="beyond the joint limits"):
             k.ik(profile, x, y)
@@ -68,8 +73,13 @@ def test_ik_returns_exactly_the_branches_within_the_limits(name, rf, angle):
 
 
 @settings(max_examples=200, deadline=None)
-@given(name=profiles, rf=st.floats(0.01, 0.99), angle=st.floats(-math.pi, math.pi),
-       heading=st.floats(-math.pi, math.pi), z_fraction=fraction)
+@given(
+    name=profiles,
+    rf=st.floats(0.01, 0.99),
+    angle=st.floats(-math.pi, math.pi),
+    heading=st.floats(-math.pi, math.pi),
+    z_fraction=fraction,
+)
 def test_wrist_keeps_the_heading_and_z_sets_the_height(name, rf, angle, heading, z_fraction):
     profile = PROFILES[name]
     x, y = _point(profile, rf, angle)
@@ -92,9 +102,15 @@ def test_wrist_keeps_the_heading_and_z_sets_the_height(name, rf, angle, heading,
 
 
 @settings(max_examples=200, deadline=None)
-@given(name=profiles, angle=st.floats(-math.pi, math.pi), outside=st.sampled_from(["in", "out"]),
-       margin=st.floats(1e-6, 5.0))
-def test_unreachable_targets_raise_out_of_reach_naming_target_annulus_and_limits(name, angle, outside, margin):
+@given(
+    name=profiles,
+    angle=st.floats(-math.pi, math.pi),
+    outside=st.sampled_from(["in", "out"]),
+    margin=st.floats(1e-6, 5.0),
+)
+def test_unreachable_targets_raise_out_of_reach_naming_target_annulus_and_limits(
+    name, angle, outside, margin
+):
     profile = PROFILES[name]
     inner, outer = profile.reach_m
     if outside == "in" and inner == 0.0:
@@ -121,7 +137,8 @@ def test_out_of_reach_message_for_the_far_point_is_one_clear_line():
         "target (2.0000, 0.0000) m is outside the reach annulus: reach annulus 0.2335..0.8675 m,"
         " shoulder -160..160 deg, elbow -150..150 deg"
     )
-    assert err.value.exit_code == 1  # a task that asks for it fails; 3 is only "runs not comparable"
+    # a task that asks for it fails; 3 is only "runs not comparable"
+    assert err.value.exit_code == 1
 
 
 @pytest.mark.parametrize("x, y", [(-0.85, 0.0), (-0.86, 0.01), (-0.86, -0.01)])
@@ -163,10 +180,12 @@ def test_choose_prefers_the_branch_nearest_the_current_pose():
         assert k.choose(sols, (s.shoulder_rad, s.elbow_rad)) == s
 
 
-# -- each report's own joint conventions (docs/seed-conventions.md) ----------------------------------
+# -- each report's own joint conventions (docs/seed-conventions.md) --------------------------------
+
 
 def _report000_ik(x, y):
-    """Report 000's ik(x, y) (links 0.8/0.8): degrees, q2 = -acos(...), q1 = atan2(y, x) + atan2(...)."""
+    """Report 000's ik(x, y) (links 0.8/0.8): degrees, q2 = -acos(...), q1 = atan2(y, x) +
+    atan2(...)."""
     q2 = -math.acos((x**2 + y**2 - 0.8**2 - 0.8**2) / (2 * 0.8 * 0.8))
     q1 = math.atan2(y, x) + math.atan2(0.8 * math.sin(q2), 0.8 + 0.8 * math.cos(q2))
     return round(math.degrees(q1), 4), round(math.degrees(q2), 4)
@@ -174,7 +193,8 @@ def _report000_ik(x, y):
 
 @pytest.mark.parametrize("box", [(0.2, 0.7), (-0.3, -0.55)])
 def test_report000_program_lands_on_its_box_in_the_seed000_frame(box):
-    """The report calls ik(y, x) and sends joint1 = -q1, joint2 = q2: seed000's frame makes that exact."""
+    """The report calls ik(y, x) and sends joint1 = -q1, joint2 = q2: seed000's frame makes that
+    exact."""
     q1, q2 = _report000_ik(box[1], box[0])
     pose = k.fk(PROFILES["seed000"], (math.radians(-q1), math.radians(q2), 0.06, 0.0))
     assert math.hypot(pose.x_m - box[0], pose.y_m - box[1]) < 1e-5  # the 4-place rounding
@@ -192,20 +212,23 @@ def _heron(x, y, a, b):
     return base + tri, deg2, deg2 - (base + tri)
 
 
-@pytest.mark.parametrize("name, links, miss_m", [("seed001", (0.467, 0.401), 0.1319),
-                                                  ("seed002", (0.5, 0.5), 0.2572)])
+@pytest.mark.parametrize(
+    "name, links, miss_m", [("seed001", (0.467, 0.401), 0.1319), ("seed002", (0.5, 0.5), 0.2572)]
+)
 def test_heron_ik_misses_the_box_in_its_own_frame_and_keeps_the_heading(name, links, miss_m):
     profile = PROFILES[name]
     deg1, deg2, deg3 = _heron(0.2, 0.7, *links)
     pose = k.fk(profile, (deg1, -deg2, profile.z_down(), deg3))
     assert math.hypot(pose.x_m - 0.2, pose.y_m - 0.7) == pytest.approx(miss_m, abs=1e-4)
-    assert k.wrap_rad(pose.heading_rad - math.pi / 2) == pytest.approx(0.0, abs=1e-12)  # wrist = deg2 - deg1
+    # wrist = deg2 - deg1
+    assert k.wrap_rad(pose.heading_rad - math.pi / 2) == pytest.approx(0.0, abs=1e-12)
     straight = k.fk(profile, (0.0, 0.0, 0.0, 0.0))  # moving(0, 0.868): the arm along +y
     assert (straight.x_m, straight.y_m) == pytest.approx((0.0, sum(links)))
 
 
 def test_report003_ik_is_the_mtb_frame():
-    """Report 003's ik(0.2, 0.7) (q2 = +acos, q1 = atan2 - atan2) lands on the box in the MTB frame."""
+    """Report 003's ik(0.2, 0.7) (q2 = +acos, q1 = atan2 - atan2) lands on the box in the MTB
+    frame."""
     a1, a2 = 0.468, 0.4
     q2 = math.acos((0.2**2 + 0.7**2 - a1**2 - a2**2) / (2 * a1 * a2))
     q1 = math.atan2(0.7, 0.2) - math.atan2(a2 * math.sin(q2), a1 + a2 * math.cos(q2))
@@ -213,8 +236,15 @@ def test_report003_ik_is_the_mtb_frame():
     assert (pose.x_m, pose.y_m) == pytest.approx((0.2, 0.7), abs=1e-12)
 
 
-@pytest.mark.parametrize("name, down, up", [("seed000", 0.06, -0.06), ("seed001", -0.055, 0.0),
-                                             ("seed002", -0.09, 0.0), ("mtb", 0.2, 0.0)])
+@pytest.mark.parametrize(
+    "name, down, up",
+    [
+        ("seed000", 0.06, -0.06),
+        ("seed001", -0.055, 0.0),
+        ("seed002", -0.09, 0.0),
+        ("mtb", 0.2, 0.0),
+    ],
+)
 def test_each_scene_s_down_puts_the_pad_on_a_50_mm_box(name, down, up):
     profile = PROFILES[name]
     assert (profile.z_down(), profile.z_up()) == (down, up)
@@ -225,8 +255,17 @@ def test_each_scene_s_down_puts_the_pad_on_a_50_mm_box(name, down, up):
 @settings(max_examples=300, deadline=None)
 @given(name=st.sampled_from(sorted(PROFILES)), q=st.tuples(*[st.floats(-7.0, 7.0)] * 4))
 def test_the_per_step_pad_pose_is_fk_bit_for_bit(name, q):
-    """The twin's per-step pad pose (pad_pose_function) and fk give the same bits: recordings depend on it."""
+    """The twin's per-step pad pose (pad_pose_function) and fk give the same bits: recordings depend
+    on it."""
     profile = PROFILES[name]
     pose = k.fk(profile, q)
     half = 0.5 * pose.heading_rad
-    assert k.pad_pose_function(profile)(q) == (pose.x_m, pose.y_m, pose.z_m, 0.0, 0.0, math.sin(half), math.cos(half))
+    assert k.pad_pose_function(profile)(q) == (
+        pose.x_m,
+        pose.y_m,
+        pose.z_m,
+        0.0,
+        0.0,
+        math.sin(half),
+        math.cos(half),
+    )

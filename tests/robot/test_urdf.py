@@ -41,14 +41,22 @@ def test_profile_file_yields_the_geometry_of_the_urdf(user_robot):
     assert p.link2_m == pytest.approx(LINK2_M, abs=1e-12)
     assert p.shoulder_height_m == pytest.approx(SHOULDER_Z_M)
     assert p.elbow_height_m == pytest.approx(SHOULDER_Z_M + ELBOW_DZ_M)
-    assert p.tip_z0_m == pytest.approx(SHOULDER_Z_M + ELBOW_DZ_M + PAD_ABOVE_Z_JOINT_M - PAD_LENGTH_M)
+    assert p.tip_z0_m == pytest.approx(
+        SHOULDER_Z_M + ELBOW_DZ_M + PAD_ABOVE_Z_JOINT_M - PAD_LENGTH_M
+    )
     assert p.z_stroke_m == 0.2
     assert p.shoulder_limit_rad == pytest.approx(math.radians(160))
     assert p.suction_signals[0] == "vacuum"
     assert p.pad_link == "tool0"
     assert Path(p.urdf_path).is_file()
     assert urdf_text(p) == Path(p.urdf_path).read_text()
-    assert [m.name for m in mesh_paths(p)] == ["arm1.stl", "arm2.stl", "base.stl", "cup.stl", "quill.stl"]
+    assert [m.name for m in mesh_paths(p)] == [
+        "arm1.stl",
+        "arm2.stl",
+        "base.stl",
+        "cup.stl",
+        "quill.stl",
+    ]
     assert all(m.is_file() for m in mesh_paths(p))
     # any variant's names still find the user's joints
     assert p.joint_index("/MTB_axis1") == 0 and p.joint_index("quill_z") == 2
@@ -60,7 +68,8 @@ def test_the_stl_meshes_are_loaded_and_scaled_from_millimetres(user_robot):
         w = twin._world  # the engine, looked at directly (white-box)
         arm1 = w.joints[0]
         lo, hi = pb.getAABB(w.robot, arm1, physicsClientId=w.client)
-        assert hi[0] - lo[0] == pytest.approx(0.547, abs=0.01)  # 507 + 40 mm: the mesh, not a default shape
+        # 507 + 40 mm: the mesh, not a default shape
+        assert hi[0] - lo[0] == pytest.approx(0.547, abs=0.01)
         assert hi[2] - lo[2] == pytest.approx(0.05, abs=0.01)
         assert pb.getDynamicsInfo(w.robot, arm1, physicsClientId=w.client)[0] == 1.5
     finally:
@@ -78,7 +87,9 @@ def test_twin_moves_the_users_pad_to_the_point(user_robot, x_m, y_m):
         assert z == pytest.approx(0.1, abs=3e-4)
         # the simulated pad link agrees with the geometry the profile derived from the URDF
         w = twin._world  # the engine, looked at directly (white-box)
-        root = pb.getLinkState(w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client)[4]
+        root = pb.getLinkState(
+            w.robot, w.pad_link, computeForwardKinematics=1, physicsClientId=w.client
+        )[4]
         assert math.hypot(root[0] - x, root[1] - y) < 1e-4
         assert root[2] - PAD_LENGTH_M == pytest.approx(z, abs=1e-4)
     finally:
@@ -87,7 +98,8 @@ def test_twin_moves_the_users_pad_to_the_point(user_robot, x_m, y_m):
 
 def test_twin_run_pick_place_works_with_the_user_robot(user_robot, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    code = main(["run", "pick_place", "--robot", str(user_robot), "--cycles", "2"])  # records by default
+    # records by default
+    code = main(["run", "pick_place", "--robot", str(user_robot), "--cycles", "2"])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert err == ""
@@ -98,14 +110,17 @@ def test_twin_run_pick_place_works_with_the_user_robot(user_robot, capsys, tmp_p
     assert worst_mm < 5.0
 
 
-@pytest.mark.parametrize("edit, expected", [
-    (lambda t: t.replace('pad_link = "tool0"\n', ""), "lacks 'pad_link'"),
-    (lambda t: t.replace('wrist = "tool_yaw"', ""), "joints lacks ['wrist']"),
-    (lambda t: t.replace('quill_z"', 'quill_q"'), "has no joint named 'quill_q'"),
-    (lambda t: t.replace('"tool0"', '"cup0"'), "has no link named 'cup0'"),
-    (lambda t: t.replace('"stl_scara.urdf"', '"missing.urdf"'), "missing.urdf' does not exist"),
-    (lambda t: t + "[[[", "cannot read robot profile"),
-])
+@pytest.mark.parametrize(
+    "edit, expected",
+    [
+        (lambda t: t.replace('pad_link = "tool0"\n', ""), "lacks 'pad_link'"),
+        (lambda t: t.replace('wrist = "tool_yaw"', ""), "joints lacks ['wrist']"),
+        (lambda t: t.replace('quill_z"', 'quill_q"'), "has no joint named 'quill_q'"),
+        (lambda t: t.replace('"tool0"', '"cup0"'), "has no link named 'cup0'"),
+        (lambda t: t.replace('"stl_scara.urdf"', '"missing.urdf"'), "missing.urdf' does not exist"),
+        (lambda t: t + "[[[", "cannot read robot profile"),
+    ],
+)
 def test_bad_profile_files_are_one_line_errors(user_robot, capsys, edit, expected):
     user_robot.write_text(edit(user_robot.read_text()))
     with pytest.raises(ConfigError, match=expected.replace("[", r"\[").replace("]", r"\]")):

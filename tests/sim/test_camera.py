@@ -52,7 +52,9 @@ def test_pictures_come_at_the_cameras_rate_in_step_order(pick_place_with_cameras
     for name in ("overhead", "wrist"):
         steps = [im.step for im in images if im.camera == name]
         assert steps == list(range(0, last + 1, every))
-    assert all(im.format == "png" and decode_rgb(im.data).shape == (120, 160, 3) for im in images[:4])
+    assert all(
+        im.format == "png" and decode_rgb(im.data).shape == (120, 160, 3) for im in images[:4]
+    )
 
 
 def test_the_same_run_gives_the_same_bytes(pick_place_with_cameras):
@@ -74,7 +76,9 @@ def test_the_render_process_draws_what_the_stepping_thread_would(pick_place_with
         world.close()
 
 
-def _pixel_of(spec: CameraSpec, pad_pose: tuple, point: tuple[float, float, float]) -> tuple[int, int]:
+def _pixel_of(
+    spec: CameraSpec, pad_pose: tuple, point: tuple[float, float, float]
+) -> tuple[int, int]:
     """Where a world point lands in the picture (column, row), from the camera's pose and K."""
     pose = optical_pose(*camera_view(spec, pad_pose))
     inverse = (-pose[3], -pose[4], -pose[5], pose[6])
@@ -88,10 +92,12 @@ def test_overhead_sees_the_box_where_it_stands():
     collector = _run((spec,), steps=1)
     first = collector.images[0]
     pixels = decode_rgb(first.data)
-    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (0.2, 0.7, 0.05))  # the box's top
+    # the box's top
+    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (0.2, 0.7, 0.05))
     r, g, b = (int(v) for v in pixels[row, col])
     assert b > r + 80 and b > 150, (col, row, (r, g, b))  # the box is blue (0.2, 0.5, 0.9)
-    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (-0.3, -0.55, 0.0))  # the empty place point
+    # the empty place point
+    col, row = _pixel_of(spec, collector.columns().frame(0).pad_pose, (-0.3, -0.55, 0.0))
     assert np.array_equal(pixels[row, col], pixels[0, 0])  # nothing there yet: the background
 
 
@@ -124,9 +130,11 @@ def test_a_jpeg_camera_gives_jpeg_pictures():
     assert decode_rgb(images[0].data).shape == (120, 160, 3)
 
 
-def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(pick_place_with_cameras, tmp_path):
-    """A daemon process (a pool's worker) may not fork, so it draws the pictures itself: it hands them
-    on at the same points of the run, so its MCAP file is the one the render process gives."""
+def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(
+    pick_place_with_cameras, tmp_path
+):
+    """A daemon process (a pool's worker) may not fork, so it draws the pictures itself: it hands
+    them on at the same points of the run, so its MCAP file is the one the render process gives."""
     from twin.record.mcap.writer import McapRecorder
     from twin.robot.urdf import urdf_text
 
@@ -135,8 +143,12 @@ def test_drawn_here_or_in_the_render_process_the_file_is_byte_identical(pick_pla
     files = []
     for background in (True, False):
         path = tmp_path / f"background_{background}.mcap"
-        recorder = McapRecorder(path, config, {"source": "task", "task": "", "params": {}},
-                                urdf=urdf_text(config.profile))
+        recorder = McapRecorder(
+            path,
+            config,
+            {"source": "task", "task": "", "params": {}},
+            urdf=urdf_text(config.profile),
+        )
         renderer = CameraRenderer(config, recorder.on_image, background=background)
         for i in range(len(frames)):
             frame = frames.frame(i)

@@ -12,11 +12,17 @@ from twin.model.types import NO_BODY
 from twin.sim.twin import Twin
 
 
-@pytest.mark.parametrize("objects", [
-    (),
-    (SceneObject("box"),),
-    (SceneObject("a", pos_m=(0.2, 0.7, 0.025)), SceneObject("b", pos_m=(0.5, 0.0, 0.025), yaw_rad=0.5)),
-])
+@pytest.mark.parametrize(
+    "objects",
+    [
+        (),
+        (SceneObject("box"),),
+        (
+            SceneObject("a", pos_m=(0.2, 0.7, 0.025)),
+            SceneObject("b", pos_m=(0.5, 0.0, 0.025), yaw_rad=0.5),
+        ),
+    ],
+)
 def test_frames_give_every_object_pose_in_scene_order(objects):
     twin = Twin(TwinConfig(objects=objects))
     try:
@@ -33,18 +39,29 @@ def test_frames_give_every_object_pose_in_scene_order(objects):
 @pytest.mark.parametrize("infinite", [True, False])
 def test_the_pad_is_idle_only_off_or_holding_on_with_infinite_strength(infinite):
     box = SceneObject("box", pos_m=(0.5, 0.0, 0.025))
-    twin = Twin(TwinConfig(objects=(box,), suction=SuctionParams(infinite_strength=infinite, max_pull_force_n=1e3,
-                                                                  max_shear_force_n=1e3, max_peel_torque_nm=1e3)))
+    twin = Twin(
+        TwinConfig(
+            objects=(box,),
+            suction=SuctionParams(
+                infinite_strength=infinite,
+                max_pull_force_n=1e3,
+                max_shear_force_n=1e3,
+                max_peel_torque_nm=1e3,
+            ),
+        )
+    )
     pad = twin.suction_pad
     try:
         assert pad.idle_on is False
         twin.move_to(0.5, 0.0, heading_rad=0.0)
         twin.suction(True)
         twin.step()
-        assert (pad.on, pad.held, pad.idle_on) == (True, NO_BODY, None)  # on and empty: the sensor looks every step
+        # on and empty: the sensor looks every step
+        assert (pad.on, pad.held, pad.idle_on) == (True, NO_BODY, None)
         twin.lower()
         assert pad.held == 0 and pad.sensed == 0
-        assert pad.idle_on is (True if infinite else None)  # a finite hold is checked for breaking every step
+        # a finite hold is checked for breaking every step
+        assert pad.idle_on is (True if infinite else None)
         twin.raise_()
         assert twin.frame.held_body == 0 and twin.frame.sensed_body == 0
         twin.suction(False)

@@ -1,4 +1,5 @@
-"""The suction pad in real PyBullet: attach, release, the measured hold wrench and when a hold breaks."""
+"""The suction pad in real PyBullet: attach, release, the measured hold wrench and when a hold
+breaks."""
 
 from __future__ import annotations
 
@@ -18,8 +19,12 @@ BOX_XY_M = (0.5, 0.0)
 HIGH = 1e3  # a limit that is never reached
 
 
-def _twin(mass_kg: float = 0.1, size_z_m: float = 0.05, robot: str = "mtb", **suction) -> tuple[Twin, FrameCollector]:
-    box = SceneObject("box", size_m=(0.05, 0.05, size_z_m), mass_kg=mass_kg, pos_m=(*BOX_XY_M, size_z_m / 2))
+def _twin(
+    mass_kg: float = 0.1, size_z_m: float = 0.05, robot: str = "mtb", **suction
+) -> tuple[Twin, FrameCollector]:
+    box = SceneObject(
+        "box", size_m=(0.05, 0.05, size_z_m), mass_kg=mass_kg, pos_m=(*BOX_XY_M, size_z_m / 2)
+    )
     sink = FrameCollector()
     config = TwinConfig(profile=PROFILES[robot], objects=(box,), suction=SuctionParams(**suction))
     return Twin(config, sinks=[sink]), sink
@@ -64,7 +69,8 @@ def test_a_box_hanging_still_pulls_with_its_weight(mass_kg):
     twin.wait(1.0)
     f = twin.frame
     fx, fy, fz = f.hold_force_n
-    assert fz == pytest.approx(mass_kg * G_M_S2, rel=0.01)  # the pad holds the box up: +z on the box
+    # the pad holds the box up: +z on the box
+    assert fz == pytest.approx(mass_kg * G_M_S2, rel=0.01)
     assert math.hypot(fx, fy) < 1e-3 * mass_kg * G_M_S2
     assert max(abs(t) for t in f.hold_torque_nm) < 1e-4
 
@@ -99,7 +105,9 @@ def test_an_empty_pad_switched_off_reports_suction_empty():
 
 
 def test_a_heavy_box_breaks_a_finite_hold_on_pull():
-    twin, sink = _twin(mass_kg=0.5, infinite_strength=False, max_shear_force_n=HIGH, max_peel_torque_nm=HIGH)
+    twin, sink = _twin(
+        mass_kg=0.5, infinite_strength=False, max_shear_force_n=HIGH, max_peel_torque_nm=HIGH
+    )
     _pick(twin)
     twin.wait(1.0)
     breaks = [e for e in sink.events if e.kind == "break"]
@@ -117,8 +125,12 @@ def test_the_same_box_holds_with_infinite_strength():
 
 
 def test_a_fast_swing_breaks_a_weak_hold_on_shear():
-    twin, sink = _twin(infinite_strength=False, max_pull_force_n=HIGH, max_shear_force_n=5.0,
-                       max_peel_torque_nm=HIGH)
+    twin, sink = _twin(
+        infinite_strength=False,
+        max_pull_force_n=HIGH,
+        max_shear_force_n=5.0,
+        max_peel_torque_nm=HIGH,
+    )
     _pick(twin, gentle=True)
     assert _kinds(sink) == ["attach"]  # lifting is not shear
     twin.move_to(-0.3, -0.55)
@@ -127,9 +139,9 @@ def test_a_fast_swing_breaks_a_weak_hold_on_shear():
 
 
 def test_peel_is_the_torque_at_the_cup_face():
-    """A box held 15 mm off its centre pulls with a peel torque of d·m·g·(1 + a/g) at the pad tip (0 at
-    its centre of mass, where the constraint acts): the jerk of lifting it breaks the stock 0.1 N·m limit,
-    while a centred box has almost none."""
+    """A box held 15 mm off its centre pulls with a peel torque of d·m·g·(1 + a/g) at the pad tip (0
+    at its centre of mass, where the constraint acts): the jerk of lifting it breaks the stock 0.1
+    N·m limit, while a centred box has almost none."""
     limits = {"infinite_strength": False, "max_pull_force_n": HIGH, "max_shear_force_n": HIGH}
     centred, sink_c = _twin(**limits)
     _pick(centred, gentle=True)
@@ -153,8 +165,13 @@ def test_peel_is_the_torque_at_the_cup_face():
 def test_pressing_the_held_box_down_is_not_pull():
     """A tall box held and pushed into the floor: the pad pushes it down (negative z), which must
     not count as pull; lifting it afterwards keeps the hold."""
-    twin, sink = _twin(size_z_m=0.07, infinite_strength=False, max_pull_force_n=20.0, max_shear_force_n=HIGH,
-                       max_peel_torque_nm=HIGH)
+    twin, sink = _twin(
+        size_z_m=0.07,
+        infinite_strength=False,
+        max_pull_force_n=20.0,
+        max_shear_force_n=HIGH,
+        max_peel_torque_nm=HIGH,
+    )
     twin.move_to(*BOX_XY_M)
     twin.suction(True)
     twin.z_to(0.06, settle=False)  # 10 mm into the box's top
@@ -168,8 +185,9 @@ def test_pressing_the_held_box_down_is_not_pull():
 
 @pytest.mark.parametrize("depth_m", [0.002, 0.010, 0.020])
 def test_a_pad_set_into_a_box_senses_it_as_coppeliasims_ray_sensor_does(depth_m):
-    """sim.setJointPosition can put the pad into a box (report 000's key 5): PyBullet's ray sees no body it
-    starts inside, CoppeliaSim's ray sensor sees the back face; the twin's pad senses and takes the box."""
+    """sim.setJointPosition can put the pad into a box (report 000's key 5): PyBullet's ray sees no
+    body it starts inside, CoppeliaSim's ray sensor sees the back face; the twin's pad senses and
+    takes the box."""
     from twin.robot.kinematics import z_joint_for_height
 
     twin, sink = _twin(robot="seed000")  # its Z stop (report 000's 0.084) reaches 19 mm into a box

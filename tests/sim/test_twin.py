@@ -63,9 +63,15 @@ def test_a_far_move_raises_out_of_reach_and_emits_an_event():
     twin = Twin(sinks=[sink])
     with pytest.raises(OutOfReach) as err:
         twin.move_to(2.0, 0.0)
-    assert "(2.0000, 0.0000)" in str(err.value) and "reach annulus 0.2335..0.8675 m" in str(err.value)
+    assert "(2.0000, 0.0000)" in str(err.value) and "reach annulus 0.2335..0.8675 m" in str(
+        err.value
+    )
     ev = sink.events[-1]
-    assert ev.kind == "out_of_reach" and ev.data == {"x_m": 2.0, "y_m": 0.0} and ev.message == str(err.value)
+    assert (
+        ev.kind == "out_of_reach"
+        and ev.data == {"x_m": 2.0, "y_m": 0.0}
+        and ev.message == str(err.value)
+    )
     # nothing moved: the only Command is the event itself, recorded so that a replay says it again
     assert [c.kind for c in sink.commands] == ["event"] and twin.step_index == 0
     twin.move_to(0.4, 0.4)  # and the twin carries on
@@ -87,7 +93,8 @@ def test_any_variants_shoulder_name_drives_the_shoulder(name):
     twin.set_joint_target(name, 0.5)
     twin.settle()
     assert twin.joint_position(0) == pytest.approx(0.5, abs=1e-3)
-    assert sink.commands[0].args == {"joint": "MTB_axis1", "q": 0.5}  # recorded under the profile's name
+    # recorded under the profile's name
+    assert sink.commands[0].args == {"joint": "MTB_axis1", "q": 0.5}
 
 
 def test_a_target_beyond_the_limit_is_clamped_with_an_event():
@@ -101,19 +108,22 @@ def test_a_target_beyond_the_limit_is_clamped_with_an_event():
     assert sink.events[0].data["requested"] == 4.0 and sink.events[0].data["limit"] == limit
 
 
-@pytest.mark.parametrize("call, error, text", [
-    (lambda t: t.set_joint_target("MTB_axis7", 0.1), UnknownName, "'MTB_axis7'"),
-    (lambda t: t.set_joint_target(4, 0.1), UnknownName, "joint index 4"),
-    (lambda t: t.set_joint_target("MTB_axis1", math.nan), ConfigError, "nan"),
-    (lambda t: t.set_joint_target("MTB_axis1", "1"), ConfigError, "'1'"),
-    (lambda t: t.set_joint_max_velocity("MTB_axis1", 0.0), ConfigError, "maximum velocity 0.0"),
-    (lambda t: t.set_signal("pad_switch", True), ConfigError, "True"),
-    (lambda t: t.set_signal("", 1), ConfigError, "signal name ''"),
-    (lambda t: t.wait(-1.0), ConfigError, "wait of -1.0 s"),
-    (lambda t: t.object_pose("ball"), UnknownName, "'ball'"),
-    (lambda t: t.apply(Command(3, "signal", {"name": "a", "value": 1})), ConfigError, "step 3"),
-    (lambda t: t.apply(Command(0, "teleport", {})), ConfigError, "'teleport'"),
-])
+@pytest.mark.parametrize(
+    "call, error, text",
+    [
+        (lambda t: t.set_joint_target("MTB_axis7", 0.1), UnknownName, "'MTB_axis7'"),
+        (lambda t: t.set_joint_target(4, 0.1), UnknownName, "joint index 4"),
+        (lambda t: t.set_joint_target("MTB_axis1", math.nan), ConfigError, "nan"),
+        (lambda t: t.set_joint_target("MTB_axis1", "1"), ConfigError, "'1'"),
+        (lambda t: t.set_joint_max_velocity("MTB_axis1", 0.0), ConfigError, "maximum velocity 0.0"),
+        (lambda t: t.set_signal("pad_switch", True), ConfigError, "True"),
+        (lambda t: t.set_signal("", 1), ConfigError, "signal name ''"),
+        (lambda t: t.wait(-1.0), ConfigError, "wait of -1.0 s"),
+        (lambda t: t.object_pose("ball"), UnknownName, "'ball'"),
+        (lambda t: t.apply(Command(3, "signal", {"name": "a", "value": 1})), ConfigError, "step 3"),
+        (lambda t: t.apply(Command(0, "teleport", {})), ConfigError, "'teleport'"),
+    ],
+)
 def test_bad_input_raises_a_twin_error_naming_the_value(call, error, text):
     twin = Twin()
     with pytest.raises(error) as err:
@@ -168,8 +178,9 @@ def test_separate_processes_give_bit_identical_frames():
     tests_dir = str(__import__("pathlib").Path(__file__).resolve().parents[1])
     code = _CHILD.format(tests=tests_dir)
     digests = [
-        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
-        .stdout.strip()
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+        ).stdout.strip()
         for _ in range(2)
     ]
     assert digests == [here, here]

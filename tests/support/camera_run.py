@@ -1,4 +1,5 @@
-"""A pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (MCAP and .rrd)."""
+"""A pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras (MCAP and
+.rrd)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,35 @@ from pathlib import Path
 
 
 def record_camera_run(folder: Path, *extra: str) -> dict[str, Path]:
-    """`twin run pick_place --cycles 1 --camera overhead --camera wrist` into folder, in its own process:
-    {"mcap": path, "rrd": path}."""
+    """`twin run pick_place --cycles 1 --camera overhead --camera wrist` into folder, in its own
+    process: {"mcap": path, "rrd": path}."""
     mcap, rrd = folder / "camera.mcap", folder / "camera.rrd"
-    env = {**os.environ, "HOME": str(folder)}  # the rerun SDK may write its analytics config under HOME
-    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "1", "--camera",
-                           "overhead", "--camera", "wrist", *extra, "--record", str(mcap), "--rrd", str(rrd)],
-                          capture_output=True, text=True, env=env, timeout=300, check=False)
+    # the rerun SDK may write its analytics config under HOME
+    env = {**os.environ, "HOME": str(folder)}
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "run",
+            "pick_place",
+            "--cycles",
+            "1",
+            "--camera",
+            "overhead",
+            "--camera",
+            "wrist",
+            *extra,
+            "--record",
+            str(mcap),
+            "--rrd",
+            str(rrd),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     return {"mcap": mcap, "rrd": rrd}

@@ -11,7 +11,8 @@ from twin.cli import main
 # the installed `twin` executable, or the same command through this interpreter
 TWIN = [shutil.which("twin")] if shutil.which("twin") else [sys.executable, "-m", "twin.cli"]
 
-# a task file that never ends (signals, --timeout, re-record kills): it moves and reports simulated time
+# a task file that never ends (signals, --timeout, re-record kills): it moves and reports simulated
+# time
 ENDLESS_TASK = '''
 def run(twin):
     i = 0

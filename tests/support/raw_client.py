@@ -1,5 +1,5 @@
-"""A bare ZeroMQ REQ client for `twin serve`: sends any bytes, for malformed requests the official client
-never sends (protocol and hardening tests)."""
+"""A bare ZeroMQ REQ client for `twin serve`: sends any bytes, for malformed requests the official
+client never sends (protocol and hardening tests)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,11 @@ class RawClient:
         return cbor2.loads(self.socket.recv())
 
     def call(self, func: str, args: list, **extra) -> dict:
-        return self.raw(cbor2.dumps({"func": func, "args": args, "argsL": len(args), "uuid": self.uuid, **extra}))
+        return self.raw(
+            cbor2.dumps(
+                {"func": func, "args": args, "argsL": len(args), "uuid": self.uuid, **extra}
+            )
+        )
 
     def close(self) -> None:
         self.socket.close()

@@ -23,21 +23,37 @@ def pick_place_run(params: dict = ONE_CYCLE) -> dict:
     return {"source": "task", "task": "pick_place", "params": dict(params)}
 
 
-def record_pick_place(path: Path | None = None, config: TwinConfig | None = None, params: dict = ONE_CYCLE, *,
-                      rate: int = 1, background: bool = True, sinks=()) -> Recording:
-    """pick_place on a fresh twin in real PyBullet, recorded to `path` (every `rate`th step, by a recorder
-    process unless background=False) when a path is given; returns the run in memory. `sinks` see it too."""
+def record_pick_place(
+    path: Path | None = None,
+    config: TwinConfig | None = None,
+    params: dict = ONE_CYCLE,
+    *,
+    rate: int = 1,
+    background: bool = True,
+    sinks=(),
+) -> Recording:
+    """pick_place on a fresh twin in real PyBullet, recorded to `path` (every `rate`th step, by a
+    recorder process unless background=False) when a path is given; returns the run in memory.
+    `sinks` see it too."""
     config = config or TwinConfig()
     if path is None:
         return record_task(config, "pick_place", params, sinks=sinks)
-    with open_recorders(config, pick_place_run(params), mcap_path=path, rate=rate, background=background,
-                        engine=engine_versions()) as files:
+    with open_recorders(
+        config,
+        pick_place_run(params),
+        mcap_path=path,
+        rate=rate,
+        background=background,
+        engine=engine_versions(),
+    ) as files:
         return record_task(config, "pick_place", params, sinks=[*sinks, *files])
 
 
-def collect_pick_place(path: Path | None = None, config: TwinConfig | None = None, params: dict = ONE_CYCLE,
-                       **options) -> FrameCollector:
-    """record_pick_place, returning a FrameCollector of the frames, commands and events the twin sent."""
+def collect_pick_place(
+    path: Path | None = None, config: TwinConfig | None = None, params: dict = ONE_CYCLE, **options
+) -> FrameCollector:
+    """record_pick_place, returning a FrameCollector of the frames, commands and events the twin
+    sent."""
     collector = FrameCollector()
     record_pick_place(path, config, params, sinks=[collector], **options)
     return collector

@@ -1,5 +1,6 @@
 """`twin serve` as a subprocess for tests: ServerProcess starts `twin serve --port 0` on loopback,
-reads the port the server bound from its first line, and always terminates it (used by every remote test)."""
+reads the port the server bound from its first line, and always terminates it (used by every remote
+test)."""
 
 from __future__ import annotations
 
@@ -26,8 +27,21 @@ class ServerProcess:
         if "--record" not in args:
             args = (*args, "--no-record")  # never write into the working tree
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "twin.cli", "serve", "--host", "127.0.0.1", "--port", "0", *args],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+            [
+                sys.executable,
+                "-m",
+                "twin.cli",
+                "serve",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                *args,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
         )
         self.lines: list[str] = []
         self._queue: queue.Queue[str | None] = queue.Queue()
@@ -61,7 +75,9 @@ class ServerProcess:
             self.lines.append(line)
             if re.search(pattern, line):
                 return line
-        raise AssertionError(f"no line matching {pattern!r}; output so far:\n" + "\n".join(self.lines))
+        raise AssertionError(
+            f"no line matching {pattern!r}; output so far:\n" + "\n".join(self.lines)
+        )
 
     def client(self) -> RemoteAPIClient:
         return RemoteAPIClient("127.0.0.1", self.port)

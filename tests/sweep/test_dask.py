@@ -15,9 +15,27 @@ from twin.cli.main import main
 
 pytestmark = pytest.mark.slow  # a cluster starts in seconds; each test runs one
 
-SWEEP = ["pick_place", "--scenarios", "40", "--seed", "11", "--vary", "box.x_m=uniform(0.17,0.23)",
-         "--vary", "box.y_m=uniform(0.67,0.73)", "--vary", "box.mass_kg=choice(0.1,0.5)",
-         "--param", "cycles=1", "--param", "pause_s=0.1", "--param", "max_error_m=0.02", "--batch", "2"]
+SWEEP = [
+    "pick_place",
+    "--scenarios",
+    "40",
+    "--seed",
+    "11",
+    "--vary",
+    "box.x_m=uniform(0.17,0.23)",
+    "--vary",
+    "box.y_m=uniform(0.67,0.73)",
+    "--vary",
+    "box.mass_kg=choice(0.1,0.5)",
+    "--param",
+    "cycles=1",
+    "--param",
+    "pause_s=0.1",
+    "--param",
+    "max_error_m=0.02",
+    "--batch",
+    "2",
+]
 
 
 def _table(folder):
@@ -41,10 +59,27 @@ def _workers(pid: int) -> list[psutil.Process]:
 def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
     assert main(["sweep", *SWEEP, "--quiet", "--jobs", "1", "--out", str(tmp_path / "local")]) == 0
     capsys.readouterr()
-    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "sweep", *SWEEP, "--executor", "dask", "--jobs", "2",
-                             "--out", str(tmp_path / "dask")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "sweep",
+            *SWEEP,
+            "--executor",
+            "dask",
+            "--jobs",
+            "2",
+            "--out",
+            str(tmp_path / "dask"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
-        first = proc.stderr.readline()  # the first batches are back: both workers are busy with the rest
+        # the first batches are back: both workers are busy with the rest
+        first = proc.stderr.readline()
         assert first.startswith("sweep: "), first + proc.stderr.read()
         workers = _workers(proc.pid)
         assert len(workers) == 2
@@ -56,7 +91,8 @@ def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
                 if conn.status == psutil.CONN_LISTEN:
                     assert conn.laddr.ip == "127.0.0.1"
         victim = workers[0]
-        victim.kill()  # SIGKILL mid-batch: its tasks go to the other worker (and the nanny's new one)
+        # SIGKILL mid-batch: its tasks go to the other worker (and the nanny's new one)
+        victim.kill()
         victim.wait(10)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
@@ -68,7 +104,9 @@ def test_a_killed_dask_worker_changes_nothing(tmp_path, capsys):
     local_failures = sorted(p.name for p in (tmp_path / "local" / "failures").iterdir())
     assert sorted(p.name for p in (tmp_path / "dask" / "failures").iterdir()) == local_failures
     for name in local_failures:
-        assert (tmp_path / "dask" / "failures" / name).read_bytes() == (tmp_path / "local" / "failures" / name).read_bytes()
+        assert (tmp_path / "dask" / "failures" / name).read_bytes() == (
+            tmp_path / "local" / "failures" / name
+        ).read_bytes()
     time.sleep(0.5)
     assert not psutil.pid_exists(victim.pid) or victim.status() == psutil.STATUS_ZOMBIE
 
@@ -78,8 +116,10 @@ def test_twin_check_runs_mcap_and_sweep_goldens_on_dask(tmp_path, capsys):
     folder.mkdir()
     assert main(["run", "pick_place", "--cycles", "1", "--record", str(folder / "a.mcap")]) == 0
     assert main(["run", "seed002", "--robot", "seed002", "--record", str(folder / "b.mcap")]) == 0
-    (folder / "s.toml").write_text('task = "pick_place"\nscenarios = 8\nseed = 4\n[params]\ncycles = 1\n'
-                                   'pause_s = 0.1\n[vary]\n"box.x_m" = "uniform(0.19, 0.21)"\n')
+    (folder / "s.toml").write_text(
+        'task = "pick_place"\nscenarios = 8\nseed = 4\n[params]\ncycles = 1\n'
+        'pause_s = 0.1\n[vary]\n"box.x_m" = "uniform(0.19, 0.21)"\n'
+    )
     assert main(["check", str(folder / "s.toml"), "--update"]) == 0  # written by the local executor
     capsys.readouterr()
     assert main(["check", str(folder), "--executor", "dask", "--jobs", "2"]) == 0

@@ -1,8 +1,8 @@
-"""twin.sweep.cluster on real Dask: a local cluster that only this process's client can use (TLS with
-a throwaway certificate; a foreign client, plain or with its own certificate, is refused) and that
-serves no HTTP unless asked; connect() failing in bounded time on a port that is not Dask's; and a
-cluster secured with the user's own certificates (`dask scheduler` / `dask worker` with --tls-*)
-reached through Dask's configuration in environment variables."""
+"""twin.sweep.cluster on real Dask: a local cluster that only this process's client can use (TLS
+with a throwaway certificate; a foreign client, plain or with its own certificate, is refused) and
+that serves no HTTP unless asked; connect() failing in bounded time on a port that is not Dask's;
+and a cluster secured with the user's own certificates (`dask scheduler` / `dask worker` with
+--tls-*) reached through Dask's configuration in environment variables."""
 
 from __future__ import annotations
 
@@ -29,11 +29,16 @@ from distributed.security import Security
 from twin.errors import ConfigError
 from twin.sweep.cluster import connect, start_local
 
-DASHBOARD_PORT = 8787  # Dask's default HTTP port: its scheduler served /metrics, /health, /info there
+# Dask's default HTTP port: its scheduler served /metrics, /health, /info there
+DASHBOARD_PORT = 8787
 
 
 def _listening(pid: int) -> set[int]:
-    return {c.laddr.port for c in psutil.Process(pid).net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+    return {
+        c.laddr.port
+        for c in psutil.Process(pid).net_connections(kind="inet")
+        if c.status == psutil.CONN_LISTEN
+    }
 
 
 def _port(address: str) -> int:
@@ -55,6 +60,7 @@ def local():
 def _refused(address: str, **connection_args) -> str:
     """Connect to a Dask server and ask who it is, as a foreign process would: the error text (the
     test fails if it answers)."""
+
     async def ask():
         comm = await comm_connect(address, timeout=3, **connection_args)
         try:
@@ -74,20 +80,26 @@ def test_only_the_clusters_own_client_gets_in(local):
     address = cluster.scheduler_address
     assert address.startswith("tls://127.0.0.1:")
     assert cluster.security.require_encryption
-    assert client.submit(lambda x: x * 2, 21).result(timeout=30) == 42  # the cluster's own client runs a task
+    # the cluster's own client runs a task
+    assert client.submit(lambda x: x * 2, 21).result(timeout=30) == 42
 
     plain = "tcp://" + address.removeprefix("tls://")
     stranger = Security.temporary()  # a certificate of its own: a different CA
-    for label, target, kwargs in (("plain tcp", plain, {}), ("own Security.temporary()", address, {"security": stranger})):
+    for label, target, kwargs in (
+        ("plain tcp", plain, {}),
+        ("own Security.temporary()", address, {"security": stranger}),
+    ):
         start = time.monotonic()
-        with pytest.raises(OSError):  # CommClosedError (reset by the TLS server), FatalCommClosedError (certificate)
+        # CommClosedError (reset by the TLS server), FatalCommClosedError (certificate)
+        with pytest.raises(OSError):
             Client(target, timeout=3, set_as_default=False, **kwargs)
         assert time.monotonic() - start < 5, label
 
     nannies = [w.address for w in cluster.workers.values()]
     workers = list(client.scheduler_info()["workers"])
     assert len(nannies) == len(workers) == 2
-    for target in [address, *nannies, *workers]:  # not one of the cluster's servers answers a stranger
+    # not one of the cluster's servers answers a stranger
+    for target in [address, *nannies, *workers]:
         assert target.startswith("tls://127.0.0.1:")
         _refused("tcp://" + target.removeprefix("tls://"))
         assert "TLS" in _refused(target, **stranger.get_connection_args("client"))
@@ -125,13 +137,19 @@ def test_the_dashboard_when_asked_is_on_loopback_on_a_free_port():
 def _worker_state(dask_worker):
     import dask
 
-    return (os.getpid(), type(dask_worker).__name__, dask_worker.services,
-            dask.config.get("distributed.worker.profile.enabled"), os.environ.get("OMP_NUM_THREADS"))
+    return (
+        os.getpid(),
+        type(dask_worker).__name__,
+        dask_worker.services,
+        dask.config.get("distributed.worker.profile.enabled"),
+        os.environ.get("OMP_NUM_THREADS"),
+    )
 
 
 def test_a_worker_the_nanny_restarts_is_the_same():
     """Killed, a worker process is started again by its nanny: still TLS, no HTTP server, the
-    configuration start_local set (a nanny's copy of it was reverted with dask.config.set's context)."""
+    configuration start_local set (a nanny's copy of it was reverted with dask.config.set's
+    context)."""
     cluster, client, _ = start_local(1, preload=())
     try:
         (first,) = client.run(_worker_state).values()
@@ -155,7 +173,8 @@ def test_a_worker_the_nanny_restarts_is_the_same():
 
 @pytest.fixture
 def mute_port():
-    """A TCP port that accepts connections and never answers, or answers bytes that are not Dask's."""
+    """A TCP port that accepts connections and never answers, or answers bytes that are not
+    Dask's."""
     servers = []
 
     def make(answer: bytes = b"") -> str:
@@ -192,8 +211,11 @@ def test_connect_to_a_port_that_never_answers_fails_within_bounds(mute_port):
     assert "\n" not in text and address in text and "did not answer Dask's handshake" in text
 
 
-@pytest.mark.parametrize("answer", [b"HTTP/1.0 200 OK\r\n\r\nhello" * 10, (1 << 20).to_bytes(8, "little")],
-                         ids=["junk", "a length, then nothing"])
+@pytest.mark.parametrize(
+    "answer",
+    [b"HTTP/1.0 200 OK\r\n\r\nhello" * 10, (1 << 20).to_bytes(8, "little")],
+    ids=["junk", "a length, then nothing"],
+)
 def test_connect_to_a_port_that_speaks_something_else_fails_within_bounds(mute_port, answer):
     address = mute_port(answer)
     start = time.monotonic()
@@ -228,9 +250,13 @@ def test_connect_over_tls_takes_the_certificates_from_dasks_configuration(local)
     assert address in str(err.value) and "DASK_DISTRIBUTED__COMM__TLS__CA_FILE" in str(err.value)
 
     sec = cluster.security  # Dask's configuration takes PEM text as well as file names
-    with dask.config.set({"distributed.comm.tls.ca-file": sec.tls_ca_file,
-                          "distributed.comm.tls.client.cert": sec.tls_client_cert,
-                          "distributed.comm.tls.client.key": sec.tls_client_key}):
+    with dask.config.set(
+        {
+            "distributed.comm.tls.ca-file": sec.tls_ca_file,
+            "distributed.comm.tls.client.cert": sec.tls_client_cert,
+            "distributed.comm.tls.client.key": sec.tls_client_key,
+        }
+    ):
         worker = next(iter(local["client"].scheduler_info()["workers"]))
         with pytest.raises(ConfigError, match="is a Dask Worker, not a scheduler"):
             connect(worker, timeout_s=3)
@@ -263,13 +289,23 @@ def _certificates(folder) -> dict[str, str]:
     def make(cn: str, issuer_name=None, issuer_key=None, ca=False):
         key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
         name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
-        builder = (x509.CertificateBuilder().subject_name(name).issuer_name(issuer_name or name)
-                   .public_key(key.public_key()).serial_number(x509.random_serial_number())
-                   .not_valid_before(now - datetime.timedelta(minutes=5)).not_valid_after(now + datetime.timedelta(days=1))
-                   .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))
+        builder = (
+            x509.CertificateBuilder()
+            .subject_name(name)
+            .issuer_name(issuer_name or name)
+            .public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(now - datetime.timedelta(minutes=5))
+            .not_valid_after(now + datetime.timedelta(days=1))
+            .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True)
+        )
         if not ca:
-            builder = builder.add_extension(x509.SubjectAlternativeName(
-                [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]), critical=False)
+            builder = builder.add_extension(
+                x509.SubjectAlternativeName(
+                    [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+                ),
+                critical=False,
+            )
         cert = builder.sign(issuer_key or key, hashes.SHA256())
         return key, cert
 
@@ -278,8 +314,14 @@ def _certificates(folder) -> dict[str, str]:
     for role in ("scheduler", "worker", "client"):
         key, cert = make(f"dask-{role}", ca_cert.subject, ca_key)
         write(role, cert.public_bytes(serialization.Encoding.PEM))
-        write(f"{role}-key", key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
-                                               serialization.NoEncryption()))
+        write(
+            f"{role}-key",
+            key.private_bytes(
+                serialization.Encoding.PEM,
+                serialization.PrivateFormat.PKCS8,
+                serialization.NoEncryption(),
+            ),
+        )
     return files
 
 
@@ -302,7 +344,8 @@ try:
 except ConfigError as err:
     print("ConfigError:", err)
     sys.exit(3)
-print(client.submit(lambda x: x + 1, 41, pure=False).result(timeout=30), len(client.scheduler_info()["workers"]))
+workers = len(client.scheduler_info()["workers"])
+print(client.submit(lambda x: x + 1, 41, pure=False).result(timeout=30), workers)
 client.close()
 """
 
@@ -313,46 +356,108 @@ def test_a_cluster_with_the_users_certificates(tmp_path):
     scheduler_file = tmp_path / "scheduler.json"
     log = (tmp_path / "scheduler.log").open("w")
     scheduler = subprocess.Popen(
-        [*dask_cli, "--protocol", "tls", "--host", "127.0.0.1", "--port", "0", "--dashboard-address", "127.0.0.1:0",
-         "--tls-ca-file", pki["ca"], "--tls-cert", pki["scheduler"], "--tls-key", pki["scheduler-key"],
-         "--scheduler-file", str(scheduler_file)], stdout=log, stderr=subprocess.STDOUT)
+        [
+            *dask_cli,
+            "--protocol",
+            "tls",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--dashboard-address",
+            "127.0.0.1:0",
+            "--tls-ca-file",
+            pki["ca"],
+            "--tls-cert",
+            pki["scheduler"],
+            "--tls-key",
+            pki["scheduler-key"],
+            "--scheduler-file",
+            str(scheduler_file),
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
     worker = None
     try:
         deadline = time.monotonic() + 30
         while not scheduler_file.exists() or not scheduler_file.read_text().strip():
-            assert scheduler.poll() is None and time.monotonic() < deadline, (tmp_path / "scheduler.log").read_text()
+            assert scheduler.poll() is None and time.monotonic() < deadline, (
+                tmp_path / "scheduler.log"
+            ).read_text()
             time.sleep(0.1)
         address = json.loads(scheduler_file.read_text())["address"]
         assert address.startswith("tls://127.0.0.1:")
         worker = subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1", "--nthreads", "1",
-             "--host", "127.0.0.1", "--no-dashboard",
-             "--tls-ca-file", pki["ca"], "--tls-cert", pki["worker"], "--tls-key", pki["worker-key"]],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_worker",
+                address,
+                "--nworkers",
+                "1",
+                "--nthreads",
+                "1",
+                "--host",
+                "127.0.0.1",
+                "--no-dashboard",
+                "--tls-ca-file",
+                pki["ca"],
+                "--tls-cert",
+                pki["worker"],
+                "--tls-key",
+                pki["worker-key"],
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
 
-        env = {**os.environ, "DASK_DISTRIBUTED__COMM__TLS__CA_FILE": pki["ca"],
-               "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT": pki["client"],
-               "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY": pki["client-key"]}
+        env = {
+            **os.environ,
+            "DASK_DISTRIBUTED__COMM__TLS__CA_FILE": pki["ca"],
+            "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT": pki["client"],
+            "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY": pki["client-key"],
+        }
         while True:  # the worker registers in a second or two
-            done = subprocess.run([sys.executable, "-c", CLIENT, address], capture_output=True, text=True, env=env,
-                                  timeout=60, check=False)
+            done = subprocess.run(
+                [sys.executable, "-c", CLIENT, address],
+                capture_output=True,
+                text=True,
+                env=env,
+                timeout=60,
+                check=False,
+            )
             assert done.returncode == 0, done.stdout + done.stderr
             if done.stdout.split() == ["42", "1"] or time.monotonic() > deadline:
                 break
         assert done.stdout.split() == ["42", "1"], done.stdout + done.stderr
 
-        # without the certificates: connect() says what to configure, and the scheduler refuses them anyway
+        # without the certificates: connect() says what to configure, and the scheduler refuses them
+        # anyway
         bare = {k: v for k, v in env.items() if not k.startswith("DASK_DISTRIBUTED__COMM__TLS__")}
-        done = subprocess.run([sys.executable, "-c", CLIENT, address], capture_output=True, text=True, env=bare,
-                              timeout=60, check=False)
-        assert done.returncode == 3 and "must name the cluster's CA" in done.stdout, done.stdout + done.stderr
+        done = subprocess.run(
+            [sys.executable, "-c", CLIENT, address],
+            capture_output=True,
+            text=True,
+            env=bare,
+            timeout=60,
+            check=False,
+        )
+        assert done.returncode == 3 and "must name the cluster's CA" in done.stdout, (
+            done.stdout + done.stderr
+        )
         host, port = address.removeprefix("tls://").rsplit(":", 1)
-        anonymous = ssl.create_default_context(cafile=pki["ca"])  # trusts the CA, shows no certificate of its own
+        # trusts the CA, shows no certificate of its own
+        anonymous = ssl.create_default_context(cafile=pki["ca"])
         anonymous.check_hostname = False
-        with pytest.raises(ssl.SSLError), socket.create_connection((host, int(port)), timeout=5) as raw, \
-                anonymous.wrap_socket(raw) as tls:
+        with (
+            pytest.raises(ssl.SSLError),
+            socket.create_connection((host, int(port)), timeout=5) as raw,
+            anonymous.wrap_socket(raw) as tls,
+        ):
             tls.sendall(b"\0" * 8)
-            tls.recv(1)  # TLS 1.3: the server's refusal of the missing client certificate arrives here
+            # TLS 1.3: the server's refusal of the missing client certificate arrives here
+            tls.recv(1)
         assert "TLS" in _refused(address, **Security.temporary().get_connection_args("client"))
         _refused("tcp://" + address.removeprefix("tls://"))
     finally:

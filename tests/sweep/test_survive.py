@@ -38,12 +38,26 @@ def run(twin, k: float = 0.0):
 '''
 
 
-def _task(tmp_path, *, crash: int | None = None, hang: int | None = None, name: str = "task.py") -> list[str]:
-    """A task file whose scenario `crash` kills its process and `hang` hangs; the sweep's arguments."""
+def _task(
+    tmp_path, *, crash: int | None = None, hang: int | None = None, name: str = "task.py"
+) -> list[str]:
+    """A task file whose scenario `crash` kills its process and `hang` hangs; the sweep's
+    arguments."""
     path = tmp_path / name
     path.write_text(TASK.format(crash=None, hang=None))
-    args = [str(path), "--scenarios", str(SCENARIOS), "--seed", "3", "--vary", "task.k=uniform(0,1)", "--quiet"]
-    prep = prepare(SweepSpec(task=str(path), scenarios=SCENARIOS, seed=3, vary=(("task.k", "uniform(0,1)"),)))
+    args = [
+        str(path),
+        "--scenarios",
+        str(SCENARIOS),
+        "--seed",
+        "3",
+        "--vary",
+        "task.k=uniform(0,1)",
+        "--quiet",
+    ]
+    prep = prepare(
+        SweepSpec(task=str(path), scenarios=SCENARIOS, seed=3, vary=(("task.k", "uniform(0,1)"),))
+    )
     sampler = RandomSampler(3, prep.keys)
 
     def k(i):
@@ -72,37 +86,65 @@ def test_a_scenario_that_kills_its_process_is_one_named_failure(tmp_path, capsys
     assert main(["recover", str(partial.with_suffix(""))]) == 0
     assert main(["info", str(partial.with_suffix(""))]) == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert summary["ok"] == SCENARIOS - 1 and summary["failures_by_reason"] == {"worker died: exit code #": 1}
+    assert summary["ok"] == SCENARIOS - 1 and summary["failures_by_reason"] == {
+        "worker died: exit code #": 1
+    }
 
 
 def test_a_hung_scenario_ends_at_the_wall_clock_limit(tmp_path, capsys):
     args = _task(tmp_path, hang=4)
-    assert main(["sweep", *args, "-j", "2", "--scenario-timeout", "2", "--out", str(tmp_path / "out")]) == 0
+    assert (
+        main(["sweep", *args, "-j", "2", "--scenario-timeout", "2", "--out", str(tmp_path / "out")])
+        == 0
+    )
     rows = _rows(tmp_path / "out")
     assert [(r["scenario"], r["error"]) for r in rows if r["outcome"] != "ok"] == [
-        (4, "timed out: no result after 2 s of wall time")]
+        (4, "timed out: no result after 2 s of wall time")
+    ]
     assert "scenario 4: timed out: no result after 2 s of wall time" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "x"])
 def test_a_bad_scenario_timeout_is_refused(tmp_path, capsys, value):
-    assert main(["sweep", "pick_place", "--scenarios", "2", "--scenario-timeout", value, "--out",
-                 str(tmp_path / "o")]) == 2
+    assert (
+        main(
+            [
+                "sweep",
+                "pick_place",
+                "--scenarios",
+                "2",
+                "--scenario-timeout",
+                value,
+                "--out",
+                str(tmp_path / "o"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
-    assert f"--scenario-timeout {value!r} is invalid; expected seconds > 0" in err and err.count("\n") == 1
+    assert (
+        f"--scenario-timeout {value!r} is invalid; expected seconds > 0" in err
+        and err.count("\n") == 1
+    )
 
 
 def _sweep(args, out, *extra) -> subprocess.Popen:
     """The sweep as a command, with Ctrl-C delivered as in a terminal."""
-    return subprocess.Popen([sys.executable, "-m", "twin", "sweep", *args, "-j", "2", "--out", str(out), *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
+    return subprocess.Popen(
+        [sys.executable, "-m", "twin", "sweep", *args, "-j", "2", "--out", str(out), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # noqa: PLW1509
+    )
 
 
 def _wait_rows(journal, n: int, proc: subprocess.Popen) -> None:
     deadline = time.monotonic() + 120
     while not (journal.exists() and journal.read_bytes().count(b"\n") > n):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.stderr else ""
+        assert proc.poll() is None and time.monotonic() < deadline, (
+            proc.stderr.read() if proc.stderr else ""
+        )
         time.sleep(0.02)
 
 
@@ -122,13 +164,28 @@ def test_kill_9_leaves_no_process_and_resume_completes_to_the_same_results(tmp_p
     assert not (tmp_path / "cut" / "results.parquet").exists()
     with (tmp_path / "cut" / "journal.jsonl").open("ab") as f:
         f.write(b'{"scenario": 1')  # a line cut short by the kill
-    assert main(["sweep", str(tmp_path / "cut" / "sweep.toml"), "--out", str(tmp_path / "cut"), "--resume",
-                 "-j", "2", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(tmp_path / "cut" / "sweep.toml"),
+                "--out",
+                str(tmp_path / "cut"),
+                "--resume",
+                "-j",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert "resuming: " in capsys.readouterr().err
     assert _rows(tmp_path / "cut") == _rows(tmp_path / "whole")
     whole, cut = (json.loads((tmp_path / f / "summary.json").read_text()) for f in ("whole", "cut"))
     assert cut == whole
-    assert sorted(p.name for p in (tmp_path / "cut" / "failures").iterdir()) == [f"scenario-{BAD}.mcap.partial"]
+    assert sorted(p.name for p in (tmp_path / "cut" / "failures").iterdir()) == [
+        f"scenario-{BAD}.mcap.partial"
+    ]
 
 
 def test_resume_refuses_another_definition_and_no_journal(tmp_path, capsys):
@@ -145,8 +202,10 @@ def test_resume_refuses_another_definition_and_no_journal(tmp_path, capsys):
     assert "--only and --resume cannot go together" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("line", [b"[" * 100_000 + b"]" * 100_000, b'{"scenario": 1, "values": ' + b"[" * 70
-                                  + b"]" * 70 + b"}"])
+@pytest.mark.parametrize(
+    "line",
+    [b"[" * 100_000 + b"]" * 100_000, b'{"scenario": 1, "values": ' + b"[" * 70 + b"]" * 70 + b"}"],
+)
 def test_resume_calls_a_deeply_nested_journal_line_damaged(tmp_path, capsys, line):
     args = _task(tmp_path)
     assert main(["sweep", *args, "--scenarios", "2", "-j", "1", "--out", str(tmp_path / "a")]) == 0
@@ -160,11 +219,25 @@ def test_resume_calls_a_deeply_nested_journal_line_damaged(tmp_path, capsys, lin
 
 def test_ctrl_c_stops_a_10m_scenario_sweep_with_its_results(tmp_path):
     out = tmp_path / "big"
-    proc = _sweep(["pick_place", "--scenarios", "10000000", "--vary", "box.x_m=uniform(0.19,0.21)", "--param",
-                   "cycles=1", "--save", "none", "--quiet"], out)
+    proc = _sweep(
+        [
+            "pick_place",
+            "--scenarios",
+            "10000000",
+            "--vary",
+            "box.x_m=uniform(0.19,0.21)",
+            "--param",
+            "cycles=1",
+            "--save",
+            "none",
+            "--quiet",
+        ],
+        out,
+    )
     _wait_rows(out / "journal.jsonl", 4, proc)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)  # a deadlock fails here (bench: sweep_scale times the stop)
+    # a deadlock fails here (bench: sweep_scale times the stop)
+    _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] and summary["planned"] == 10_000_000 and summary["scenarios"] >= 4
@@ -175,7 +248,12 @@ def test_ctrl_c_stops_a_10m_scenario_sweep_with_its_results(tmp_path):
 @pytest.mark.slow
 def test_on_dask_too_a_crashing_scenario_is_one_named_failure(tmp_path, capsys):
     args = _task(tmp_path, crash=BAD)
-    assert main(["sweep", *args, "--executor", "dask", "--jobs", "2", "--out", str(tmp_path / "out")]) == 0
+    assert (
+        main(["sweep", *args, "--executor", "dask", "--jobs", "2", "--out", str(tmp_path / "out")])
+        == 0
+    )
     rows = _rows(tmp_path / "out")
-    assert [(r["scenario"], r["error"]) for r in rows if r["outcome"] != "ok"] == [(BAD, "worker died: exit code 7")]
+    assert [(r["scenario"], r["error"]) for r in rows if r["outcome"] != "ok"] == [
+        (BAD, "worker died: exit code 7")
+    ]
     assert len(rows) == SCENARIOS

@@ -27,10 +27,12 @@ from twin.tasks.pick_place import POINT_A_M
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out
 
 MAX_ERROR_M = 0.002
-# What the twin gives now (README): at most 0.1 um of placement drift and 0.0002 deg of yaw per cycle.
+# What the twin gives now (README): at most 0.1 um of placement drift and 0.0002 deg of yaw per
+# cycle.
 DRIFT_LIMIT_M_PER_CYCLE = 1e-6  # ten times the measured drift
 YAW_LIMIT_RAD_PER_CYCLE = math.radians(0.002)
-# A task file that first carries the box off pick_place's pick point, so its first pick finds nothing.
+# A task file that first carries the box off pick_place's pick point, so its first pick finds
+# nothing.
 MOVED_BOX_TASK = """
 from twin.tasks import pick_place
 
@@ -70,7 +72,11 @@ def _placed(robot: str, cycles: int, **params) -> list:
         run_task(t, TASKS["pick_place"], {"cycles": cycles, **params})
     finally:
         t.close()
-    kinds = [e.kind for e in sink.events if e.kind in ("attach", "release", "placed", "suction_empty", "break")]
+    kinds = [
+        e.kind
+        for e in sink.events
+        if e.kind in ("attach", "release", "placed", "suction_empty", "break")
+    ]
     assert kinds == ["attach", "release", "placed"] * cycles
     return [e for e in sink.events if e.kind == "placed"]
 
@@ -92,8 +98,14 @@ def test_five_hundred_cycles_stay_within_2_mm():
 
 
 def test_twin_run_200_cycles_keeps_every_placement_within_2_mm(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "200", "--no-record"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=600, check=False)
+    done = subprocess.run(
+        [sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "200", "--no-record"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     worst = re.search(r"placement error: worst ([\d.]+) mm over 200 cycle\(s\)", done.stdout)
     assert worst and float(worst.group(1)) < 2.0, done.stdout[-2000:]
@@ -118,7 +130,8 @@ def test_a_box_set_on_the_floor_stays_where_it_lands(drop_m):
 
 
 def _moved_box_twin(sink) -> Twin:
-    """The default scene but the box 60 mm off pick_place's first pick point (out of the pad's ray)."""
+    """The default scene but the box 60 mm off pick_place's first pick point (out of the pad's
+    ray)."""
     box = SceneObject("box", pos_m=(POINT_A_M[0] + 0.06, POINT_A_M[1], 0.025))
     return Twin(TwinConfig(objects=(box,)), sinks=[sink])
 
@@ -139,11 +152,18 @@ def test_a_pick_that_senses_nothing_fails_the_task_naming_the_cycle():
 def test_a_hold_that_breaks_at_the_pick_fails_the_task_and_places_nothing():
     """The break golden's scene: a 0.5 kg box on the stock finite-strength pad."""
     sink = _Events()
-    heavy = TwinConfig(objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False))
+    heavy = TwinConfig(
+        objects=(SceneObject("box", mass_kg=0.5),), suction=SuctionParams(infinite_strength=False)
+    )
     t = Twin(heavy, sinks=[sink])
     with pytest.raises(TaskError, match=r"^cycle 1: suction on at \(0\.2, 0\.7\), the hold broke$"):
         run_task(t, TASKS["pick_place"], {"cycles": 1})
-    assert [e.kind for e in sink.events if e.kind != "phase"] == ["task_start", "attach", "break", "task_error"]
+    assert [e.kind for e in sink.events if e.kind != "phase"] == [
+        "task_start",
+        "attach",
+        "break",
+        "task_error",
+    ]
     t.close()
 
 
@@ -162,10 +182,17 @@ def test_keep_going_records_each_failed_cycle_and_places_nothing():
 def test_a_placement_beyond_the_limit_fails_after_reporting_it():
     sink = _Events()
     t = Twin(TwinConfig(), sinks=[sink])
-    with pytest.raises(TaskError, match=r"^cycle 1: placed 0\.\d{3,} mm from \(-0\.3, -0\.55\), beyond 1e-06 mm$"):
+    with pytest.raises(
+        TaskError, match=r"^cycle 1: placed 0\.\d{3,} mm from \(-0\.3, -0\.55\), beyond 1e-06 mm$"
+    ):
         run_task(t, TASKS["pick_place"], {"cycles": 2, "max_error_m": 1e-9})
     assert [e.kind for e in sink.events if e.kind not in ("phase",)] == [
-        "task_start", "attach", "release", "placed", "task_error"]
+        "task_start",
+        "attach",
+        "release",
+        "placed",
+        "task_error",
+    ]
     t.close()
 
 
@@ -173,13 +200,21 @@ def test_twin_run_exits_1_at_the_first_miss_and_records_outcome_error(tmp_path):
     task = tmp_path / "moved_box.py"
     task.write_text(MOVED_BOX_TASK)
     out = tmp_path / "miss.mcap"
-    done = subprocess.run([sys.executable, "-m", "twin.cli", "run", str(task), "--cycles", "3", "--record", str(out)],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False)
+    done = subprocess.run(
+        [sys.executable, "-m", "twin.cli", "run", str(task), "--cycles", "3", "--record", str(out)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 1
     assert done.stderr == "twin: error: cycle 1: suction on at (0.2, 0.7), nothing sensed\n"
     assert "placed" not in done.stdout
     rec = twin.load(out)
     assert rec.finalized and rec.meta[S.META_FINALIZED]["outcome"] == "error"
     assert [e.kind for e in rec.events if e.kind in ("suction_empty", "placed", "task_error")] == [
-        "suction_empty", "task_error"]
+        "suction_empty",
+        "task_error",
+    ]
     assert Path(out).stat().st_size > 0

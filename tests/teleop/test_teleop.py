@@ -1,5 +1,5 @@
-"""Scripted teleop (--keys): a pick and a place on the seeds' 1-degree key grid, recorded and replayed
-exactly; unknown keys, joint limits and bad options."""
+"""Scripted teleop (--keys): a pick and a place on the seeds' 1-degree key grid, recorded and
+replayed exactly; unknown keys, joint limits and bad options."""
 
 import math
 import re
@@ -41,14 +41,24 @@ def key_script(profile_name, pick, place):
         d1, d2 = to[0] - frm[0], to[1] - frm[1]
         return [up1 if d1 > 0 else down1] * abs(d1) + [up2 if d2 > 0 else down2] * abs(d2)
 
-    keys = moves((0, 0), pick) + MAPS[profile_name]["pick"] + moves(pick, place) + MAPS[profile_name]["place"]
+    keys = (
+        moves((0, 0), pick)
+        + MAPS[profile_name]["pick"]
+        + moves(pick, place)
+        + MAPS[profile_name]["place"]
+    )
     return " ".join(keys)
 
 
 def _scripted(robot, keys, interval_s=0.5, record=None):
     collector = FrameCollector()
-    opts = TeleopOptions(robot=robot, keys=keys, key_interval_s=interval_s, record_path=record,
-                         extra_sinks=[collector])
+    opts = TeleopOptions(
+        robot=robot,
+        keys=keys,
+        key_interval_s=interval_s,
+        record_path=record,
+        extra_sinks=[collector],
+    )
     session = run_teleop(opts)
     return session, collected(collector, teleop_config(opts), {"source": "teleop"})
 
@@ -59,7 +69,9 @@ def _assert_replays_exactly(rec):
     assert again.commands == rec.commands
 
     def kinds(events):
-        return [(e.step, e.kind, e.body, e.message) for e in events if e.kind in REPLAYED_EVENT_KINDS]
+        return [
+            (e.step, e.kind, e.body, e.message) for e in events if e.kind in REPLAYED_EVENT_KINDS
+        ]
 
     assert kinds(again.events) == kinds(rec.events)
 
@@ -75,20 +87,29 @@ def test_scripted_pick_and_place_on_the_key_grid_replays_exactly(robot, tmp_path
     kinds = [e.kind for e in rec.events]
     assert kinds.count("attach") == 1 and kinds.count("release") == 1 and "key_unknown" not in kinds
     box = session.twin.frame.object_poses[0]
-    # The box lands where the grid puts it (within 2 mm of the prediction: suction sensing and the drop)
-    # and within 5 mm of the place point.
+    # The box lands where the grid puts it (within 2 mm of the prediction: suction sensing and the
+    # drop) and within 5 mm of the place point.
     assert math.dist(box[:2], predicted_m) < 0.002
     assert math.dist(box[:2], POINT_B_M) < 0.005
     assert abs(box[2] - 0.025) < 1e-3 and rec.frames.held_body[-1] == -1
-    # every key press is one "key" Command stamped with the step it took effect at, one interval apart
+    # every key press is one "key" Command stamped with the step it took effect at, one interval
+    # apart
     tokens = script.split()
     keys = [c for c in rec.commands if c.kind == "key"]
     assert [c.args["key"] for c in keys] == [t for t in tokens if t != "wait"]
-    assert [c.step for c in keys] == [STEPS_PER_KEY * i for i, t in enumerate(tokens) if t != "wait"]
-    assert len(rec.frames) == STEPS_PER_KEY * len(tokens) + 1  # the interval runs once more after the last key
-    # the file holds the session (config with the key map, every frame and command) and `twin replay` matches it
+    assert [c.step for c in keys] == [
+        STEPS_PER_KEY * i for i, t in enumerate(tokens) if t != "wait"
+    ]
+    # the interval runs once more after the last key
+    assert len(rec.frames) == STEPS_PER_KEY * len(tokens) + 1
+    # the file holds the session (config with the key map, every frame and command) and `twin
+    # replay` matches it
     loaded = load(path)
-    assert loaded.finalized and loaded.run["source"] == "teleop" and loaded.config.keymap == rec.config.keymap
+    assert (
+        loaded.finalized
+        and loaded.run["source"] == "teleop"
+        and loaded.config.keymap == rec.config.keymap
+    )
     assert loaded.frames.equals(rec.frames) and loaded.commands == rec.commands
     assert main(["replay", str(path)]) == 0
     assert capsys.readouterr().out.startswith("MATCH")
@@ -98,9 +119,14 @@ def test_unknown_key_is_ignored_shown_and_replayed():
     session, rec = _scripted("seed001", "left z 3")
     unknown = [e for e in rec.events if e.kind == "key_unknown"]
     assert len(unknown) == 1 and unknown[0].step == 120 and unknown[0].data == {"key": "z"}
-    assert rec.frames.joint_target[240].tolist() == rec.frames.joint_target[239].tolist()  # nothing moved for z
+    # nothing moved for z
+    assert rec.frames.joint_target[240].tolist() == rec.frames.joint_target[239].tolist()
     screen = "\n".join(status_lines(session))
-    assert "last keys left z(unknown) 3" in screen and "key_unknown" in screen and "'z' is not in the key map" in screen
+    assert (
+        "last keys left z(unknown) 3" in screen
+        and "key_unknown" in screen
+        and "'z' is not in the key map" in screen
+    )
     assert "1 not in the key map" in summary_lines(session)[0]
     _assert_replays_exactly(rec)
 
@@ -112,8 +138,10 @@ def test_joint_driven_past_its_limit_stops_there_with_an_event():
     session, rec = _scripted("mtb", f"D*{presses}", interval_s=0.05)
     limits = [e for e in rec.events if e.kind == "joint_limit"]
     assert len(limits) == presses - int(limit_deg)
-    assert all(e.data["joint"] == "MTB_axis1" and e.data["limit"] == pytest.approx(math.radians(limit_deg))
-               for e in limits)
+    assert all(
+        e.data["joint"] == "MTB_axis1" and e.data["limit"] == pytest.approx(math.radians(limit_deg))
+        for e in limits
+    )
     q = session.twin.frame.joint_q
     assert math.degrees(q[0]) == pytest.approx(limit_deg, abs=0.05)
     # the wrist stopped turning with the shoulder, so the pad kept its heading
@@ -131,17 +159,27 @@ def test_quit_key_in_a_script_ends_the_session_there():
 
 
 def _cli(*args, env=None, timeout=60):
-    return subprocess.run([sys.executable, "-m", "twin.cli", "teleop", *args], check=False, capture_output=True,
-                          text=True, timeout=timeout, env=env, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [sys.executable, "-m", "twin.cli", "teleop", *args],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        stdin=subprocess.DEVNULL,
+    )
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--keys", "d dd"], "--keys token 'dd' is not a key"),
-    (["--keys", "d", "--key-interval", "0"], "--key-interval 0.0 s is invalid"),
-    (["--keys", "d", "--key-interval", "nan"], "--key-interval nan s is invalid"),
-    (["--keys", "d", "--robot", "seed9"], "unknown robot 'seed9'"),
-    (["--keys", "d", "--record", "x.txt"], "should end in .mcap"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--keys", "d dd"], "--keys token 'dd' is not a key"),
+        (["--keys", "d", "--key-interval", "0"], "--key-interval 0.0 s is invalid"),
+        (["--keys", "d", "--key-interval", "nan"], "--key-interval nan s is invalid"),
+        (["--keys", "d", "--robot", "seed9"], "unknown robot 'seed9'"),
+        (["--keys", "d", "--record", "x.txt"], "should end in .mcap"),
+    ],
+)
 def test_bad_options_are_one_line_and_exit_2(args, message, capsys):
     assert main(["teleop", *args]) == 2
     err = capsys.readouterr().err
@@ -157,7 +195,10 @@ def test_the_screen_without_a_terminal_is_one_line_and_exit_2():
 def test_cli_scripted_session_prints_a_summary():
     out = _cli("--robot", "seed000", "--keys", "d*2 e 5 8 s", "--key-interval", "0.2")
     assert out.returncode == 0, out.stderr
-    assert "teleop (scripted) robot seed000: 6 key presses (0 not in the key map), 288 steps" in out.stdout
+    assert (
+        "teleop (scripted) robot seed000: 6 key presses (0 not in the key map), 288 steps"
+        in out.stdout
+    )
     assert "box final pose" in out.stdout
 
 
@@ -169,7 +210,8 @@ def test_teleop_config_carries_the_keymap():
 
 
 def test_paced_script_runs_in_real_time_with_the_same_commands():
-    """With a window (--gui) a script is paced to wall-clock time; the Commands and Frames are the same."""
+    """With a window (--gui) a script is paced to wall-clock time; the Commands and Frames are the
+    same."""
     _, fast = _scripted("mtb", "d k wait", interval_s=0.1)
     config = teleop_config(TeleopOptions(robot="mtb"))
     collector = FrameCollector()
@@ -185,7 +227,9 @@ def test_paced_script_runs_in_real_time_with_the_same_commands():
 
 def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
     readme = (Path(__file__).resolve().parents[2] / "docs/how-to/teleop.md").read_text()
-    line = next(x for x in readme.splitlines() if x.startswith("twin teleop --robot seed000 --keys"))
+    line = next(
+        x for x in readme.splitlines() if x.startswith("twin teleop --robot seed000 --keys")
+    )
     keys = line.split('"')[1]
     out = _cli("--robot", "seed000", "--keys", keys, "--record", str(tmp_path / "keys000.mcap"))
     assert out.returncode == 0, out.stderr
@@ -199,8 +243,11 @@ def test_report_000s_own_keys_from_the_readme_pick_and_place_the_box(tmp_path):
 @pytest.mark.parametrize("robot", ["seed001", "seed000"])
 def test_a_keys_run_prints_how_far_the_box_ended_from_the_place_point_as_the_readme_says(robot):
     readme = (Path(__file__).resolve().parents[2] / "docs/how-to/teleop.md").read_text()
-    keys = next(x for x in readme.splitlines() if x.startswith(f"twin teleop --robot {robot} --keys")).split('"')[1]
-    said = re.search(rf"{robot}'s .*?(\d+\.\d) mm", readme, re.DOTALL).group(1)  # the README's figure for it
+    keys = next(
+        x for x in readme.splitlines() if x.startswith(f"twin teleop --robot {robot} --keys")
+    ).split('"')[1]
+    # the README's figure for it
+    said = re.search(rf"{robot}'s .*?(\d+\.\d) mm", readme, re.DOTALL).group(1)
     out = _cli("--robot", robot, "--keys", keys)
     assert out.returncode == 0, out.stderr
     assert f", {said} mm from the place point (-0.3, -0.55) in x and y" in out.stdout

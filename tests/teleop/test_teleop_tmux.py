@@ -1,5 +1,6 @@
-"""The curses teleop screen driven in a real terminal (tmux): a pick and a place with the mtb map, the screen
-read back at every stage, then quit and `twin replay` the recording with an exact match."""
+"""The curses teleop screen driven in a real terminal (tmux): a pick and a place with the mtb map,
+the screen read back at every stage, then quit and `twin replay` the recording with an exact
+match."""
 
 import math
 import os
@@ -18,10 +19,17 @@ from twin.cli import main
 from twin.record.mcap.reader import load
 from twin.tasks.pick_place import POINT_A_M, POINT_B_M
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(shutil.which("tmux") is None, reason="needs tmux (tools/setup_test_system.sh)")]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        shutil.which("tmux") is None, reason="needs tmux (tools/setup_test_system.sh)"
+    ),
+]
 
 NUMBER = r"([+-]?\d+\.\d+)"
-JOINTS = re.compile(rf"shoulder +{NUMBER} +elbow +{NUMBER} +Z {NUMBER} +wrist +{NUMBER}$", re.MULTILINE)
+JOINTS = re.compile(
+    rf"shoulder +{NUMBER} +elbow +{NUMBER} +Z {NUMBER} +wrist +{NUMBER}$", re.MULTILINE
+)
 BOX = re.compile(rf"^box +x {NUMBER} +y {NUMBER} +z {NUMBER} m", re.MULTILINE)
 
 
@@ -32,12 +40,32 @@ class Terminal:
         self.socket = f"twin-teleop-{os.getpid()}-{tmp_path.name}"
         self.status = tmp_path / "exit_status"
         env = f"HOME={shlex.quote(str(tmp_path))} TERM=xterm-256color"
-        shell = f"cd {shlex.quote(os.getcwd())} && env {env} {command}; echo $? > {shlex.quote(str(self.status))}"
-        self._tmux("new-session", "-d", "-s", "teleop", "-x", str(width), "-y", str(height), "sh", "-c", shell)
+        shell = (
+            f"cd {shlex.quote(os.getcwd())} && env {env} {command}; echo $? > "
+            f"{shlex.quote(str(self.status))}"
+        )
+        self._tmux(
+            "new-session",
+            "-d",
+            "-s",
+            "teleop",
+            "-x",
+            str(width),
+            "-y",
+            str(height),
+            "sh",
+            "-c",
+            shell,
+        )
 
     def _tmux(self, *args: str) -> str:
-        out = subprocess.run(["tmux", "-L", self.socket, "-f", os.devnull, *args], capture_output=True, text=True,
-                             timeout=10, check=True)
+        out = subprocess.run(
+            ["tmux", "-L", self.socket, "-f", os.devnull, *args],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        )
         return out.stdout
 
     def send(self, *keys: str) -> None:
@@ -65,7 +93,9 @@ class Terminal:
         return int(self.status.read_text())
 
     def close(self) -> None:
-        subprocess.run(["tmux", "-L", self.socket, "kill-server"], capture_output=True, timeout=10, check=False)
+        subprocess.run(
+            ["tmux", "-L", self.socket, "kill-server"], capture_output=True, timeout=10, check=False
+        )
 
 
 def _joints(text: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -78,12 +108,18 @@ def arrived(text: str) -> bool:
     if len(JOINTS.findall(text)) < 2:
         return False
     actual, target = _joints(text)
-    return all(abs(a - t) <= (2e-4 if i == 2 else 0.02) for i, (a, t) in enumerate(zip(actual, target, strict=True)))
+    return all(
+        abs(a - t) <= (2e-4 if i == 2 else 0.02)
+        for i, (a, t) in enumerate(zip(actual, target, strict=True))
+    )
 
 
 def arrived_at(text: str, deg: tuple[int, int]) -> bool:
-    """Arrived, with the shoulder and elbow targets at these whole degrees (every key sent has been read)."""
-    return arrived(text) and all(abs(t - d) < 0.01 for t, d in zip(_joints(text)[1][:2], deg, strict=True))
+    """Arrived, with the shoulder and elbow targets at these whole degrees (every key sent has been
+    read)."""
+    return arrived(text) and all(
+        abs(t - d) < 0.01 for t, d in zip(_joints(text)[1][:2], deg, strict=True)
+    )
 
 
 def box_xyz(text: str) -> tuple[float, float, float]:
@@ -91,11 +127,14 @@ def box_xyz(text: str) -> tuple[float, float, float]:
 
 
 def mtb_keys(delta_deg: tuple[int, int]) -> list[str]:
-    """The mtb map's keys for a shoulder/elbow move: 5-degree steps (a/d, j/l), then 1-degree steps (A/D, J/L)."""
+    """The mtb map's keys for a shoulder/elbow move: 5-degree steps (a/d, j/l), then 1-degree steps
+    (A/D, J/L)."""
     keys = []
     for delta, (minus, plus) in zip(delta_deg, (("a", "d"), ("j", "l")), strict=True):
         coarse, fine = divmod(abs(delta), 5)
-        keys += [plus if delta > 0 else minus] * coarse + [(plus if delta > 0 else minus).upper()] * fine
+        keys += [plus if delta > 0 else minus] * coarse + [
+            (plus if delta > 0 else minus).upper()
+        ] * fine
     return keys
 
 
@@ -114,10 +153,15 @@ def terminal(tmp_path):
 
 def test_curses_pick_and_place_then_replay_exactly(terminal, tmp_path, capsys):
     record = tmp_path / "teleop_mtb.mcap"
-    cmd = f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot mtb --record {shlex.quote(str(record))}"
+    cmd = (
+        f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot mtb --record "
+        f"{shlex.quote(str(record))}"
+    )
     term = terminal(cmd)
     text = term.wait_for("the start screen", lambda s: "last keys (none yet)" in s)
-    assert "quit: q, Esc, Ctrl-C, Ctrl-D" in text and "lower Z (down)" in text and "suction on" in text
+    assert (
+        "quit: q, Esc, Ctrl-C, Ctrl-D" in text and "lower Z (down)" in text and "suction on" in text
+    )
     assert math.dist(box_xyz(text)[:2], POINT_A_M) < 1e-3
 
     term.send("z")  # not in the mtb map: ignored, shown as such
@@ -154,20 +198,36 @@ def test_curses_pick_and_place_then_replay_exactly(terminal, tmp_path, capsys):
     rec = load(record)
     assert rec.finalized and rec.run["params"]["mode"] == "terminal"
     keys = [c.args["key"] for c in rec.commands if c.kind == "key"]
-    assert keys == ["z", *mtb_keys(pick), "k", "g", "i", *mtb_keys((place[0] - pick[0], place[1] - pick[1])),
-                    "k", "r", "i"]
+    assert keys == [
+        "z",
+        *mtb_keys(pick),
+        "k",
+        "g",
+        "i",
+        *mtb_keys((place[0] - pick[0], place[1] - pick[1])),
+        "k",
+        "r",
+        "i",
+    ]
     assert [e.kind for e in rec.events if e.kind in ("attach", "release", "key_unknown")] == [
-        "key_unknown", "attach", "release"]
+        "key_unknown",
+        "attach",
+        "release",
+    ]
     assert main(["replay", str(record)]) == 0
     assert capsys.readouterr().out.startswith("MATCH")
 
 
 def test_seed000_screen_ctrl_c_ends_and_keeps_the_recording(terminal, tmp_path):
     record = tmp_path / "teleop_seed000.mcap"
-    cmd = f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot seed000 --record {shlex.quote(str(record))}"
+    cmd = (
+        f"{shlex.quote(sys.executable)} -m twin.cli teleop --robot seed000 --record "
+        f"{shlex.quote(str(record))}"
+    )
     term = terminal(cmd)
     text = term.wait_for("the start screen", lambda s: "last keys (none yet)" in s)
-    assert "quit: Esc, Ctrl-C, Ctrl-D" in text and "q  elbow -1 deg" in text  # q is the elbow here, not quit
+    # q is the elbow here, not quit
+    assert "quit: Esc, Ctrl-C, Ctrl-D" in text and "q  elbow -1 deg" in text
     term.send("q", "q", "e", "Up", "d")
     text = term.wait_for("the keys", lambda s: "last keys q q e up(unknown) d" in s and arrived(s))
     assert _joints(text)[1][:2] == (1.0, -1.0)

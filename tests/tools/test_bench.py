@@ -1,4 +1,5 @@
-"""tools/bench.py: the framework runs a section against the measured baseline and prints one table."""
+"""tools/bench.py: the framework runs a section against the measured baseline and prints one
+table."""
 
 from __future__ import annotations
 
@@ -15,26 +16,44 @@ BENCH = Path(__file__).resolve().parents[2] / "tools" / "bench.py"
 
 
 def _bench(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(BENCH), *args], capture_output=True, text=True, timeout=120,
-                          check=False)
+    return subprocess.run(
+        [sys.executable, str(BENCH), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
 
 
 def test_only_twin_prints_the_baseline_and_the_twins_ratio():
-    # medians of 3: one 2000-step sample each of the idle and the moving scene could be spoiled by a busy
-    # moment of the shared machine (the idle one measured slower than the moving one in 1 of 6 runs)
+    # medians of 3: one 2000-step sample each of the idle and the moving scene could be spoiled by a
+    # busy moment of the shared machine (the idle one measured slower than the moving one in 1 of 6
+    # runs)
     done = _bench("--only", "twin", "--repeats", "3", "--physics-steps", "2000")
     assert done.returncode == 0, done.stderr
-    rows = {tuple(c.strip() for c in line.split("|")[:2]): line.split("|")[2].strip()
-            for line in done.stdout.splitlines() if line.count("|") == 2}
-    physics = float(rows[("physics", "physics-only steps/s (median of 3)")].split()[0].replace(",", ""))
+    rows = {
+        tuple(c.strip() for c in line.split("|")[:2]): line.split("|")[2].strip()
+        for line in done.stdout.splitlines()
+        if line.count("|") == 2
+    }
+    physics = float(
+        rows[("physics", "physics-only steps/s (median of 3)")].split()[0].replace(",", "")
+    )
     assert physics > 0
-    rate, ratio = re.match(r"([\d,]+) \(([\d.]+)x idle",
-                           rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")]).groups()
-    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006  # measured against that baseline
-    motion = float(rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")].split()[0]
-                   .replace(",", ""))
+    rate, ratio = re.match(
+        r"([\d,]+) \(([\d.]+)x idle",
+        rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")],
+    ).groups()
+    # measured against that baseline
+    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006
+    motion = float(
+        rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")]
+        .split()[0]
+        .replace(",", "")
+    )
     assert physics > motion > 0  # a moving arm with contacts costs more than an idle one
-    assert not any(section in ("record", "diff", "remote") for section, _ in rows)  # --only selected
+    # --only selected
+    assert not any(section in ("record", "diff", "remote") for section, _ in rows)
 
 
 def test_list_names_every_section_and_unknown_sections_are_refused():
@@ -42,28 +61,76 @@ def test_list_names_every_section_and_unknown_sections_are_refused():
     assert "twin" in listed and listed == sorted(listed)
     done = _bench("--only", "nope")
     assert done.returncode == 2 and done.stdout == ""
-    assert done.stderr.strip().startswith("bench: error: unknown section 'nope'") and done.stderr.count("\n") == 1
+    assert (
+        done.stderr.strip().startswith("bench: error: unknown section 'nope'")
+        and done.stderr.count("\n") == 1
+    )
 
 
 def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
     import json
 
     out = tmp_path / "bench.json"
-    done = _bench("--only", "twin", "--only", "record", "--repeats", "1", "--physics-steps", "2000", "--json", str(out))
+    done = _bench(
+        "--only",
+        "twin",
+        "--only",
+        "record",
+        "--repeats",
+        "1",
+        "--physics-steps",
+        "2000",
+        "--json",
+        str(out),
+    )
     assert done.returncode == 0, done.stderr
     data = json.loads(out.read_text())
-    for key in ("record_both_vs_motion", "record_both_vs_idle", "record_mcap_vs_motion", "twin_vs_motion",
-                "mcap_mb_per_sim_min", "physics_steps_per_s", "motion_physics_steps_per_s",
-                "record_mcap_writer_cpu_us_per_frame", "record_rrd_writer_cpu_us_per_frame",
-                "record_both_vs_reads", "record_both_vs_naive", "record_reads_vs_motion"):
+    for key in (
+        "record_both_vs_motion",
+        "record_both_vs_idle",
+        "record_mcap_vs_motion",
+        "twin_vs_motion",
+        "mcap_mb_per_sim_min",
+        "physics_steps_per_s",
+        "motion_physics_steps_per_s",
+        "record_mcap_writer_cpu_us_per_frame",
+        "record_rrd_writer_cpu_us_per_frame",
+        "record_both_vs_reads",
+        "record_both_vs_naive",
+        "record_reads_vs_motion",
+    ):
         assert isinstance(data[key], float) and data[key] > 0, key
-    # the record section pairs each repeat with its own sample of the same motion's baseline (one repeat: that one)
-    assert abs(data["record_both_vs_motion"] - data["record_both_steps_per_s"] / data["record_motion_steps_per_s"]) < 1e-5
-    assert abs(data["twin_vs_motion"] - data["twin_steps_per_s"] / data["motion_physics_steps_per_s"]) < 1e-5
+    # the record section pairs each repeat with its own sample of the same motion's baseline (one
+    # repeat: that one)
+    assert (
+        abs(
+            data["record_both_vs_motion"]
+            - data["record_both_steps_per_s"] / data["record_motion_steps_per_s"]
+        )
+        < 1e-5
+    )
+    assert (
+        abs(data["twin_vs_motion"] - data["twin_steps_per_s"] / data["motion_physics_steps_per_s"])
+        < 1e-5
+    )
     # the two user baselines are paired with twin + MCAP + Rerun the same way
-    assert abs(data["record_both_vs_reads"] - data["record_both_steps_per_s"] / data["record_reads_steps_per_s"]) < 1e-5
-    assert abs(data["record_both_vs_naive"] - data["record_both_steps_per_s"] / data["record_naive_steps_per_s"]) < 1e-5
+    assert (
+        abs(
+            data["record_both_vs_reads"]
+            - data["record_both_steps_per_s"] / data["record_reads_steps_per_s"]
+        )
+        < 1e-5
+    )
+    assert (
+        abs(
+            data["record_both_vs_naive"]
+            - data["record_both_steps_per_s"] / data["record_naive_steps_per_s"]
+        )
+        < 1e-5
+    )
     assert any(r["section"] == "total" and r["measure"] == "wall time" for r in data["rows"])
-    assert len(data["rows"]) == sum(1 for line in done.stdout.splitlines() if line.count("|") == 2) - 1
+    assert (
+        len(data["rows"]) == sum(1 for line in done.stdout.splitlines() if line.count("|") == 2) - 1
+    )
     bad = _bench("--only", "twin", "--json", str(tmp_path / "no" / "b.json"))
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "does not exist" in bad.stderr

@@ -39,7 +39,13 @@ def test_a_step_is_the_difference_of_two_runs(tmp_path):
 
 
 def test_without_valgrind_it_says_so_in_one_line(tmp_path):
-    done = subprocess.run([sys.executable, str(SCRIPT)], capture_output=True, text=True, timeout=60, check=False,
-                          env=dict(os.environ, PATH=str(tmp_path)))
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env=dict(os.environ, PATH=str(tmp_path)),
+    )
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "valgrind is not installed" in done.stderr

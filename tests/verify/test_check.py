@@ -1,4 +1,5 @@
-"""`twin diff` and `twin check` on real MCAP recordings: exit codes, reports, sensitivity, bad input."""
+"""`twin diff` and `twin check` on real MCAP recordings: exit codes, reports, sensitivity, bad
+input."""
 
 from __future__ import annotations
 
@@ -23,7 +24,9 @@ from twin.verify.replay import save
 BASE = TwinConfig()
 PARAMS = {"cycles": 1}
 VARIANTS = {
-    "link": dataclasses.replace(BASE, profile=dataclasses.replace(BASE.profile, link1_m=BASE.profile.link1_m + 0.001)),
+    "link": dataclasses.replace(
+        BASE, profile=dataclasses.replace(BASE.profile, link1_m=BASE.profile.link1_m + 0.001)
+    ),
     "box": dataclasses.replace(BASE, objects=(SceneObject("box", pos_m=(0.201, 0.7, 0.025)),)),
     "solver": dataclasses.replace(BASE, engine=EngineParams(num_solver_iterations=40)),
     "seed003": dataclasses.replace(BASE, profile=PROFILES["seed003"]),
@@ -38,29 +41,42 @@ def record_file(path, config: TwinConfig, params: dict = PARAMS):
 def first_change(a, b) -> int:
     """The first step where two in-memory frame streams differ, computed without twin.compare."""
     n = min(len(a), len(b))
-    steps = [int(np.flatnonzero((getattr(a, c)[:n] != getattr(b, c)[:n]).reshape(n, -1).any(axis=1))[0])
-             for c in ("joint_q", "joint_qd", "joint_effort", "hold_force_n", "hold_torque_nm", "pad_pose",
-                       "object_poses", "held_body", "sensed_body")
-             if (getattr(a, c)[:n] != getattr(b, c)[:n]).any()]
+    steps = [
+        int(np.flatnonzero((getattr(a, c)[:n] != getattr(b, c)[:n]).reshape(n, -1).any(axis=1))[0])
+        for c in (
+            "joint_q",
+            "joint_qd",
+            "joint_effort",
+            "hold_force_n",
+            "hold_torque_nm",
+            "pad_pose",
+            "object_poses",
+            "held_body",
+            "sensed_body",
+        )
+        if (getattr(a, c)[:n] != getattr(b, c)[:n]).any()
+    ]
     return min(steps + ([n] if len(a) != len(b) else []))
 
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("recs")
-    runs = {"golden": record_file(d / "golden.mcap", BASE), "again": record_file(d / "again.mcap", BASE)}
+    runs = {
+        "golden": record_file(d / "golden.mcap", BASE),
+        "again": record_file(d / "again.mcap", BASE),
+    }
     for name, config in VARIANTS.items():
         runs[name] = record_file(d / f"{name}.mcap", config)
     return d, runs
-
-
 
 
 def test_rerunning_the_same_task_matches_exactly(files, capsys):
     d, _ = files
     code, out, err = twin(capsys, "diff", d / "golden.mcap", d / "again.mcap")
     assert (code, err) == (0, "")
-    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out  # the default, on one machine
+    # the default, on one machine
+    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out
     assert (d / "golden.mcap").read_bytes() == (d / "again.mcap").read_bytes()
 
 
@@ -69,24 +85,47 @@ def test_diff_exits_1_at_or_before_the_first_change(files, capsys, change):
     d, runs = files
     code, out, err = twin(capsys, "diff", d / "golden.mcap", d / f"{change}.mcap")
     assert code == 1 and err == ""
-    step = int(re.search(r"^first divergence: step (\d+) \(t = ([0-9.]+) s\)", out, re.MULTILINE).group(1))
+    step = int(
+        re.search(r"^first divergence: step (\d+) \(t = ([0-9.]+) s\)", out, re.MULTILINE).group(1)
+    )
     assert step <= first_change(runs["golden"].frames, runs[change].frames)
     assert "expected" in out and "difference" in out and "tolerance" in out
 
 
 def test_outcome_passes_the_solver_change_but_not_the_link_change_at_exact(files, capsys):
     d, runs = files
-    g, s = runs["golden"].frames.object_poses[-1, 0, :3], runs["solver"].frames.object_poses[-1, 0, :3]
+    g, s = (
+        runs["golden"].frames.object_poses[-1, 0, :3],
+        runs["solver"].frames.object_poses[-1, 0, :3],
+    )
     assert np.linalg.norm(g - s) < 5e-3
-    assert twin(capsys, "diff", d / "golden.mcap", d / "solver.mcap", "--tolerance", "outcome")[0] == 0
-    assert twin(capsys, "diff", d / "golden.mcap", d / "solver.mcap", "--tolerance", "tight")[0] == 1
+    assert (
+        twin(capsys, "diff", d / "golden.mcap", d / "solver.mcap", "--tolerance", "outcome")[0] == 0
+    )
+    assert (
+        twin(capsys, "diff", d / "golden.mcap", d / "solver.mcap", "--tolerance", "tight")[0] == 1
+    )
 
 
 def test_reports_for_ci(files, capsys, tmp_path):
     d, _ = files
     md, js, xml = tmp_path / "r.md", tmp_path / "r.json", tmp_path / "r.xml"
-    code, _out, _ = twin(capsys, "diff", d / "golden.mcap", d / "box.mcap", "--report", md, "--report", js,
-                        "--report", xml, "--tol", "objects.position=0.002", "--tol", "final=0.002")
+    code, _out, _ = twin(
+        capsys,
+        "diff",
+        d / "golden.mcap",
+        d / "box.mcap",
+        "--report",
+        md,
+        "--report",
+        js,
+        "--report",
+        xml,
+        "--tol",
+        "objects.position=0.002",
+        "--tol",
+        "final=0.002",
+    )
     assert code == 1
     data = json.loads(js.read_text())
     assert data["match"] is False and data["first"]["step"] >= 0
@@ -103,17 +142,20 @@ def test_another_profile_is_a_mismatch_naming_the_profile(files, capsys):
     assert "profile.name 'mtb' -> 'seed003'" in out
 
 
-@pytest.mark.parametrize(("make", "args", "expected"), [
-    ("missing", [], "does not exist"),
-    ("truncated", [], "truncated"),
-    ("text", [], "not an MCAP file"),
-    ("golden", ["--tol", "joints.position"], "malformed"),
-    ("golden", ["--tol", "joints.angle=1e-3"], "unknown field 'joints.angle'"),
-    ("golden", ["--tol", "pad.position=-1"], "expected a number >= 0 or inf"),
-    ("golden", ["--tolerance", "loose"], "unknown tolerance preset 'loose'"),
-    ("golden", ["--event-window", "-3"], "--event-window: '-3' is not a whole number >= 0"),
-    ("golden", ["--report", "out.pdf"], "unknown extension '.pdf'"),
-])
+@pytest.mark.parametrize(
+    ("make", "args", "expected"),
+    [
+        ("missing", [], "does not exist"),
+        ("truncated", [], "truncated"),
+        ("text", [], "not an MCAP file"),
+        ("golden", ["--tol", "joints.position"], "malformed"),
+        ("golden", ["--tol", "joints.angle=1e-3"], "unknown field 'joints.angle'"),
+        ("golden", ["--tol", "pad.position=-1"], "expected a number >= 0 or inf"),
+        ("golden", ["--tolerance", "loose"], "unknown tolerance preset 'loose'"),
+        ("golden", ["--event-window", "-3"], "--event-window: '-3' is not a whole number >= 0"),
+        ("golden", ["--report", "out.pdf"], "unknown extension '.pdf'"),
+    ],
+)
 def test_bad_input_gives_one_line_and_exit_2(files, capsys, tmp_path, make, args, expected):
     d, _ = files
     candidate = d / "golden.mcap"
@@ -144,7 +186,8 @@ def test_rrd_diff_view_shows_both_runs_and_the_error(files, capsys, tmp_path):
 
 
 def tamper(src, dst, step: int, dx_m: float) -> None:
-    """A golden whose box drifts dx_m from `step` on: what a behaviour change looks like to check."""
+    """A golden whose box drifts dx_m from `step` on: what a behaviour change looks like to
+    check."""
     rec = load(src)
     rec.frames.object_poses[step:, 0, 0] += dx_m
     save(rec, dst)
@@ -154,7 +197,9 @@ def test_check_finds_a_changed_golden_and_update_rewrites_it(files, capsys, tmp_
     d, _ = files
     shutil.copy(d / "golden.mcap", tmp_path / "a.mcap")
     tamper(d / "golden.mcap", tmp_path / "b.mcap", 300, 0.002)
-    code, out, err = twin(capsys, "check", tmp_path, "--jobs", "2", "--junit", tmp_path / "check.xml")
+    code, out, err = twin(
+        capsys, "check", tmp_path, "--jobs", "2", "--junit", tmp_path / "check.xml"
+    )
     assert code == 1
     suite = ET.parse(tmp_path / "check.xml").getroot().find("testsuite")
     assert (suite.get("tests"), suite.get("failures")) == ("2", "1")
@@ -169,7 +214,10 @@ def test_check_finds_a_changed_golden_and_update_rewrites_it(files, capsys, tmp_
 def test_check_tolerance_applies(files, tmp_path):
     d, _ = files
     tamper(d / "golden.mcap", tmp_path / "b.mcap", 300, 0.002)
-    outcomes = check_all([str(tmp_path / "b.mcap")], Tolerances.from_preset("outcome").with_overrides(["final=0.005"]))
+    outcomes = check_all(
+        [str(tmp_path / "b.mcap")],
+        Tolerances.from_preset("outcome").with_overrides(["final=0.005"]),
+    )
     assert [o.status for o in outcomes] == ["match"]
 
 

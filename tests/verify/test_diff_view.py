@@ -1,4 +1,5 @@
-"""The diff view draws each robot in its own scene's frame: the arm's wrist axis stands over the pad."""
+"""The diff view draws each robot in its own scene's frame: the arm's wrist axis stands over the
+pad."""
 
 from __future__ import annotations
 

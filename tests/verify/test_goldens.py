@@ -1,5 +1,5 @@
-"""Every golden in recordings/ re-runs and replays to a match under the default verdict (bits here, or within
-the measured noise floor on another machine); the `golden` pytest fixture works."""
+"""Every golden in recordings/ re-runs and replays to a match under the default verdict (bits here,
+or within the measured noise floor on another machine); the `golden` pytest fixture works."""
 
 from __future__ import annotations
 
@@ -22,7 +22,9 @@ pytest_plugins = ["pytester"]
 
 
 def _regen_module():
-    spec = importlib.util.spec_from_file_location("regen_goldens", ROOT / "tools" / "regen_goldens.py")
+    spec = importlib.util.spec_from_file_location(
+        "regen_goldens", ROOT / "tools" / "regen_goldens.py"
+    )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up
     spec.loader.exec_module(module)
@@ -34,13 +36,16 @@ def test_every_golden_rerun_matches():
     outcomes = check_all([str(p) for p in GOLDENS], Tolerances.from_preset(DEFAULT), jobs=2)
     bad = {Path(o.path).name: o.summary for o in outcomes if o.status != "match"}
     assert not bad, "\n".join(f"{name}: {why}" for name, why in bad.items()) + (
-        "\n(if the change is intended: python tools/regen_goldens.py rewrites every golden with this machine's "
-        "runs; review `twin diff` old vs new first)")
+        "\n(if the change is intended: python tools/regen_goldens.py rewrites every "
+        "golden with this machine's "
+        "runs; review `twin diff` old vs new first)"
+    )
 
 
 @pytest.mark.parametrize("path", GOLDENS, ids=lambda p: p.stem)
 def test_every_golden_replays_to_a_match_with_every_event(path, tmp_path):
-    """Replay feeds the file's commands (what the task said included) back: nothing may differ beyond noise."""
+    """Replay feeds the file's commands (what the task said included) back: nothing may differ
+    beyond noise."""
     from twin.verify.noise import judge
     from twin.verify.replay import replay, replayed_event_kinds
 
@@ -78,7 +83,8 @@ def test_run(golden):
     run = record_task(TwinConfig(), "pick_place", {"cycles": 1})
     if os.environ.get("TWIN_TAMPER"):
         run.frames.object_poses[400:, 0, 1] += 0.003
-    golden.check(run, "one_cycle", **({"tolerance": os.environ["TWIN_TOL"]} if "TWIN_TOL" in os.environ else {}))
+    tolerance = {"tolerance": os.environ["TWIN_TOL"]} if "TWIN_TOL" in os.environ else {}
+    golden.check(run, "one_cycle", **tolerance)
 """
 
 
@@ -96,12 +102,17 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     failed = pytester.runpytest_inprocess("-p", "no:cacheprovider")
     failed.assert_outcomes(failed=1)
     assert "step 400" in failed.stdout.str()
-    assert (goldens / "one_cycle.obtained.mcap").exists() and (goldens / "one_cycle.report.md").exists()
+    assert (goldens / "one_cycle.obtained.mcap").exists() and (
+        goldens / "one_cycle.report.md"
+    ).exists()
     monkeypatch.setenv("TWIN_TOL", "outcome")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)  # lands within 5 mm
+    # lands within 5 mm
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
     monkeypatch.delenv("TWIN_TOL")
 
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
+    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+        passed=1
+    )
     assert not (goldens / "one_cycle.obtained.mcap").exists()
     pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
 
@@ -125,10 +136,15 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     monkeypatch.setenv("TWIN_FAIL", "1")
     first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
     first.assert_outcomes(failed=1)
-    assert "this run cannot become it: its task ended error" in first.stdout.str() and not golden.exists()
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)  # still not written
+    assert (
+        "this run cannot become it: its task ended error" in first.stdout.str()
+        and not golden.exists()
+    )
+    # still not written
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     monkeypatch.delenv("TWIN_FAIL")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)  # written from the ok run
+    # written from the ok run
+    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     assert golden.exists()
     monkeypatch.setenv("TWIN_FAIL", "1")
     update = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens")
@@ -136,4 +152,6 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     assert "rerun with --update-goldens" not in update.stdout.str()
     assert "this run cannot become the golden: its task ended error" in update.stdout.str()
     monkeypatch.setenv("TWIN_ALLOW", "1")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(passed=1)
+    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+        passed=1
+    )

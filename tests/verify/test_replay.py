@@ -65,14 +65,22 @@ def recs(tmp_path_factory):
 
 @pytest.mark.parametrize("kind", ["task", "teleop", "remote"])
 def test_replay_matches_exactly_for_every_source(recs, capsys, tmp_path, kind):
-    code, out, err = twin(capsys, "replay", recs / f"{kind}.mcap", "--record", tmp_path / "new.mcap")
+    code, out, err = twin(
+        capsys, "replay", recs / f"{kind}.mcap", "--record", tmp_path / "new.mcap"
+    )
     assert (code, err) == (0, ""), out
-    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out  # the default, on one machine
+    # the default, on one machine
+    assert out.startswith("MATCH (tolerance noise") and "  bit-identical\n" in out
     original, new = load(recs / f"{kind}.mcap"), load(tmp_path / "new.mcap")
     # the replay's run is the original's, and says which file it replays
-    assert new.run == {**original.run, "replay_of": {"file": f"{kind}.mcap", "sha256": new.run["replay_of"]["sha256"]}}
+    assert new.run == {
+        **original.run,
+        "replay_of": {"file": f"{kind}.mcap", "sha256": new.run["replay_of"]["sha256"]},
+    }
     assert new.config == original.config
-    assert [(c.step, c.kind, c.args) for c in new.commands] == [(c.step, c.kind, c.args) for c in original.commands]
+    assert [(c.step, c.kind, c.args) for c in new.commands] == [
+        (c.step, c.kind, c.args) for c in original.commands
+    ]
     assert new.frames.step[-1] == original.frames.step[-1]
 
 
@@ -80,18 +88,26 @@ def test_replayed_events_are_the_twins_own(recs):
     teleop = load(recs / "teleop.mcap")
     assert any(e.kind == "key_unknown" for e in teleop.events)
     result = compare(teleop, replay(teleop), event_kinds=REPLAYED_EVENT_KINDS)
-    assert result.match and result.events_matched == sum(e.kind in REPLAYED_EVENT_KINDS for e in teleop.events)
+    assert result.match and result.events_matched == sum(
+        e.kind in REPLAYED_EVENT_KINDS for e in teleop.events
+    )
     remote = load(recs / "remote.mcap")
     assert any(e.kind == "joint_limit" for e in remote.events)
 
 
 def test_replay_uses_the_recorded_commands(recs, capsys, tmp_path):
     rec = load(recs / "remote.mcap")
-    changed = [dataclasses.replace(c, args={**c.args, "q": 0.81})
-               if c.kind == "joint_target" and c.args["joint"] == "MTB_axis2" else c for c in rec.commands]
+    changed = [
+        dataclasses.replace(c, args={**c.args, "q": 0.81})
+        if c.kind == "joint_target" and c.args["joint"] == "MTB_axis2"
+        else c
+        for c in rec.commands
+    ]
     rec.commands = changed
     save(rec, tmp_path / "edited.mcap")
-    code, _out, _ = twin(capsys, "replay", tmp_path / "edited.mcap", "--report", tmp_path / "r.json")
+    code, _out, _ = twin(
+        capsys, "replay", tmp_path / "edited.mcap", "--report", tmp_path / "r.json"
+    )
     assert code == 1
     first = json.loads((tmp_path / "r.json").read_text())["first"]
     assert first["channel"] == "joints" and first["step"] == 11  # the target changed at step 10
@@ -108,12 +124,16 @@ def test_replay_needs_only_the_metadata(recs):
         t.apply(c)
     t.step(int(rec.frames.step[-1]) - t.step_index)
     t.close()
-    assert compare(rec, collected(direct, rec.config, rec.run), event_kinds=REPLAYED_EVENT_KINDS).match
+    assert compare(
+        rec, collected(direct, rec.config, rec.run), event_kinds=REPLAYED_EVENT_KINDS
+    ).match
 
 
 def test_replay_refuses_a_command_after_the_last_frame(recs):
     rec = load(recs / "remote.mcap")
-    rec.commands.append(Command(int(rec.frames.step[-1]) + 5, "signal", {"name": "pad_switch", "value": 1}))
+    rec.commands.append(
+        Command(int(rec.frames.step[-1]) + 5, "signal", {"name": "pad_switch", "value": 1})
+    )
     with pytest.raises(RecordingError, match="after its last frame"):
         replay(rec)
 
@@ -130,13 +150,17 @@ def test_check_replays_a_golden_without_a_task(recs):
     from twin.compare.tolerances import Tolerances
     from twin.verify.check import check_all
 
-    outcomes = check_all([str(recs / "teleop.mcap"), str(recs / "remote.mcap")], Tolerances.from_preset("exact"))
+    outcomes = check_all(
+        [str(recs / "teleop.mcap"), str(recs / "remote.mcap")], Tolerances.from_preset("exact")
+    )
     assert [o.status for o in outcomes] == ["match", "match"]
 
 
 def test_replay_refuses_to_record_over_the_recording_it_replays(tmp_path, capsys):
     golden = tmp_path / "golden.mcap"
-    golden.write_bytes((Path(__file__).resolve().parents[2] / "recordings" / "pick_place_mtb.mcap").read_bytes())
+    golden.write_bytes(
+        (Path(__file__).resolve().parents[2] / "recordings" / "pick_place_mtb.mcap").read_bytes()
+    )
     before = golden.read_bytes()
     assert main(["replay", str(golden), "--record", str(golden)]) == 2
     err = capsys.readouterr().err
@@ -151,7 +175,21 @@ def test_a_user_robot_replays_from_the_recording_alone_after_its_files_are_gone(
 
     profile_file = write_user_robot(tmp_path / "robot")
     recording = tmp_path / "user.mcap"
-    assert main(["run", "pick_place", "--cycles", "1", "--robot", str(profile_file), "--record", str(recording)]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "pick_place",
+                "--cycles",
+                "1",
+                "--robot",
+                str(profile_file),
+                "--record",
+                str(recording),
+            ]
+        )
+        == 0
+    )
     shutil.rmtree(tmp_path / "robot")  # the URDF and its STL meshes: replay must not need them
     capsys.readouterr()
     assert main(["replay", str(recording)]) == 0

@@ -46,7 +46,8 @@ def test_a_renamed_copy_of_a_task_is_the_same_task_even_under_exact(runs, capsys
     code, out, _ = twin(capsys, "diff", GOLDEN, runs / "renamed.mcap", "--tolerance", "exact")
     assert code == 0, out
     assert out.startswith("MATCH")
-    assert "run.task 'pick_place' -> 'renamed.py'" in out  # the name stays visible, as configuration
+    # the name stays visible, as configuration
+    assert "run.task 'pick_place' -> 'renamed.py'" in out
 
 
 def test_an_edited_comment_is_an_annotation_difference_and_not_a_physical_one(runs, capsys):

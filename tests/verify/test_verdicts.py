@@ -37,8 +37,14 @@ def run(twin):
 
 def cli(*argv, cwd=None) -> subprocess.CompletedProcess:
     """The real `twin` command in its own process."""
-    return subprocess.run([sys.executable, "-m", "twin.cli", *map(str, argv)], capture_output=True, text=True,
-                          cwd=cwd, timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "twin.cli", *map(str, argv)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+        check=False,
+    )
 
 
 # -- 1. a replay diffs as exact against its source ------------------------------------------------
@@ -51,7 +57,10 @@ def test_a_replayed_task_run_diffs_exact_and_says_what_it_replays(tmp_path, caps
     assert code == 0 and out.startswith("MATCH"), out
     kinds = {e.kind for e in load(b).events}
     assert {"task_start", "phase", "placed", "task_end", "attach", "release"} <= kinds
-    assert load(b).run["replay_of"]["file"] == "a.mcap" and len(load(b).run["replay_of"]["sha256"]) == 64
+    assert (
+        load(b).run["replay_of"]["file"] == "a.mcap"
+        and len(load(b).run["replay_of"]["sha256"]) == 64
+    )
     assert "replay_of" not in load(a).run
     code, out, _ = twin(capsys, "info", b)
     assert code == 0 and "a replay of a.mcap (sha256 " in out
@@ -84,7 +93,10 @@ def test_a_stepped_remote_session_with_addlog_replays_exact(tmp_path, capsys):
     code, out, _ = twin(capsys, "replay", session, "--record", again)
     assert code == 0 and out.startswith("MATCH"), out
     assert twin(capsys, "diff", "--tolerance", "exact", session, again)[0] == 0
-    assert [e.message for e in load(again).events if e.kind == "log"] == ["moving the shoulder", "done"]
+    assert [e.message for e in load(again).events if e.kind == "log"] == [
+        "moving the shoulder",
+        "done",
+    ]
 
 
 # -- 2. a divergence between kept frames is not invisible ------------------------------------------
@@ -97,44 +109,90 @@ def late_runs(tmp_path_factory):
         task = d / name / "task.py"
         task.write_text(LATE_TASK.format(before_s=1.8, early=early, late=late))
         for rate in (1, 4, 7):
-            assert main(["run", str(task), "--record", str(d / f"{name}_r{rate}.mcap"), "--rate", str(rate)]) == 0
+            assert (
+                main(
+                    [
+                        "run",
+                        str(task),
+                        "--record",
+                        str(d / f"{name}_r{rate}.mcap"),
+                        "--rate",
+                        str(rate),
+                    ]
+                )
+                == 0
+            )
     return d
 
 
 @pytest.mark.parametrize("rate", [4, 7])
 @pytest.mark.parametrize("side", ["golden", "candidate", "both"])
-def test_a_one_step_late_signal_is_a_mismatch_whichever_side_is_decimated(late_runs, capsys, rate, side):
+def test_a_one_step_late_signal_is_a_mismatch_whichever_side_is_decimated(
+    late_runs, capsys, rate, side
+):
     d = late_runs
     golden = d / f"on_time_r{rate if side in ('golden', 'both') else 1}.mcap"
     candidate = d / f"late_r{rate if side in ('candidate', 'both') else 1}.mcap"
     code, out, _ = twin(capsys, "diff", golden, candidate)
     assert code == 1, out
     step = next(c.step for c in load(golden).commands if c.kind == "signal")
-    assert f"first divergence: step {step}" in out or f"first command difference: step {step}" in out
+    assert (
+        f"first divergence: step {step}" in out or f"first command difference: step {step}" in out
+    )
     assert "decimated (a frame every" in out
     for preset in ("exact", "tight"):
         assert twin(capsys, "diff", "--tolerance", preset, golden, candidate)[0] == 1
 
 
-def test_the_report_names_the_first_command_difference_and_the_likely_cause(late_runs, capsys, tmp_path):
+def test_the_report_names_the_first_command_difference_and_the_likely_cause(
+    late_runs, capsys, tmp_path
+):
     d = late_runs
     signal = next(c for c in load(d / "on_time_r1.mcap").commands if c.kind == "signal")
-    # decimated and with the command check switched off, the late pad is invisible: what the issue found
+    # decimated and with the command check switched off, the late pad is invisible: what the issue
+    # found
     for golden, candidate in (("on_time_r4", "late_r1"), ("on_time_r1", "late_r7")):
-        assert twin(capsys, "diff", d / f"{golden}.mcap", d / f"{candidate}.mcap", "--tol", "commands=inf")[0] == 0
+        assert (
+            twin(
+                capsys,
+                "diff",
+                d / f"{golden}.mcap",
+                d / f"{candidate}.mcap",
+                "--tol",
+                "commands=inf",
+            )[0]
+            == 0
+        )
     # every frame kept, commands off: the frames diverge one step later; the report names the cause
-    code, out, _ = twin(capsys, "diff", d / "on_time_r1.mcap", d / "late_r1.mcap", "--tol", "commands=inf",
-                        "--report", tmp_path / "r.json")
+    code, out, _ = twin(
+        capsys,
+        "diff",
+        d / "on_time_r1.mcap",
+        d / "late_r1.mcap",
+        "--tol",
+        "commands=inf",
+        "--report",
+        tmp_path / "r.json",
+    )
     assert code == 1 and f"first divergence: step {signal.step + 1} " in out and "suction.on" in out
     cause = f"step {signal.step} signal(name='pad_switch', value=1)"
-    assert f"likely cause: the golden's last command at or before step {signal.step + 1}: {cause}" in out
+    assert (
+        f"likely cause: the golden's last command at or before step {signal.step + 1}: {cause}"
+        in out
+    )
     assert json.loads((tmp_path / "r.json").read_text())["likely_cause"] == cause
     # commands on: the command sequence is the first divergence, and the frames' follows it
     code, out, _ = twin(capsys, "diff", d / "on_time_r4.mcap", d / "late_r4.mcap")
-    assert code == 1 and f"first divergence: step {signal.step} " in out and "commands.sequence" in out
-    acting = [c for c in load(d / "on_time_r4.mcap").commands if c.kind != "event"]  # annotations apart
-    assert f"the golden's command #{acting.index(signal)} is {cause}; the candidate's is step {signal.step + 1} " \
+    assert (
+        code == 1 and f"first divergence: step {signal.step} " in out and "commands.sequence" in out
+    )
+    # annotations apart
+    acting = [c for c in load(d / "on_time_r4.mcap").commands if c.kind != "event"]
+    assert (
+        f"the golden's command #{acting.index(signal)} is {cause}; the candidate's is "
+        f"step {signal.step + 1} "
         "signal(" in out
+    )
 
 
 # -- 3. outcome judges the outcome ----------------------------------------------------------------
@@ -157,9 +215,11 @@ def run(twin, cycles=1):
 """
 
 
-def pick_place_and(task_text: str, folder: Path, exit_code: int, pick_place: Path) -> tuple[Path, Path]:
-    """One pick_place cycle recorded as a.mcap (a copy of the recording pick_place), and the task file
-    task_text recorded as b.mcap."""
+def pick_place_and(
+    task_text: str, folder: Path, exit_code: int, pick_place: Path
+) -> tuple[Path, Path]:
+    """One pick_place cycle recorded as a.mcap (a copy of the recording pick_place), and the task
+    file task_text recorded as b.mcap."""
     (folder / "other.py").write_text(task_text)
     a, b = folder / "a.mcap", folder / "b.mcap"
     shutil.copy(pick_place, a)
@@ -167,7 +227,9 @@ def pick_place_and(task_text: str, folder: Path, exit_code: int, pick_place: Pat
     return a, b
 
 
-def test_runs_differing_only_in_annotations_pass_outcome_not_exact(tmp_path, capsys, pick_place_cli):
+def test_runs_differing_only_in_annotations_pass_outcome_not_exact(
+    tmp_path, capsys, pick_place_cli
+):
     a, b = pick_place_and(QUIET_TASK, tmp_path, 0, pick_place_cli["mcap"])
     capsys.readouterr()
     assert load(a).frames.object_poses[-1].tobytes() == load(b).frames.object_poses[-1].tobytes()
@@ -184,7 +246,7 @@ def test_outcome_fails_a_task_that_now_raises_with_the_same_poses(tmp_path, caps
     assert "expected 'ok', actual 'error'" in out
 
 
-# -- 5. check --update never blesses a crash --------------------------------------------------------
+# -- 5. check --update never blesses a crash -------------------------------------------------------
 def test_check_update_leaves_a_golden_untouched_when_its_task_now_raises(tmp_path, capsys):
     task = tmp_path / "my_task.py"
     task.write_text(QUIET_TASK)
@@ -197,7 +259,11 @@ def test_check_update_leaves_a_golden_untouched_when_its_task_now_raises(tmp_pat
     assert code == 1 and "refused" in out and "not rewritten: the re-run's task failed" in out
     assert "note: the task file 'my_task.py' changed since the golden was recorded" in out
     assert "RuntimeError: the gripper report failed" in out
-    assert golden.read_bytes() == before and not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob("*partial*"))
+    assert (
+        golden.read_bytes() == before
+        and not list(tmp_path.glob("*.tmp"))
+        and not list(tmp_path.glob("*partial*"))
+    )
     code, out, _ = twin(capsys, "check", "--update", "--allow-error", golden)
     assert code == 0 and "updated" in out
     rewritten = load(golden)
@@ -215,7 +281,8 @@ def test_a_run_whose_task_raised_is_finalized_as_error_even_when_the_caller_goes
     (tmp_path / "crash.py").write_text(CRASHING_TASK)
     path = tmp_path / "x.mcap"
     run = {"source": "task", "task": "crash.py", "params": {"cycles": 1}}
-    with open_recorders(TwinConfig(), run, mcap_path=path) as sinks:  # record_task records, not raises
+    # record_task records, not raises
+    with open_recorders(TwinConfig(), run, mcap_path=path) as sinks:
         record_task(TwinConfig(), str(tmp_path / "crash.py"), {"cycles": 1}, sinks=sinks)
     assert load(path).meta["twin.finalized"]["outcome"] == "error"
 
@@ -227,11 +294,20 @@ def test_a_user_task_golden_checks_from_root_and_from_a_copy_of_the_project(tmp_
     (project / "tasks").mkdir(parents=True)
     (project / "recordings").mkdir()
     (project / "tasks" / "my_task.py").write_text(QUIET_TASK)
-    done = cli("run", "my_task.py", "--cycles", "1", "--record", "../recordings/mine.mcap", cwd=project / "tasks")
+    done = cli(
+        "run",
+        "my_task.py",
+        "--cycles",
+        "1",
+        "--record",
+        "../recordings/mine.mcap",
+        cwd=project / "tasks",
+    )
     assert done.returncode == 0, done.stderr
     rec = load(project / "recordings" / "mine.mcap")
     assert rec.run["task"] == "../tasks/my_task.py" and len(rec.run["task_sha256"]) == 64
-    assert str(tmp_path).encode() not in (project / "recordings" / "mine.mcap").read_bytes()  # no absolute path
+    # no absolute path
+    assert str(tmp_path).encode() not in (project / "recordings" / "mine.mcap").read_bytes()
     done = cli("check", project / "recordings" / "mine.mcap", cwd="/")
     assert done.returncode == 0 and "1 match" in done.stdout, done.stdout + done.stderr
     copy = tmp_path / "clone"
@@ -239,8 +315,18 @@ def test_a_user_task_golden_checks_from_root_and_from_a_copy_of_the_project(tmp_
     done = cli("check", cwd=copy)
     assert done.returncode == 0 and "1 match" in done.stdout, done.stdout + done.stderr
     # recorded again in the copy, the same run gives the same bytes
-    done = cli("run", "my_task.py", "--cycles", "1", "--record", "../recordings/again.mcap", cwd=copy / "tasks")
-    assert (copy / "recordings" / "again.mcap").read_bytes() == (project / "recordings" / "mine.mcap").read_bytes()
+    done = cli(
+        "run",
+        "my_task.py",
+        "--cycles",
+        "1",
+        "--record",
+        "../recordings/again.mcap",
+        cwd=copy / "tasks",
+    )
+    assert (copy / "recordings" / "again.mcap").read_bytes() == (
+        project / "recordings" / "mine.mcap"
+    ).read_bytes()
 
 
 @pytest.mark.slow  # real processes
@@ -250,13 +336,23 @@ def test_a_user_robot_golden_checks_from_another_folder_and_stores_no_absolute_p
     project = tmp_path / "project"
     profile_file = write_user_robot(project / "robot")
     (project / "recordings").mkdir()
-    done = cli("run", "pick_place", "--cycles", "1", "--robot", profile_file, "--record", "recordings/user.mcap",
-               cwd=project)
+    done = cli(
+        "run",
+        "pick_place",
+        "--cycles",
+        "1",
+        "--robot",
+        profile_file,
+        "--record",
+        "recordings/user.mcap",
+        cwd=project,
+    )
     assert done.returncode == 0, done.stderr
     data = (project / "recordings" / "user.mcap").read_bytes()
     assert str(tmp_path).encode() not in data
     urdf = Path(load(project / "recordings" / "user.mcap").config.profile.urdf_path)
-    assert urdf.parent == project / "robot" and urdf.is_file()  # resolved from the recording's folder
+    # resolved from the recording's folder
+    assert urdf.parent == project / "robot" and urdf.is_file()
     shutil.copytree(project, tmp_path / "clone")
     done = cli("check", tmp_path / "clone" / "recordings", cwd="/")
     assert done.returncode == 0 and "1 match" in done.stdout, done.stdout + done.stderr
@@ -281,14 +377,20 @@ def test_a_moved_event_prints_each_side_its_own_time_and_json_gives_the_window(t
     e, s = golden.events[i].step, moved.events[i].step
     dt_s = golden.config.dt_ns * 1e-9
     text = render_text(result)
-    assert f"moved    release box: expected step {e} (t = {e * dt_s:.3f} s), actual step {s} (t = {s * dt_s:.3f} s)" \
-        in text
+    assert (
+        f"moved    release box: expected step {e} (t = {e * dt_s:.3f} s), actual step "
+        f"{s} (t = {s * dt_s:.3f} s)" in text
+    )
     data = json.loads(render_json(result))
     assert data["first"]["channel"] == "events" and data["first"]["field"] == "moved"
     assert data["first"]["tolerance"] == 12 == data["tolerances"]["event_window_steps"]
     suite = ET.fromstring(render_junit(result)).find("testsuite")
-    failures = [c.find("failure") for c in suite.findall("testcase") if c.find("failure") is not None]
-    assert failures and all("MISMATCH" not in f.text and "final object poses" not in f.text for f in failures)
+    failures = [
+        c.find("failure") for c in suite.findall("testcase") if c.find("failure") is not None
+    ]
+    assert failures and all(
+        "MISMATCH" not in f.text and "final object poses" not in f.text for f in failures
+    )
     assert suite.find("system-out").text == text  # the whole report once, for the suite
 
 
@@ -310,7 +412,9 @@ def test_physical_flags_a_sub_millimetre_change_with_a_margin(capsys, tmp_path):
 
 
 def test_a_task_that_calls_sys_exit_0_fails(tmp_path):
-    (tmp_path / "quits.py").write_text("import sys\n\n\ndef run(twin):\n    twin.wait(0.1)\n    sys.exit(0)\n")
+    (tmp_path / "quits.py").write_text(
+        "import sys\n\n\ndef run(twin):\n    twin.wait(0.1)\n    sys.exit(0)\n"
+    )
     done = cli("run", "quits.py", "--record", "q.mcap", cwd=tmp_path)
     assert done.returncode == 1 and "Traceback" not in done.stderr
     assert done.stderr.strip() == "twin: error: the task called sys.exit(0) instead of returning"
@@ -323,9 +427,13 @@ def test_non_finite_event_data_is_null_in_memory_as_in_the_file(tmp_path):
     from twin.sim.twin import Twin
 
     path = tmp_path / "nan.mcap"
-    with open_recorders(TwinConfig(), {"source": "task", "task": "", "params": {}}, mcap_path=path) as sinks:
+    with open_recorders(
+        TwinConfig(), {"source": "task", "task": "", "params": {}}, mcap_path=path
+    ) as sinks:
         t = Twin(sinks=sinks)
-        said = t.event("placed", "box", "nan error", error_m=float("nan"), limits=[1.0, float("-inf")])
+        said = t.event(
+            "placed", "box", "nan error", error_m=float("nan"), limits=[1.0, float("-inf")]
+        )
         t.step(2)
         t.close()
     assert said.data == {"error_m": None, "limits": [1.0, None]}
@@ -335,7 +443,9 @@ def test_non_finite_event_data_is_null_in_memory_as_in_the_file(tmp_path):
 def test_a_timeout_is_part_of_the_run_so_check_reruns_with_it(tmp_path, capsys):
     (tmp_path / "endless.py").write_text("def run(twin):\n    while True:\n        twin.step(10)\n")
     golden = tmp_path / "endless.mcap"
-    assert main(["run", str(tmp_path / "endless.py"), "--timeout", "2", "--record", str(golden)]) == 1
+    assert (
+        main(["run", str(tmp_path / "endless.py"), "--timeout", "2", "--record", str(golden)]) == 1
+    )
     rec = load(golden)
     assert rec.run["timeout_s"] == 2.0 and rec.meta["twin.finalized"]["outcome"] == "error"
     capsys.readouterr()
@@ -348,9 +458,19 @@ def test_diff_outputs_are_checked_before_any_work_and_never_overwrite_an_input(t
     assert main(["run", "pick_place", "--cycles", "1", "--record", str(a)]) == 0
     before = a.read_bytes()
     capsys.readouterr()
-    for args in (["--rrd", str(a)], ["--rrd", str(tmp_path / "no" / "d.rrd")], ["--report", str(tmp_path / "no" / "r.md")]):
+    for args in (
+        ["--rrd", str(a)],
+        ["--rrd", str(tmp_path / "no" / "d.rrd")],
+        ["--report", str(tmp_path / "no" / "r.md")],
+    ):
         code, out, err = twin(capsys, "diff", a, a, *args)
-        assert code == 2 and out == "" and err.count("\n") == 1 and err.startswith("twin: error:"), (args, err)
+        assert (
+            code == 2 and out == "" and err.count("\n") == 1 and err.startswith("twin: error:")
+        ), (args, err)
     assert a.read_bytes() == before
     code, out, _ = twin(capsys, "diff", a, a, "--rrd", tmp_path / "d.rrd")
-    assert code == 0 and (tmp_path / "d.rrd").stat().st_size > 0 and not (tmp_path / "d.rrd.partial").exists()
+    assert (
+        code == 0
+        and (tmp_path / "d.rrd").stat().st_size > 0
+        and not (tmp_path / "d.rrd.partial").exists()
+    )

@@ -15,7 +15,9 @@ from twin.sweep.dists import INT64_MAX, BadValue, read_value
 
 def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
     """--robot and --rate-hz (and --gui where a window makes sense): what builds the twin."""
-    p.add_argument("--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file")
+    p.add_argument(
+        "--robot", default="mtb", help="profile: mtb, seed000..seed003, or a profile file"
+    )
     p.add_argument("--rate-hz", type=float, default=240.0, help="physics rate (default 240 Hz)")
     if gui:
         p.add_argument("--gui", action="store_true", help="open the PyBullet window")
@@ -24,18 +26,39 @@ def add_twin_options(p: argparse.ArgumentParser, *, gui: bool = True) -> None:
 
 def twin_config(args: argparse.Namespace) -> TwinConfig:
     """The twin configuration the --robot, --rate-hz and camera options ask for."""
-    return TwinConfig(profile=get_profile(args.robot), dt_ns=dt_ns_from_hz(args.rate_hz), cameras=camera_specs(args))
+    return TwinConfig(
+        profile=get_profile(args.robot),
+        dt_ns=dt_ns_from_hz(args.rate_hz),
+        cameras=camera_specs(args),
+    )
 
 
 def add_camera_options(p: argparse.ArgumentParser) -> None:
-    """--camera NAME (repeatable), --camera-size WxH, --camera-hz HZ: cameras rendered into the recordings."""
+    """--camera NAME (repeatable), --camera-size WxH, --camera-hz HZ: cameras rendered into the
+    recordings."""
     default_w, default_h = DEFAULT_SIZE_PX
-    p.add_argument("--camera", action="append", default=[], choices=sorted(CAMERAS), metavar="NAME",
-                   help=f"render this camera into the recording (repeatable): {', '.join(CAMERAS)}")
-    p.add_argument("--camera-size", type=size_px, default=None, metavar="WxH",
-                   help=f"picture size in pixels (default {default_w}x{default_h})")
-    p.add_argument("--camera-hz", type=float, default=None, metavar="HZ",
-                   help=f"pictures per second of simulated time (default {DEFAULT_RATE_HZ:g})")
+    p.add_argument(
+        "--camera",
+        action="append",
+        default=[],
+        choices=sorted(CAMERAS),
+        metavar="NAME",
+        help=f"render this camera into the recording (repeatable): {', '.join(CAMERAS)}",
+    )
+    p.add_argument(
+        "--camera-size",
+        type=size_px,
+        default=None,
+        metavar="WxH",
+        help=f"picture size in pixels (default {default_w}x{default_h})",
+    )
+    p.add_argument(
+        "--camera-hz",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help=f"pictures per second of simulated time (default {DEFAULT_RATE_HZ:g})",
+    )
 
 
 def camera_specs(args: argparse.Namespace) -> tuple:
@@ -43,10 +66,14 @@ def camera_specs(args: argparse.Namespace) -> tuple:
     names = getattr(args, "camera", None) or []
     size, rate = getattr(args, "camera_size", None), getattr(args, "camera_hz", None)
     if not names and (size is not None or rate is not None):
-        raise ConfigError("--camera-size and --camera-hz need a --camera NAME; expected e.g. --camera overhead")
+        raise ConfigError(
+            "--camera-size and --camera-hz need a --camera NAME; expected e.g. --camera overhead"
+        )
     if len(set(names)) != len(names):
         raise ConfigError(f"--camera {names} names a camera twice; expected each camera once")
-    return tuple(camera(n, size or DEFAULT_SIZE_PX, DEFAULT_RATE_HZ if rate is None else rate) for n in names)
+    return tuple(
+        camera(n, size or DEFAULT_SIZE_PX, DEFAULT_RATE_HZ if rate is None else rate) for n in names
+    )
 
 
 def size_px(text: str) -> tuple[int, int]:
@@ -57,30 +84,43 @@ def size_px(text: str) -> tuple[int, int]:
     except ValueError:
         size = None
     if size is None or not all(16 <= v <= MAX_SIDE_PX for v in size):
-        raise argparse.ArgumentTypeError(f"--camera-size {text!r} is invalid; expected WxH, e.g. 320x240, "
-                                         f"each 16..{MAX_SIDE_PX} pixels")
+        raise argparse.ArgumentTypeError(
+            f"--camera-size {text!r} is invalid; expected WxH, e.g. 320x240, "
+            f"each 16..{MAX_SIDE_PX} pixels"
+        )
     return size
 
 
 def add_param_option(p: argparse.ArgumentParser) -> None:
-    """--param NAME=VALUE (repeatable): a task parameter, checked against the task function's signature."""
-    p.add_argument("--param", action="append", type=param_pair, default=[], metavar="NAME=VALUE",
-                   help="a task parameter (repeatable); VALUE as JSON when it parses (1, 0.5, true, "
-                        '"text", [1, 2]), else a string; NaN, infinities (1e400, inf) and integers outside '
-                        "int64 are refused")
+    """--param NAME=VALUE (repeatable): a task parameter, checked against the task function's
+    signature."""
+    p.add_argument(
+        "--param",
+        action="append",
+        type=param_pair,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a task parameter (repeatable); VALUE as JSON when it parses (1, 0.5, true, "
+        '"text", [1, 2]), else a string; NaN, infinities (1e400, inf) and integers outside '
+        "int64 are refused",
+    )
 
 
 def param_pair(text: str) -> tuple[str, object]:
     """An argparse type: NAME=VALUE, VALUE parsed as JSON when it parses (numbers, true/false, null,
-    lists), else kept as a string; NaN, infinities (also a bare nan or inf) and integers outside int64
-    are refused, anywhere in the value."""
+    lists), else kept as a string; NaN, infinities (also a bare nan or inf) and integers outside
+    int64 are refused, anywhere in the value."""
     name, sep, raw = text.partition("=")
     if not sep or not name.isidentifier():
-        raise argparse.ArgumentTypeError(f"--param {text!r} is invalid; expected NAME=VALUE, NAME a Python identifier")
+        raise argparse.ArgumentTypeError(
+            f"--param {text!r} is invalid; expected NAME=VALUE, NAME a Python identifier"
+        )
     try:
         value = read_value(raw)
     except BadValue as err:
-        raise argparse.ArgumentTypeError(f"--param {name}={_short(raw)} is invalid: {err}") from None
+        raise argparse.ArgumentTypeError(
+            f"--param {name}={_short(raw)} is invalid: {err}"
+        ) from None
     return name, value
 
 
@@ -103,20 +143,24 @@ def whole_number(minimum: int = 1) -> Callable[[str], int]:
 
     def parse(text: str) -> int:
         try:
-            value = int(text) if len(text) <= 24 else INT64_MAX + 1  # no int() of thousands of digits
+            # no int() of thousands of digits
+            value = int(text) if len(text) <= 24 else INT64_MAX + 1
         except ValueError:
             value = minimum - 1
         if value < minimum:
             raise argparse.ArgumentTypeError(f"{_short(text)!r} is not a whole number >= {minimum}")
         if value > INT64_MAX:
-            raise argparse.ArgumentTypeError(f"{_short(text)!r} is not a whole number {minimum}..2**63-1 (int64)")
+            raise argparse.ArgumentTypeError(
+                f"{_short(text)!r} is not a whole number {minimum}..2**63-1 (int64)"
+            )
         return value
 
     return parse
 
 
 def seconds(name: str, *, allow_zero: bool) -> Callable[[str], float]:
-    """An argparse type: a finite number of seconds of simulated time, > 0 (or >= 0 with allow_zero)."""
+    """An argparse type: a finite number of seconds of simulated time, > 0 (or >= 0 with
+    allow_zero)."""
 
     def parse(text: str) -> float:
         try:
@@ -124,8 +168,10 @@ def seconds(name: str, *, allow_zero: bool) -> Callable[[str], float]:
         except ValueError:
             value = -1.0
         if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-            raise argparse.ArgumentTypeError(f"{name} {text!r} is invalid; expected seconds of simulated time "
-                                             f"{'>=' if allow_zero else '>'} 0")
+            raise argparse.ArgumentTypeError(
+                f"{name} {text!r} is invalid; expected seconds of simulated time "
+                f"{'>=' if allow_zero else '>'} 0"
+            )
         return value
 
     return parse

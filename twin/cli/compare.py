@@ -12,16 +12,29 @@ from twin.cli.args import whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.errors import ConfigError, OutputError
 
-_TOL_HELP = "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: " + ", ".join(
-    f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
+_TOL_HELP = (
+    "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: "
+    + ", ".join(f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
+)
 
 
 def _add_tolerance_options(p: argparse.ArgumentParser, default: str) -> None:
-    p.add_argument("--tolerance", default=default, metavar="PRESET",
-                   help=f"preset: {', '.join(PRESETS)} (default {default}); see recordings/README.md")
-    p.add_argument("--tol", action="append", default=[], metavar="CHANNEL.FIELD=VALUE", help=_TOL_HELP)
-    p.add_argument("--event-window", type=whole_number(0), default=None, metavar="STEPS",
-                   help="events match when within this many steps (default: the preset's)")
+    p.add_argument(
+        "--tolerance",
+        default=default,
+        metavar="PRESET",
+        help=f"preset: {', '.join(PRESETS)} (default {default}); see recordings/README.md",
+    )
+    p.add_argument(
+        "--tol", action="append", default=[], metavar="CHANNEL.FIELD=VALUE", help=_TOL_HELP
+    )
+    p.add_argument(
+        "--event-window",
+        type=whole_number(0),
+        default=None,
+        metavar="STEPS",
+        help="events match when within this many steps (default: the preset's)",
+    )
 
 
 def _tolerances(args: argparse.Namespace) -> Tolerances:
@@ -30,11 +43,22 @@ def _tolerances(args: argparse.Namespace) -> Tolerances:
 
 
 def _add_report_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--report", action="append", default=[], metavar="FILE",
-                   help="also write the report to FILE.md, FILE.json or FILE.xml (JUnit); repeatable")
-    p.add_argument("--rrd", default=None, metavar="FILE.rrd",
-                   help="write a Rerun recording showing both runs (the candidate as a ghost) and the error")
-    p.add_argument("--quiet", "-q", action="store_true", help="print only the verdict and first divergence")
+    p.add_argument(
+        "--report",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="also write the report to FILE.md, FILE.json or FILE.xml (JUnit); repeatable",
+    )
+    p.add_argument(
+        "--rrd",
+        default=None,
+        metavar="FILE.rrd",
+        help="write a Rerun recording showing both runs (the candidate as a ghost) and the error",
+    )
+    p.add_argument(
+        "--quiet", "-q", action="store_true", help="print only the verdict and first divergence"
+    )
 
 
 def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
@@ -57,8 +81,13 @@ def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
 
     lines = render_text(result).splitlines()
     if args.quiet:
-        lines = lines[:1] + [line for line in lines if line.startswith(
-            ("first divergence", "  expected", "  the candidate has it", "  the golden has it"))]
+        lines = lines[:1] + [
+            line
+            for line in lines
+            if line.startswith(
+                ("first divergence", "  expected", "  the candidate has it", "  the golden has it")
+            )
+        ]
     print("\n".join(lines))
     for path in args.report:
         write_report(result, path)
@@ -93,8 +122,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
         from twin.record import open_recorders
         from twin.sim.world import engine_versions
 
-        with open_recorders(rec.config, replay_run(rec), mcap_path=args.record,
-                            engine=engine_versions()) as sinks:
+        with open_recorders(
+            rec.config, replay_run(rec), mcap_path=args.record, engine=engine_versions()
+        ) as sinks:
             new = replay(rec, sinks=sinks)
         new.path, new.finalized = args.record, True  # the file was finalized as the block closed
     else:
@@ -102,8 +132,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     kinds = replayed_event_kinds(rec)
     result = judge(rec, new, tol, replay, source=rec, event_kinds=kinds)
     if kinds is not None:
-        result.notes.append("this recording predates recorded task and client events: replay compares only the "
-                            "events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS)))
+        result.notes.append(
+            "this recording predates recorded task and client events: replay compares only the "
+            "events the twin itself emits: " + ", ".join(sorted(REPLAYED_EVENT_KINDS))
+        )
     return _emit(result, rec, new, args)
 
 
@@ -121,15 +153,32 @@ def cmd_check(args: argparse.Namespace) -> int:
     recordings, sweeps = split_paths(rest)
     paths = golden_paths(recordings) if recordings or not (sweeps or searches) else []
     progress = Progress(len(paths) + len(sweeps) + len(searches))
-    executor = make_executor(args.executor, args.jobs, args.scheduler) if sweeps or args.executor == "dask" else None
+    executor = (
+        make_executor(args.executor, args.jobs, args.scheduler)
+        if sweeps or args.executor == "dask"
+        else None
+    )
     try:
         run_many = executor.map_unordered if args.executor == "dask" else None
-        outcomes = check_all(paths, tol, update=args.update, jobs=args.jobs, progress=progress,
-                             allow_error=args.allow_error, run_many=run_many) if paths else []
-        for definition in sweeps:  # statistical goldens: each sweep spread over the executor's workers
+        outcomes = (
+            check_all(
+                paths,
+                tol,
+                update=args.update,
+                jobs=args.jobs,
+                progress=progress,
+                allow_error=args.allow_error,
+                run_many=run_many,
+            )
+            if paths
+            else []
+        )
+        # statistical goldens: each sweep spread over the executor's workers
+        for definition in sweeps:
             outcomes.append(check_sweep(definition, executor, update=args.update))
             progress(outcomes[-1])
-        for definition in searches:  # a failure found by `twin search`: does it still fail that way?
+        # a failure found by `twin search`: does it still fail that way?
+        for definition in searches:
             outcomes.append(check_search(definition, update=args.update))
             progress(outcomes[-1])
     finally:
@@ -154,37 +203,83 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     """Add diff, replay and check to the `twin` command's subparsers."""
-    p = sub.add_parser("diff", help="compare two recordings by content (exit 0 match, 1 mismatch, 2 bad input, "
-                                    "3 not comparable)")
+    p = sub.add_parser(
+        "diff",
+        help="compare two recordings by content (exit 0 match, 1 mismatch, 2 bad input, "
+        "3 not comparable)",
+    )
     p.add_argument("golden", help="the reference recording (.mcap)")
     p.add_argument("candidate", help="the recording to check (.mcap)")
     _add_tolerance_options(p, DEFAULT)
-    p.add_argument("--force", action="store_true",
-                   help="compare even when robot profile, time step or scene objects differ")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="compare even when robot profile, time step or scene objects differ",
+    )
     _add_report_options(p)
     p.set_defaults(func=cmd_diff)
 
-    p = sub.add_parser("replay", help="rebuild the twin from a recording, feed its commands back, compare")
+    p = sub.add_parser(
+        "replay", help="rebuild the twin from a recording, feed its commands back, compare"
+    )
     p.add_argument("recording", help="the recording to replay (.mcap)")
-    p.add_argument("--record", default=None, metavar="NEW.mcap", help="also record the replayed run")
+    p.add_argument(
+        "--record", default=None, metavar="NEW.mcap", help="also record the replayed run"
+    )
     _add_tolerance_options(p, DEFAULT)
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)
 
-    p = sub.add_parser("check", help="re-run every golden recording and compare (default: recordings/*.mcap); "
-                                     "sweep goldens (NAME.toml) are judged by statistics")
-    p.add_argument("paths", nargs="*", help="golden .mcap files or folders (default: recordings/), sweep definitions "
-                   "NAME.toml with NAME.summary.json beside them, or folders of them (recordings/sweeps)")
-    p.add_argument("--update", action="store_true", help="rewrite the goldens that differ (and say which); "
-                   "never with a run whose task failed")
-    p.add_argument("--allow-error", action="store_true",
-                   help="with --update: also write a run whose task failed (its outcome stays error)")
-    p.add_argument("--jobs", "-j", type=whole_number(1), default=1, metavar="N", help="parallel processes (default 1)")
-    p.add_argument("--executor", choices=("local", "dask"), default="local",
-                   help="local: processes on this machine (default); dask: Dask's distributed scheduler (a "
-                        "LocalCluster of --jobs workers on 127.0.0.1, or --scheduler), for large golden sets")
-    p.add_argument("--scheduler", default=None, metavar="ADDR", help="with --executor dask: tcp://HOST:8786")
-    p.add_argument("--verbose", "-v", action="store_true", help="print the full report of each differing golden")
-    p.add_argument("--junit", default=None, metavar="FILE.xml", help="also write a JUnit report, one case per golden")
+    p = sub.add_parser(
+        "check",
+        help="re-run every golden recording and compare (default: recordings/*.mcap); "
+        "sweep goldens (NAME.toml) are judged by statistics",
+    )
+    p.add_argument(
+        "paths",
+        nargs="*",
+        help="golden .mcap files or folders (default: recordings/), sweep definitions "
+        "NAME.toml with NAME.summary.json beside them, or folders of them (recordings/sweeps)",
+    )
+    p.add_argument(
+        "--update",
+        action="store_true",
+        help="rewrite the goldens that differ (and say which); never with a run whose task failed",
+    )
+    p.add_argument(
+        "--allow-error",
+        action="store_true",
+        help="with --update: also write a run whose task failed (its outcome stays error)",
+    )
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=whole_number(1),
+        default=1,
+        metavar="N",
+        help="parallel processes (default 1)",
+    )
+    p.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local: processes on this machine (default); dask: Dask's distributed scheduler (a "
+        "LocalCluster of --jobs workers on 127.0.0.1, or --scheduler), for large golden sets",
+    )
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDR", help="with --executor dask: tcp://HOST:8786"
+    )
+    p.add_argument(
+        "--verbose",
+        "-v",
+        action="store_true",
+        help="print the full report of each differing golden",
+    )
+    p.add_argument(
+        "--junit",
+        default=None,
+        metavar="FILE.xml",
+        help="also write a JUnit report, one case per golden",
+    )
     _add_tolerance_options(p, DEFAULT)
     p.set_defaults(func=cmd_check)

@@ -1,4 +1,5 @@
-"""`twin export`: recordings out as Parquet, CSV or a LeRobot v3.0 dataset (the work is in twin.export).
+"""`twin export`: recordings out as Parquet, CSV or a LeRobot v3.0 dataset (the work is in
+twin.export).
 
 Exit codes: 0 written; 1 with --verify, a recording whose replay is not exact was left out (the rest
 is written; nothing is written if none is left); 2 bad input, checked before any work.
@@ -23,26 +24,60 @@ class _LeftOut(TwinError):
 
 
 def add_export_command(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="recordings as Parquet, CSV (one row per frame) or a LeRobot v3.0 dataset",
-                       description="parquet/csv: one recording's frames (or --table events|commands) in one file. "
-                                   "lerobot: every recording (or pick-place cycle) an episode, resampled to --fps.")
-    p.add_argument("files", nargs="+", metavar="FILE.mcap", help="recordings (parquet and csv: exactly one)")
+    p = sub.add_parser(
+        "export",
+        help="recordings as Parquet, CSV (one row per frame) or a LeRobot v3.0 dataset",
+        description="parquet/csv: one recording's frames (or --table events|commands) in one file. "
+        "lerobot: every recording (or pick-place cycle) an episode, resampled to --fps.",
+    )
+    p.add_argument(
+        "files", nargs="+", metavar="FILE.mcap", help="recordings (parquet and csv: exactly one)"
+    )
     p.add_argument("--format", required=True, choices=FORMATS, help="parquet, csv or lerobot")
-    p.add_argument("-o", "--output", required=True, metavar="OUT",
-                   help="FILE.parquet, FILE.csv, or the dataset's folder (new, or empty) for lerobot")
-    p.add_argument("--table", choices=("frames", "events", "commands"), default=None,
-                   help="parquet/csv: which table (default frames: one row per recorded frame)")
-    p.add_argument("--fps", type=whole_number(1), default=None, metavar="N",
-                   help=f"lerobot: frames per second of the dataset (a whole number; required), at most the "
-                        f"recordings' physics rate (240 by default; never above {MAX_FPS})")
-    p.add_argument("--episodes", choices=("recording", "cycles"), default=None,
-                   help="lerobot: one episode per recording (default) or per pick-place cycle")
-    p.add_argument("--task", default=None, metavar="TEXT",
-                   help="lerobot: the episodes' task text (default: each recording's task name)")
-    p.add_argument("--verify", action="store_true",
-                   help="lerobot: replay each recording first; export only those whose replay is exact")
-    p.add_argument("--overwrite", action="store_true",
-                   help="lerobot: replace an existing dataset folder (one holding meta/info.json) once the new one is complete")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT",
+        help="FILE.parquet, FILE.csv, or the dataset's folder (new, or empty) for lerobot",
+    )
+    p.add_argument(
+        "--table",
+        choices=("frames", "events", "commands"),
+        default=None,
+        help="parquet/csv: which table (default frames: one row per recorded frame)",
+    )
+    p.add_argument(
+        "--fps",
+        type=whole_number(1),
+        default=None,
+        metavar="N",
+        help=f"lerobot: frames per second of the dataset (a whole number; required), at most the "
+        f"recordings' physics rate (240 by default; never above {MAX_FPS})",
+    )
+    p.add_argument(
+        "--episodes",
+        choices=("recording", "cycles"),
+        default=None,
+        help="lerobot: one episode per recording (default) or per pick-place cycle",
+    )
+    p.add_argument(
+        "--task",
+        default=None,
+        metavar="TEXT",
+        help="lerobot: the episodes' task text (default: each recording's task name)",
+    )
+    p.add_argument(
+        "--verify",
+        action="store_true",
+        help="lerobot: replay each recording first; export only those whose replay is exact",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="lerobot: replace an existing dataset folder (one holding meta/info.json) once "
+        "the new one is complete",
+    )
     p.set_defaults(func=cmd_export)
 
 
@@ -68,12 +103,15 @@ def _export_table(args: argparse.Namespace) -> int:
 
     _refuse(args, ("--fps", "--episodes", "--task", "--verify", "--overwrite"), "--format lerobot")
     if len(args.files) != 1:
-        raise ConfigError(f"--format {args.format} writes one recording; got {len(args.files)} files "
-                          "(export each on its own, or use --format lerobot)")
+        raise ConfigError(
+            f"--format {args.format} writes one recording; got {len(args.files)} files "
+            "(export each on its own, or use --format lerobot)"
+        )
     out = check_output(args.output, SUFFIXES[args.format], inputs=args.files, option="output")
     table = args.table or "frames"
     rec = load(args.files[0])
-    check_commands(rec)  # the frames table reads them (suction.command); a malformed one is exit 2 as in replay
+    # the frames table reads them (suction.command); a malformed one is exit 2 as in replay
+    check_commands(rec)
     rows = write_table(rec, out, args.format, table)
     print(f"wrote {out}: {rows} rows ({table})")
     return 0
@@ -85,17 +123,37 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     _refuse(args, ("--table",), "--format parquet and csv")
     if args.fps is None:
         raise ConfigError("--format lerobot needs --fps N (a whole number of frames per second)")
-    if args.fps > MAX_FPS:  # before loading anything; each recording's own physics rate is checked once loaded
-        raise ConfigError(f"--fps {args.fps} is above {MAX_FPS}, the fastest physics rate a recording has; expected "
-                          "at most the recordings' physics rate (240 by default)")
-    written, sources = export_lerobot(args.files, Path(args.output), args.fps, mode=args.episodes or "recording",
-                                      task=args.task, verify_first=args.verify, overwrite=args.overwrite, say=print)
+    # before loading anything; each recording's own physics rate is checked once loaded
+    if args.fps > MAX_FPS:
+        raise ConfigError(
+            f"--fps {args.fps} is above {MAX_FPS}, the fastest physics rate a recording "
+            f"has; expected "
+            "at most the recordings' physics rate (240 by default)"
+        )
+    written, sources = export_lerobot(
+        args.files,
+        Path(args.output),
+        args.fps,
+        mode=args.episodes or "recording",
+        task=args.task,
+        verify_first=args.verify,
+        overwrite=args.overwrite,
+        say=print,
+    )
     left_out = sum(1 for s in sources if s.verified is False)
     if written is None:
-        raise _LeftOut(f"no recording to export: the replay of each differs from it (--verify); nothing written to "
-                       f"{args.output!r}")
+        raise _LeftOut(
+            f"no recording to export: the replay of each differs from it (--verify); "
+            f"nothing written to "
+            f"{args.output!r}"
+        )
     videos = f", videos {', '.join(written.video_keys)}" if written.video_keys else ", no camera"
-    print(f"wrote {written.path}: {written.episodes} episode(s), {written.frames} frames at {args.fps} fps{videos}")
+    print(
+        f"wrote {written.path}: {written.episodes} episode(s), {written.frames} frames "
+        f"at {args.fps} fps{videos}"
+    )
     if left_out:
-        raise _LeftOut(f"{left_out} of {len(sources)} recording(s) left out: their replay is not exact")
+        raise _LeftOut(
+            f"{left_out} of {len(sources)} recording(s) left out: their replay is not exact"
+        )
     return 0

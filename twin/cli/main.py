@@ -45,7 +45,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     config = twin_config(args)
     params = run_params(fn, args)
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
-    run = task_run(args.task, params, mcap_path)  # a task file by its path relative to the recording
+    # a task file by its path relative to the recording
+    run = task_run(args.task, params, mcap_path)
     if args.timeout is not None:
         run["timeout_s"] = args.timeout  # twin check re-runs the task with the same bound
     summary = _Summary()
@@ -57,7 +58,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate,
                             engine=engine_versions()) as sinks:
-            twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])  # the limit last: recorders see its frame
+            # the limit last: recorders see its frame
+            twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])
             wall0 = time.perf_counter()
             try:
                 run_task(twin, fn, params)
@@ -80,7 +82,9 @@ def run_params(fn, args: argparse.Namespace) -> dict:
     params = params_dict(args.param)
     if args.cycles is not None:
         if "cycles" in params:
-            raise ConfigError("--cycles and --param cycles=... are both given; expected one of them")
+            raise ConfigError(
+                "--cycles and --param cycles=... are both given; expected one of them"
+            )
         params["cycles"] = args.cycles
     elif "cycles" not in params and "cycles" in (task_params(fn) or {}):
         params["cycles"] = DEFAULT_CYCLES
@@ -99,31 +103,48 @@ class _Summary(Sink):
 
 def _print_summary(twin: Twin, summary: _Summary, wall_s: float) -> None:
     sim_s = twin.t_s
-    print(f"robot {twin.profile.name}: {twin.step_index} steps, simulated {sim_s:.3f} s, wall {wall_s:.3f} s, "
-          f"real-time factor {sim_s / wall_s if wall_s > 0 else float('inf'):.1f}x")
+    print(
+        f"robot {twin.profile.name}: {twin.step_index} steps, simulated {sim_s:.3f} s, "
+        f"wall {wall_s:.3f} s, "
+        f"real-time factor {sim_s / wall_s if wall_s > 0 else float('inf'):.1f}x"
+    )
     counts: dict[str, int] = {}
     for ev in summary.events:
         counts[ev.kind] = counts.get(ev.kind, 0) + 1
     print("events: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     for ev in summary.events:
-        if ev.kind in ("attach", "release", "break", "suction_empty", "out_of_reach", "placed", "task_error",
-                       "settle_timeout", "joint_limit"):
+        if ev.kind in (
+            "attach",
+            "release",
+            "break",
+            "suction_empty",
+            "out_of_reach",
+            "placed",
+            "task_error",
+            "settle_timeout",
+            "joint_limit",
+        ):
             print(f"  t={ev.t_ns * 1e-9:8.3f} s  {ev.kind:<14} {ev.body:<6} {ev.message}")
     for obj, pose in zip(twin.config.objects, twin.frame.object_poses, strict=True):
-        print(f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m, "
-              f"q ({pose[3]:+.4f}, {pose[4]:+.4f}, {pose[5]:+.4f}, {pose[6]:+.4f})")
+        print(
+            f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m, "
+            f"q ({pose[3]:+.4f}, {pose[4]:+.4f}, {pose[5]:+.4f}, {pose[6]:+.4f})"
+        )
     placed = [ev for ev in summary.events if ev.kind == "placed"]
     errors = [e for e in (_error_m(ev) for ev in placed) if e is not None]
     unmeasured = len(placed) - len(errors)
     if errors:  # a task's own `placed` event may carry no error figure: counted, never a crash
-        print(f"placement error: worst {max(errors) * 1000:.2f} mm over {len(errors)} cycle(s)"
-              + (f"; {unmeasured} more placed (no error figure)" if unmeasured else ""))
+        print(
+            f"placement error: worst {max(errors) * 1000:.2f} mm over {len(errors)} cycle(s)"
+            + (f"; {unmeasured} more placed (no error figure)" if unmeasured else "")
+        )
     elif placed:
         print(f"placement error: {unmeasured} placed (no error figure)")
 
 
 def _error_m(event) -> float | None:
-    """A `placed` event's error_m when it is a finite number of metres, else None (missing, null, text)."""
+    """A `placed` event's error_m when it is a finite number of metres, else None (missing, null,
+    text)."""
     value = event.data.get("error_m") if isinstance(event.data, dict) else None
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
@@ -138,48 +159,84 @@ def cmd_teleop(args: argparse.Namespace) -> int:
     from twin.teleop.session import TeleopOptions, run_teleop, summary_lines
 
     mcap, rrd = record_paths(args, f"teleop_{args.robot}")
-    session = run_teleop(TeleopOptions(
-        robot=args.robot, rate_hz=args.rate_hz, gui=args.gui, keymap_path=args.keymap or "", keys=args.keys,
-        key_interval_s=args.key_interval, record_path=str(mcap) if mcap else None,
-        rrd_path=str(rrd) if rrd else None, record_rate=args.rate, cameras=camera_specs(args),
-    ))
+    session = run_teleop(
+        TeleopOptions(
+            robot=args.robot,
+            rate_hz=args.rate_hz,
+            gui=args.gui,
+            keymap_path=args.keymap or "",
+            keys=args.keys,
+            key_interval_s=args.key_interval,
+            record_path=str(mcap) if mcap else None,
+            rrd_path=str(rrd) if rrd else None,
+            record_rate=args.rate,
+            cameras=camera_specs(args),
+        )
+    )
     for line in summary_lines(session):
         print(line)
     return 0
 
 
 def _add_teleop_parser(sub) -> None:
-    p = sub.add_parser("teleop", help="drive the robot from the keyboard (terminal screen, window, or --keys)",
-                       description="Keyboard teleoperation. Quit: Esc, Ctrl-C, Ctrl-D, and q unless the key map "
-                                   "binds q (seed000's elbow). Every key press is recorded and replayable.")
+    p = sub.add_parser(
+        "teleop",
+        help="drive the robot from the keyboard (terminal screen, window, or --keys)",
+        description="Keyboard teleoperation. Quit: Esc, Ctrl-C, Ctrl-D, and q unless the key map "
+        "binds q (seed000's elbow). Every key press is recorded and replayable.",
+    )
     add_twin_options(p)
     add_record_options(p, record_by_default=False)
-    p.add_argument("--keymap", metavar="FILE", help="your own key map (.toml or .json); default: the robot's map")
-    p.add_argument("--keys", metavar="KEYS", help='scripted keys, e.g. "d*30 e 8 wait*2 s" (a character or a '
-                   'name like up/down/left/right/space; wait: no key; *N repeats), run in simulated time')
-    p.add_argument("--key-interval", metavar="SECONDS", type=float, default=0.5,
-                   help="simulated time after each scripted key (default 0.5 s)")
+    p.add_argument(
+        "--keymap",
+        metavar="FILE",
+        help="your own key map (.toml or .json); default: the robot's map",
+    )
+    p.add_argument(
+        "--keys",
+        metavar="KEYS",
+        help='scripted keys, e.g. "d*30 e 8 wait*2 s" (a character or a '
+        "name like up/down/left/right/space; wait: no key; *N repeats), run in simulated time",
+    )
+    p.add_argument(
+        "--key-interval",
+        metavar="SECONDS",
+        type=float,
+        default=0.5,
+        help="simulated time after each scripted key (default 0.5 s)",
+    )
     p.set_defaults(func=cmd_teleop)
 
 
 class _OneLineErrors(argparse.ArgumentParser):
-    """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit it."""
+    """Usage errors as one line (like every other error) and exit code 2; sub-commands inherit
+    it."""
 
     def error(self, message: str):
         self.exit(2, f"twin: error: {message} (see `{self.prog} --help`)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _OneLineErrors(prog="twin", description="Record-and-replay digital twin of the MTB SCARA robot")
+    parser = _OneLineErrors(
+        prog="twin", description="Record-and-replay digital twin of the MTB SCARA robot"
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a task (built-in name or path/to/task.py)")
     p.add_argument("task")
     add_twin_options(p)
-    p.add_argument("--cycles", type=whole_number(1), default=None,
-                   help=f"pick-and-place cycles (default {DEFAULT_CYCLES} for a task that takes cycles)")
+    p.add_argument(
+        "--cycles",
+        type=whole_number(1),
+        default=None,
+        help=f"pick-and-place cycles (default {DEFAULT_CYCLES} for a task that takes cycles)",
+    )
     add_param_option(p)
-    p.add_argument("--timeout", type=seconds("--timeout", allow_zero=False), metavar="SECONDS",
-                   help="end the task with an error (exit 1) once it passes this much simulated time")
+    p.add_argument(
+        "--timeout",
+        type=seconds("--timeout", allow_zero=False),
+        metavar="SECONDS",
+        help="end the task with an error (exit 1) once it passes this much simulated time",
+    )
     add_record_options(p)
     p.set_defaults(func=cmd_run)
     _add_teleop_parser(sub)
@@ -201,7 +258,8 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as done:  # --help (0) or a usage error (2), already printed
         return done.code if isinstance(done.code, int) else 2
     try:
-        with stop_signals_raise():  # SIGTERM and SIGHUP unwind like Ctrl-C: recordings are finalized
+        # SIGTERM and SIGHUP unwind like Ctrl-C: recordings are finalized
+        with stop_signals_raise():
             return args.func(args)
     except TwinError as err:
         print(f"twin: error: {err}", file=sys.stderr)
@@ -213,7 +271,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"twin: stopped by {stop.name}", file=sys.stderr)
         return stop.exit_code
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading: what the shell
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # reports for a program SIGPIPE ended
+        # reports for a program SIGPIPE ended
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return BROKEN_PIPE_EXIT
 
 

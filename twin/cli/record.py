@@ -1,5 +1,5 @@
-"""Recording options shared by `twin run`, `teleop` and `serve`, and the `twin info` and `twin recover`
-commands: argument parsing and printing only."""
+"""Recording options shared by `twin run`, `teleop` and `serve`, and the `twin info` and `twin
+recover` commands: argument parsing and printing only."""
 
 from __future__ import annotations
 
@@ -11,19 +11,41 @@ from twin.errors import RecordingError
 from twin.record.outputs import DEFAULT_FOLDER, check_output, partial_path
 
 
-def add_record_options(p: argparse.ArgumentParser, *, record_by_default: bool = True,
-                       default_stem: str = "<task>_<robot>") -> None:
+def add_record_options(
+    p: argparse.ArgumentParser,
+    *,
+    record_by_default: bool = True,
+    default_stem: str = "<task>_<robot>",
+) -> None:
     """--record FILE.mcap, --no-record (when recording is on by default), --rrd FILE.rrd, --rate N.
     default_stem: the default file's name as the help shows it (record_paths makes the real one)."""
-    default_text = f"default {DEFAULT_FOLDER}/{default_stem}.mcap" if record_by_default else "default: no MCAP file"
+    default_text = (
+        f"default {DEFAULT_FOLDER}/{default_stem}.mcap"
+        if record_by_default
+        else "default: no MCAP file"
+    )
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--record", metavar="FILE.mcap", help=f"record the run to this MCAP file ({default_text})")
+    group.add_argument(
+        "--record", metavar="FILE.mcap", help=f"record the run to this MCAP file ({default_text})"
+    )
     if record_by_default:
-        group.add_argument("--no-record", action="store_true", help="do not write an MCAP recording")
-    p.add_argument("--rrd", metavar="FILE.rrd", help="also write a Rerun recording (a view, regenerable from MCAP)")
-    p.add_argument("--rate", type=whole_number(1), default=1, metavar="N",
-                   help="MCAP: keep every Nth physics step (default 1: every step; the last step is always kept); "
-                        "the .rrd view keeps every step")
+        group.add_argument(
+            "--no-record", action="store_true", help="do not write an MCAP recording"
+        )
+    p.add_argument(
+        "--rrd",
+        metavar="FILE.rrd",
+        help="also write a Rerun recording (a view, regenerable from MCAP)",
+    )
+    p.add_argument(
+        "--rate",
+        type=whole_number(1),
+        default=1,
+        metavar="N",
+        help="MCAP: keep every Nth physics step (default 1: every step; the last step is "
+        "always kept); "
+        "the .rrd view keeps every step",
+    )
     p.set_defaults(record_by_default=record_by_default)
 
 
@@ -33,7 +55,11 @@ def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | No
     missing (the default's folder, or one the user names: twin.record.outputs.make_default_folder);
     any other folder must exist."""
     mcap = args.record
-    if mcap is None and getattr(args, "record_by_default", False) and not getattr(args, "no_record", False):
+    if (
+        mcap is None
+        and getattr(args, "record_by_default", False)
+        and not getattr(args, "no_record", False)
+    ):
         mcap = str(Path(DEFAULT_FOLDER) / f"{default_stem}.mcap")
     mcap_path = check_output(mcap, ".mcap", option="recording") if mcap is not None else None
     rrd_path = check_output(args.rrd, ".rrd", option="recording") if args.rrd is not None else None
@@ -45,16 +71,26 @@ def cmd_info(args: argparse.Namespace) -> int:
 
     partial = partial_path(args.file)
     if not Path(args.file).exists() and partial.is_file():
-        raise RecordingError(f"recording {args.file!r} does not exist, but {str(partial)!r} does: the unfinished file "
-                             f"of a run that was killed (or is still running); `twin recover {args.file}` restores it")
+        raise RecordingError(
+            f"recording {args.file!r} does not exist, but {str(partial)!r} does: the "
+            f"unfinished file "
+            f"of a run that was killed (or is still running); `twin recover {args.file}` "
+            f"restores it"
+        )
     info = read_info(args.file, keep_events=args.events)
     for line in format_info(info, all_events=args.events):
         print(line)
     if not info.intact:
-        raise RecordingError(f"recording {args.file!r} is not finalized: {info.problem}; "
-                             f"`twin recover {args.file} -o FIXED.mcap` restores its readable part")
+        raise RecordingError(
+            f"recording {args.file!r} is not finalized: {info.problem}; "
+            f"`twin recover {args.file} -o FIXED.mcap` restores its readable part"
+        )
     if info.problems:  # printed above, each on its own line; the error names the first and how many
-        more = f" (and {len(info.problems) - 1} more problem(s) listed above)" if len(info.problems) > 1 else ""
+        more = (
+            f" (and {len(info.problems) - 1} more problem(s) listed above)"
+            if len(info.problems) > 1
+            else ""
+        )
         raise RecordingError(f"recording {args.file!r}: {info.problems[0]}{more}")
     return 0
 
@@ -69,19 +105,35 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 
 def add_record_commands(sub) -> None:
-    p = sub.add_parser("info", help="describe a recording: duration, channels, events, metadata, finalized or not",
-                       description="Exit code 0 for a complete twin recording; 2 for a missing, unfinished or "
-                                   "foreign file, or one with any unreadable part (the report says what it could read).")
+    p = sub.add_parser(
+        "info",
+        help="describe a recording: duration, channels, events, metadata, finalized or not",
+        description="Exit code 0 for a complete twin recording; 2 for a missing, unfinished or "
+        "foreign file, or one with any unreadable part (the report says what it could read).",
+    )
     p.add_argument("file", metavar="FILE.mcap")
-    p.add_argument("--events", action="store_true", help="also list every event with its time, step and data")
+    p.add_argument(
+        "--events", action="store_true", help="also list every event with its time, step and data"
+    )
     p.set_defaults(func=cmd_info)
-    p = sub.add_parser("recover", help="restore the readable part of a recording cut short (crash, kill -9)",
-                       description="Reads up to the first damaged record and writes a complete MCAP file. A run "
-                                   "writes NAME.mcap.partial and renames it to NAME.mcap when it ends; a killed run "
-                                   "leaves the .partial file: `twin recover NAME.mcap` finds it and writes NAME.mcap.")
-    p.add_argument("file", metavar="BROKEN.mcap",
-                   help="the cut-short file; for a killed run, its NAME.mcap (its NAME.mcap.partial is used)")
-    p.add_argument("-o", "--output", metavar="FIXED.mcap",
-                   help="where to write the restored file (default, for a killed run's .partial file: the NAME.mcap "
-                        "it was meant to become, if that does not exist)")
+    p = sub.add_parser(
+        "recover",
+        help="restore the readable part of a recording cut short (crash, kill -9)",
+        description="Reads up to the first damaged record and writes a complete MCAP file. A run "
+        "writes NAME.mcap.partial and renames it to NAME.mcap when it ends; a killed run "
+        "leaves the .partial file: `twin recover NAME.mcap` finds it and writes NAME.mcap.",
+    )
+    p.add_argument(
+        "file",
+        metavar="BROKEN.mcap",
+        help="the cut-short file; for a killed run, its NAME.mcap (its NAME.mcap.partial is used)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="FIXED.mcap",
+        help="where to write the restored file (default, for a killed run's .partial file: "
+        "the NAME.mcap "
+        "it was meant to become, if that does not exist)",
+    )
     p.set_defaults(func=cmd_recover)

@@ -1,4 +1,5 @@
-"""The `twin serve` subcommand's arguments (the `twin` CLI registers it; the server lives in server.py)."""
+"""The `twin serve` subcommand's arguments (the `twin` CLI registers it; the server lives in
+server.py)."""
 
 from __future__ import annotations
 
@@ -24,23 +25,58 @@ ends the run and resets the scene. Each run is recorded (default runs/remote_<ro
 
 
 def add_serve_command(sub) -> None:
-    p = sub.add_parser("serve", help="serve CoppeliaSim's ZeroMQ remote API (drive the twin from its clients)",
-                       description=SERVE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "serve",
+        help="serve CoppeliaSim's ZeroMQ remote API (drive the twin from its clients)",
+        description=SERVE_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_twin_options(p, gui=False)
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1, loopback only)")
-    p.add_argument("--port", type=port(allow_any=True), default=23000, help="port (default 23000, CoppeliaSim's; 0: any free port)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1, loopback only)",
+    )
+    p.add_argument(
+        "--port",
+        type=port(allow_any=True),
+        default=23000,
+        help="port (default 23000, CoppeliaSim's; 0: any free port)",
+    )
     mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
-                      help="advance with the wall clock (default)")
-    mode.add_argument("--stepped", dest="mode", action="store_const", const="stepped",
-                      help="advance only on sim.step()")
+    mode.add_argument(
+        "--realtime",
+        dest="mode",
+        action="store_const",
+        const="realtime",
+        help="advance with the wall clock (default)",
+    )
+    mode.add_argument(
+        "--stepped",
+        dest="mode",
+        action="store_const",
+        const="stepped",
+        help="advance only on sim.step()",
+    )
     p.set_defaults(mode="realtime")
-    p.add_argument("--speed", type=float, default=1.0, help="--realtime: simulated seconds per wall second (default 1)")
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="--realtime: simulated seconds per wall second (default 1)",
+    )
     low, high = STEP_GRACE_RANGE_S
-    p.add_argument("--step-grace", type=float, default=DEFAULT_STEP_GRACE_S, metavar="SECONDS",
-                   help="a stepping client silent this long no longer holds back the others' sim.step() "
-                        f"(default {DEFAULT_STEP_GRACE_S:g}; {low:g}..{high:g})")
-    p.add_argument("--start", action="store_true", help="start the simulation at launch, like pressing Play")
+    p.add_argument(
+        "--step-grace",
+        type=float,
+        default=DEFAULT_STEP_GRACE_S,
+        metavar="SECONDS",
+        help="a stepping client silent this long no longer holds back the others' sim.step() "
+        f"(default {DEFAULT_STEP_GRACE_S:g}; {low:g}..{high:g})",
+    )
+    p.add_argument(
+        "--start", action="store_true", help="start the simulation at launch, like pressing Play"
+    )
     add_record_options(p, record_by_default=True, default_stem="remote_<robot>")
     p.set_defaults(func=cmd_serve)
 
@@ -50,6 +86,16 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     config = twin_config(args)
     mcap_path, rrd_path = record_paths(args, f"remote_{config.profile.name}")
-    return serve(config, host=args.host, port=args.port, mode=args.mode, speed=args.speed, step_grace_s=args.step_grace,
-                 mcap_path=str(mcap_path) if mcap_path else None, rrd_path=str(rrd_path) if rrd_path else None,
-                 rate=args.rate, start=args.start, log=lambda line: print(line, flush=True))
+    return serve(
+        config,
+        host=args.host,
+        port=args.port,
+        mode=args.mode,
+        speed=args.speed,
+        step_grace_s=args.step_grace,
+        mcap_path=str(mcap_path) if mcap_path else None,
+        rrd_path=str(rrd_path) if rrd_path else None,
+        rate=args.rate,
+        start=args.start,
+        log=lambda line: print(line, flush=True),
+    )

@@ -1,4 +1,5 @@
-"""The `twin sweep` command: argument parsing, progress and printing only (the work is twin.sweep)."""
+"""The `twin sweep` command: argument parsing, progress and printing only (the work is
+twin.sweep)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from pathlib import Path
 from twin.cli.args import add_param_option, params_dict, whole_number
 from twin.errors import ConfigError, TwinError
 
-NO_RESULT = ("worker died", "killed: ", "timed out: ")  # a scenario that gave no result (twin.sweep.guard)
+# a scenario that gave no result (twin.sweep.guard)
+NO_RESULT = ("worker died", "killed: ", "timed out: ")
 
 
 class BelowThreshold(TwinError):
@@ -28,7 +30,9 @@ def rate(text: str) -> float:
     except ValueError:
         value = -1.0
     if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"--fail-under {text!r} is invalid; expected a rate 0..1 or a percentage")
+        raise argparse.ArgumentTypeError(
+            f"--fail-under {text!r} is invalid; expected a rate 0..1 or a percentage"
+        )
     return value
 
 
@@ -39,7 +43,9 @@ def seconds(text: str) -> float:
     except ValueError:
         value = -1.0
     if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"--scenario-timeout {text!r} is invalid; expected seconds > 0")
+        raise argparse.ArgumentTypeError(
+            f"--scenario-timeout {text!r} is invalid; expected seconds > 0"
+        )
     return value
 
 
@@ -50,66 +56,150 @@ def only_list(text: str) -> list[int]:
     except ValueError:
         out = [-1]
     if not out or min(out) < 0:
-        raise argparse.ArgumentTypeError(f"--only {text!r} is invalid; expected scenario numbers such as 7 or 3,7")
+        raise argparse.ArgumentTypeError(
+            f"--only {text!r} is invalid; expected scenario numbers such as 7 or 3,7"
+        )
     return out
 
 
 def add_sweep_command(sub) -> None:
-    p = sub.add_parser("sweep", help="run a task over many seeded scenarios (varied scene, pad, robot, task values) "
-                                     "and report statistics",
-                       description="Scenario i's values depend only on (--seed, i); its run is the same whatever "
-                                   "the executor or job count. Writes DIR/results.parquet, DIR/summary.json, "
-                                   "DIR/sweep.toml and DIR/failures/scenario-<i>.mcap. Exit 0 done, 1 under "
-                                   "--fail-under, 2 bad input, 130 Ctrl-C (the results so far are written).")
+    p = sub.add_parser(
+        "sweep",
+        help="run a task over many seeded scenarios (varied scene, pad, robot, task values) "
+        "and report statistics",
+        description="Scenario i's values depend only on (--seed, i); its run is the same whatever "
+        "the executor or job count. Writes DIR/results.parquet, DIR/summary.json, "
+        "DIR/sweep.toml and DIR/failures/scenario-<i>.mcap. Exit 0 done, 1 under "
+        "--fail-under, 2 bad input, 130 Ctrl-C (the results so far are written).",
+    )
     p.add_argument("task", help="a built-in task, path/to/task.py, or a sweep definition NAME.toml")
-    p.add_argument("--robot", default=None, help="profile: mtb (default), seed000..seed003, or a profile file")
+    p.add_argument(
+        "--robot", default=None, help="profile: mtb (default), seed000..seed003, or a profile file"
+    )
     p.add_argument("--rate-hz", type=float, default=None, help="physics rate (default 240 Hz)")
-    p.add_argument("--scenarios", type=whole_number(1), default=None, metavar="N", help="how many scenarios")
-    p.add_argument("--seed", type=whole_number(0), default=None, metavar="S", help="the sweep's seed (default 0)")
-    p.add_argument("--vary", action="append", default=[], metavar="KEY=DIST",
-                   help="a varied value (repeatable): KEY box.x_m, box.y_m, box.yaw_rad, box.mass_kg, box.friction "
-                        "(any scene object), pad.<suction field>, robot.revolute_max_velocity_rad_s, "
-                        "robot.prismatic_max_velocity_m_s, engine.<field>, task.<parameter>; DIST uniform(a,b), "
-                        "normal(mu,sigma), choice(v1,v2,...) or a value")
+    p.add_argument(
+        "--scenarios", type=whole_number(1), default=None, metavar="N", help="how many scenarios"
+    )
+    p.add_argument(
+        "--seed",
+        type=whole_number(0),
+        default=None,
+        metavar="S",
+        help="the sweep's seed (default 0)",
+    )
+    p.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=DIST",
+        help="a varied value (repeatable): KEY box.x_m, box.y_m, box.yaw_rad, box.mass_kg, "
+        "box.friction "
+        "(any scene object), pad.<suction field>, robot.revolute_max_velocity_rad_s, "
+        "robot.prismatic_max_velocity_m_s, engine.<field>, task.<parameter>; DIST uniform(a,b), "
+        "normal(mu,sigma), choice(v1,v2,...) or a value",
+    )
     add_param_option(p)
-    p.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
-                   help="a scenario whose task runs past this much simulated time fails")
-    p.add_argument("--scenario-timeout", type=seconds, default=None, metavar="S",
-                   help="a scenario that gives no result within S seconds of wall time (hung without stepping) "
-                        "is ended and fails with that reason")
-    p.add_argument("--jobs", "-j", type=whole_number(1), default=os.cpu_count() or 1, metavar="N",
-                   help=f"worker processes (default: every core, {os.cpu_count()})")
-    p.add_argument("--executor", choices=("local", "dask"), default="local",
-                   help="local: a process pool on this machine (default); dask: Dask's distributed scheduler")
-    p.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or tls://HOST:8786 "
-                        "(certificates from Dask's configuration; default: a cluster of --jobs workers on "
-                        "127.0.0.1 that only this sweep can reach, TLS with a certificate made for the run)")
-    p.add_argument("--dashboard", action="store_true",
-                   help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on a free "
-                        "port (its address is printed); without it no HTTP server runs")
-    p.add_argument("--batch", type=whole_number(1), default=None, metavar="N",
-                   help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on Dask; at most 16)")
-    p.add_argument("--out", required=True, metavar="DIR", help="the output folder (created; its parent must exist, or be runs/, which is made)")
-    p.add_argument("--save", choices=("failures", "all", "none"), default="failures",
-                   help="which scenarios to record as MCAP (default failures: DIR/failures/scenario-<i>.mcap; "
-                        "all: also DIR/scenarios/scenario-<i>.mcap)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue a sweep that was stopped or killed: run only the scenarios missing from "
-                        "DIR/journal.jsonl (same definition), then write the results as an uninterrupted sweep")
-    p.add_argument("--only", type=only_list, default=None, metavar="I[,J...]",
-                   help="re-run only these scenarios (recorded per --save; results.parquet is left alone)")
-    p.add_argument("--fail-under", type=rate, default=None, metavar="RATE",
-                   help="exit 1 when the success rate is below RATE (0..1, or 95%%): a CI gate")
-    p.add_argument("--plot", action="store_true",
-                   help="also write DIR/sweep.png: each scenario over the two varied keys "
-                        "that matter most and the placement error's distribution (needs "
-                        "matplotlib: twin[plot])")
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="a scenario whose task runs past this much simulated time fails",
+    )
+    p.add_argument(
+        "--scenario-timeout",
+        type=seconds,
+        default=None,
+        metavar="S",
+        help="a scenario that gives no result within S seconds of wall time (hung without "
+        "stepping) "
+        "is ended and fails with that reason",
+    )
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=whole_number(1),
+        default=os.cpu_count() or 1,
+        metavar="N",
+        help=f"worker processes (default: every core, {os.cpu_count()})",
+    )
+    p.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local: a process pool on this machine (default); dask: Dask's distributed scheduler",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or "
+        "tls://HOST:8786 "
+        "(certificates from Dask's configuration; default: a cluster of --jobs workers on "
+        "127.0.0.1 that only this sweep can reach, TLS with a certificate made for the run)",
+    )
+    p.add_argument(
+        "--dashboard",
+        action="store_true",
+        help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on "
+        "a free "
+        "port (its address is printed); without it no HTTP server runs",
+    )
+    p.add_argument(
+        "--batch",
+        type=whole_number(1),
+        default=None,
+        metavar="N",
+        help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on "
+        "Dask; at most 16)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="the output folder (created; its parent must exist, or be runs/, which is made)",
+    )
+    p.add_argument(
+        "--save",
+        choices=("failures", "all", "none"),
+        default="failures",
+        help="which scenarios to record as MCAP (default failures: DIR/failures/scenario-<i>.mcap; "
+        "all: also DIR/scenarios/scenario-<i>.mcap)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue a sweep that was stopped or killed: run only the scenarios missing from "
+        "DIR/journal.jsonl (same definition), then write the results as an uninterrupted sweep",
+    )
+    p.add_argument(
+        "--only",
+        type=only_list,
+        default=None,
+        metavar="I[,J...]",
+        help="re-run only these scenarios (recorded per --save; results.parquet is left alone)",
+    )
+    p.add_argument(
+        "--fail-under",
+        type=rate,
+        default=None,
+        metavar="RATE",
+        help="exit 1 when the success rate is below RATE (0..1, or 95%%): a CI gate",
+    )
+    p.add_argument(
+        "--plot",
+        action="store_true",
+        help="also write DIR/sweep.png: each scenario over the two varied keys "
+        "that matter most and the placement error's distribution (needs "
+        "matplotlib: twin[plot])",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar; only the summary")
     p.set_defaults(func=cmd_sweep)
-    p.epilog = ("twin sweep compare A B: two sweeps' results compared (paired when they ran "
-                "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
-                "`twin sweep compare --help`.")
+    p.epilog = (
+        "twin sweep compare A B: two sweeps' results compared (paired when they ran "
+        "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
+        "`twin sweep compare --help`."
+    )
     _add_subcommands(p)
 
 
@@ -117,32 +207,60 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
     """`twin sweep compare` and `twin sweep plot`: parsers of their own, chosen by the first word
     after `sweep` (`twin sweep TASK` takes any other first word as the task)."""
     kind = type(p)  # twin's parser class: one-line usage errors, exit 2
-    compare = kind(prog=f"{p.prog} compare",
-                   description="Compare two sweeps: B (new) against A (reference). The same "
-                               "scenarios (same seed and varied keys): paired, scenario by "
-                               "scenario (flips, Newcombe's paired interval, McNemar's exact "
-                               "test, the paired shift of the placement error); else Newcombe's "
-                               "unpaired interval. Exit 0, 1 under --fail-if-worse when B is "
-                               "worse, 2 bad input.")
-    compare.add_argument("a", metavar="A", help="the reference: a result folder (twin sweep "
-                         "--out) or a golden NAME.toml with NAME.results.parquet")
-    compare.add_argument("b", metavar="B",
-                         help="the new run: a result folder or a golden NAME.toml")
-    compare.add_argument("--report", default=None, metavar="FILE",
-                         help="also write the report: Markdown (.md) or JSON (.json)")
-    compare.add_argument("--fail-if-worse", action="store_true",
-                         help="exit 1 when B is worse beyond sampling noise: a significant "
-                              "drop in success rate (paired: McNemar p < 0.05; unpaired: "
-                              "Newcombe's interval below 0) or in placement error")
-    compare.add_argument("--plot", default=None, metavar="FILE.png",
-                         help="also write a picture with the flips ringed (needs matplotlib)")
+    compare = kind(
+        prog=f"{p.prog} compare",
+        description="Compare two sweeps: B (new) against A (reference). The same "
+        "scenarios (same seed and varied keys): paired, scenario by "
+        "scenario (flips, Newcombe's paired interval, McNemar's exact "
+        "test, the paired shift of the placement error); else Newcombe's "
+        "unpaired interval. Exit 0, 1 under --fail-if-worse when B is "
+        "worse, 2 bad input.",
+    )
+    compare.add_argument(
+        "a",
+        metavar="A",
+        help="the reference: a result folder (twin sweep "
+        "--out) or a golden NAME.toml with NAME.results.parquet",
+    )
+    compare.add_argument(
+        "b", metavar="B", help="the new run: a result folder or a golden NAME.toml"
+    )
+    compare.add_argument(
+        "--report",
+        default=None,
+        metavar="FILE",
+        help="also write the report: Markdown (.md) or JSON (.json)",
+    )
+    compare.add_argument(
+        "--fail-if-worse",
+        action="store_true",
+        help="exit 1 when B is worse beyond sampling noise: a significant "
+        "drop in success rate (paired: McNemar p < 0.05; unpaired: "
+        "Newcombe's interval below 0) or in placement error",
+    )
+    compare.add_argument(
+        "--plot",
+        default=None,
+        metavar="FILE.png",
+        help="also write a picture with the flips ringed (needs matplotlib)",
+    )
     compare.set_defaults(func=cmd_compare)
-    plot = kind(prog=f"{p.prog} plot", description="Draw a sweep: each scenario over the two "
-                "varied keys that matter most, and the placement error.")
-    plot.add_argument("dir", metavar="DIR", help="a result folder, or a golden NAME.toml with "
-                                                 "NAME.results.parquet")
-    plot.add_argument("--out", default=None, metavar="FILE.png",
-                      help="the picture (default DIR/sweep.png; NAME.png for a golden)")
+    plot = kind(
+        prog=f"{p.prog} plot",
+        description="Draw a sweep: each scenario over the two "
+        "varied keys that matter most, and the placement error.",
+    )
+    plot.add_argument(
+        "dir",
+        metavar="DIR",
+        help="a result folder, or a golden NAME.toml with NAME.results.parquet",
+    )
+    plot.add_argument(
+        "--out",
+        default=None,
+        metavar="FILE.png",
+        help="the picture (default DIR/sweep.png; NAME.png for a golden)",
+    )
     plot.set_defaults(func=cmd_plot)
     extra = {"compare": compare, "plot": plot}
     parse_run = p.parse_known_args
@@ -160,8 +278,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from twin.sweep.compare import compare, load_run, write_report
 
     if args.report and not args.report.endswith((".md", ".json")):
-        raise ConfigError(f"--report {args.report!r} is invalid; expected a file ending in .md "
-                          "or .json")
+        raise ConfigError(
+            f"--report {args.report!r} is invalid; expected a file ending in .md or .json"
+        )
     if args.plot:
         _plot_target(args.plot)
     a, b = load_run(args.a), load_run(args.b)
@@ -219,22 +338,33 @@ class Worse(TwinError):
 
 
 def sweep_spec(args: argparse.Namespace):
-    """The definition the arguments ask for: TASK.toml's (with --scenarios/--seed overriding it), or one
-    built from --robot, --scenarios, --seed, --vary and --param."""
+    """The definition the arguments ask for: TASK.toml's (with --scenarios/--seed overriding it), or
+    one built from --robot, --scenarios, --seed, --vary and --param."""
     from twin.sweep.spec import SweepSpec, load_spec, parse_vary
 
     if args.task.endswith(".toml"):
         if args.vary or args.param or args.robot or args.rate_hz or args.timeout is not None:
-            raise ConfigError(f"{args.task} defines the sweep; --vary, --param, --robot, --rate-hz and --timeout "
-                              "go into the file (only --scenarios and --seed override it)")
+            raise ConfigError(
+                f"{args.task} defines the sweep; --vary, --param, --robot, --rate-hz and --timeout "
+                "go into the file (only --scenarios and --seed override it)"
+            )
         spec = load_spec(args.task)
-        overrides = {k: v for k, v in (("scenarios", args.scenarios), ("seed", args.seed)) if v is not None}
+        overrides = {
+            k: v for k, v in (("scenarios", args.scenarios), ("seed", args.seed)) if v is not None
+        }
         return SweepSpec(**{**spec.__dict__, **overrides}) if overrides else spec
     if args.scenarios is None:
         raise ConfigError("--scenarios N is missing; expected how many scenarios to run")
-    return SweepSpec(task=args.task, scenarios=args.scenarios, robot=args.robot or "mtb", seed=args.seed or 0,
-                     vary=parse_vary(args.vary), params=params_dict(args.param), rate_hz=args.rate_hz or 240.0,
-                     timeout_s=args.timeout)
+    return SweepSpec(
+        task=args.task,
+        scenarios=args.scenarios,
+        robot=args.robot or "mtb",
+        seed=args.seed or 0,
+        vary=parse_vary(args.vary),
+        params=params_dict(args.param),
+        rate_hz=args.rate_hz or 240.0,
+        timeout_s=args.timeout,
+    )
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -254,18 +384,26 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.only is not None and args.resume:
         raise ConfigError("--only and --resume cannot go together; expected one of them")
     if args.only is not None and max(args.only) >= spec.scenarios:
-        raise ConfigError(f"--only {max(args.only)} is out of range; the sweep has scenarios 0..{spec.scenarios - 1}")
+        raise ConfigError(
+            f"--only {max(args.only)} is out of range; the sweep has scenarios "
+            f"0..{spec.scenarios - 1}"
+        )
     out = _out_dir(args.out, clear=args.only is None and not args.resume)
     journal = None
     if args.only is None:
         if args.resume and not (out / JOURNAL).exists():
-            raise ConfigError(f"--resume: {str(out / JOURNAL)!r} does not exist; expected the folder of a sweep "
-                              "that was stopped (or run without --resume)")
+            raise ConfigError(
+                f"--resume: {str(out / JOURNAL)!r} does not exist; expected the folder of a sweep "
+                "that was stopped (or run without --resume)"
+            )
         journal = Journal(out, spec, resume=args.resume)
         write_definition(out, spec)
         if journal.rows:
-            print(f"resuming: {len(journal.rows)} of {spec.scenarios} scenarios are in {out / JOURNAL}",
-                  file=sys.stderr)
+            print(
+                f"resuming: {len(journal.rows)} of {spec.scenarios} scenarios are in "
+                f"{out / JOURNAL}",
+                file=sys.stderr,
+            )
         scenarios = (i for i in range(spec.scenarios) if not journal.done(i))
         count = spec.scenarios - len(journal.rows)
     else:
@@ -282,9 +420,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         progress(row)
 
     try:
-        done = run_sweep(Job(spec, str(out), args.save), scenarios, executor, count=count, batch_size_n=args.batch,
-                         scenario_timeout_s=args.scenario_timeout, on_row=on_row,
-                         rows=journal.rows if journal else None, planned=spec.scenarios if journal else None)
+        done = run_sweep(
+            Job(spec, str(out), args.save),
+            scenarios,
+            executor,
+            count=count,
+            batch_size_n=args.batch,
+            scenario_timeout_s=args.scenario_timeout,
+            on_row=on_row,
+            rows=journal.rows if journal else None,
+            planned=spec.scenarios if journal else None,
+        )
     finally:
         progress.close()
         executor.close()
@@ -300,20 +446,32 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.plot and done.rows:
             from twin.sweep.paired import read_side
 
-            _plot_run(read_side(out / "results.parquet", str(out)), str(out / "sweep.png"), spec,
-                      str(out))
+            _plot_run(
+                read_side(out / "results.parquet", str(out)), str(out / "sweep.png"), spec, str(out)
+            )
     if done.stopped_by is not None:
-        print(f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` runs the rest",
-              file=sys.stderr)
-        raise done.stopped_by  # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
-    if args.fail_under is not None and args.only is None and summary["success_rate"] < args.fail_under:
-        raise BelowThreshold(f"success rate {summary['success_rate']:.4f} is under --fail-under {args.fail_under:g}")
+        print(
+            f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` "
+            f"runs the rest",
+            file=sys.stderr,
+        )
+        # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
+        raise done.stopped_by
+    if (
+        args.fail_under is not None
+        and args.only is None
+        and summary["success_rate"] < args.fail_under
+    ):
+        raise BelowThreshold(
+            f"success rate {summary['success_rate']:.4f} is under --fail-under {args.fail_under:g}"
+        )
     return 0
 
 
 def _out_dir(path: str, *, clear: bool) -> Path:
-    """The output folder, created (its parent must exist, or be runs/); a full sweep removes the recordings an
-    earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is mistaken for its own."""
+    """The output folder, created (its parent must exist, or be runs/); a full sweep removes the
+    recordings an earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is
+    mistaken for its own."""
     from twin.record.outputs import make_default_folder
     from twin.sweep.worker import FAILURES, SCENARIOS
 
@@ -326,7 +484,10 @@ def _out_dir(path: str, *, clear: bool) -> Path:
         out.mkdir(exist_ok=True)
         if clear:
             for folder in (FAILURES, SCENARIOS):
-                for old in (*(out / folder).glob("scenario-*.mcap"), *(out / folder).glob("scenario-*.mcap.partial")):
+                for old in (
+                    *(out / folder).glob("scenario-*.mcap"),
+                    *(out / folder).glob("scenario-*.mcap.partial"),
+                ):
                     old.unlink()
     except OSError as err:
         raise ConfigError(f"--out {path!r}: {err.strerror or err}") from err
@@ -337,9 +498,22 @@ def _print_only(rows: list[dict], out: Path, save: str) -> None:
     from twin.sweep.worker import FAILURES, SCENARIOS, scenario_path
 
     for r in rows:
-        placed = "" if r["placement_error_mm"] is None else f", placement error {r['placement_error_mm']:.2f} mm"
-        print(f"scenario {r['scenario']}: {r['outcome']}{': ' + r['error'] if r['error'] else ''}{placed}")
-        folder = SCENARIOS if save == "all" else FAILURES if r["outcome"] != "ok" and save != "none" else None
+        placed = (
+            ""
+            if r["placement_error_mm"] is None
+            else f", placement error {r['placement_error_mm']:.2f} mm"
+        )
+        print(
+            f"scenario {r['scenario']}: "
+            f"{r['outcome']}{': ' + r['error'] if r['error'] else ''}{placed}"
+        )
+        folder = (
+            SCENARIOS
+            if save == "all"
+            else FAILURES
+            if r["outcome"] != "ok" and save != "none"
+            else None
+        )
         if folder is not None:
             print(f"recorded {scenario_path(out, folder, r['scenario'])}")
 
@@ -350,31 +524,54 @@ def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> 
     head = f"sweep {spec.task} on {spec.robot}: {n} scenarios"
     if summary.get("interrupted"):
         head += f" of {summary['planned']} (stopped part-way)"
-    lines = [(f"{head}, seed {spec.seed}, {executor.jobs} jobs ({executor.name}), wall {wall:.1f} s, "
-              f"{n / wall if wall > 0 else 0:.1f} scenarios/s")]
+    lines = [
+        (
+            f"{head}, seed {spec.seed}, {executor.jobs} jobs ({executor.name}), wall {wall:.1f} s, "
+            f"{n / wall if wall > 0 else 0:.1f} scenarios/s"
+        )
+    ]
     lo, hi = summary["wilson95"]
-    lines.append(f"ok {summary['ok']}, failed {summary['failed']}: success rate {100 * summary['success_rate']:.1f} % "
-                 f"(Wilson 95 %: {100 * lo:.1f}-{100 * hi:.1f} %)")
+    lines.append(
+        f"ok {summary['ok']}, failed {summary['failed']}: success rate "
+        f"{100 * summary['success_rate']:.1f} % "
+        f"(Wilson 95 %: {100 * lo:.1f}-{100 * hi:.1f} %)"
+    )
     pe = summary["placement_error_mm"]
     if pe["count"]:
-        lines.append(f"placement error: p50 {pe['p50']:.2f} mm, p95 {pe['p95']:.2f} mm, max {pe['max']:.2f} mm "
-                     f"(over {pe['count']} scenarios that placed)")
+        lines.append(
+            f"placement error: p50 {pe['p50']:.2f} mm, p95 {pe['p95']:.2f} mm, max "
+            f"{pe['max']:.2f} mm "
+            f"(over {pe['count']} scenarios that placed)"
+        )
     if summary["failures_by_reason"]:
         lines.append("failures by reason:")
         lines += [f"  {count:6d}  {why}" for why, count in summary["failures_by_reason"].items()]
         if save != "none":
-            recorded = [r["scenario"] for r in done.rows
-                        if r["outcome"] != "ok" and (out / "failures" / f"scenario-{r['scenario']}.mcap").exists()]
+            recorded = [
+                r["scenario"]
+                for r in done.rows
+                if r["outcome"] != "ok"
+                and (out / "failures" / f"scenario-{r['scenario']}.mcap").exists()
+            ]
             if recorded:
-                lines.append(f"failures recorded in {out / 'failures'}/ (e.g. twin replay "
-                             f"{out / 'failures' / f'scenario-{recorded[0]}.mcap'})")
+                lines.append(
+                    f"failures recorded in {out / 'failures'}/ (e.g. twin replay "
+                    f"{out / 'failures' / f'scenario-{recorded[0]}.mcap'})"
+                )
         lost = [r for r in done.rows if r["outcome"] != "ok" and r["error"].startswith(NO_RESULT)]
-        for r in lost[:5]:  # the scenarios that killed their process or hung: named, with their recording
+        # the scenarios that killed their process or hung: named, with their recording
+        for r in lost[:5]:
             cut = out / "failures" / f"scenario-{r['scenario']}.mcap.partial"
-            hint = f"; twin recover {cut.with_suffix('')} restores its recording" if cut.exists() else ""
+            hint = (
+                f"; twin recover {cut.with_suffix('')} restores its recording"
+                if cut.exists()
+                else ""
+            )
             lines.append(f"scenario {r['scenario']}: {r['error']}{hint}")
         if len(lost) > 5:
-            lines.append(f"... and {len(lost) - 5} more such scenarios (results.parquet names them)")
+            lines.append(
+                f"... and {len(lost) - 5} more such scenarios (results.parquet names them)"
+            )
     return lines
 
 
@@ -392,7 +589,9 @@ class Progress:
         if not quiet and self.stream.isatty():
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, file=self.stream, unit="scenario", dynamic_ncols=True, leave=True)
+            self._bar = tqdm(
+                total=total, file=self.stream, unit="scenario", dynamic_ncols=True, leave=True
+            )
 
     def __call__(self, row: dict) -> None:
         self.done += 1
@@ -401,11 +600,15 @@ class Progress:
         if self._bar is not None:
             self._bar.set_postfix_str(text, refresh=False)
             self._bar.update(1)
-        elif not self.quiet and (time.perf_counter() - self._last >= 1.0 or self.done == self.total):
+        elif not self.quiet and (
+            time.perf_counter() - self._last >= 1.0 or self.done == self.total
+        ):
             self._last = time.perf_counter()
             elapsed = self._last - self._t0
             eta = elapsed / self.done * (self.total - self.done)
-            self.stream.write(f"sweep: {self.done}/{self.total} scenarios, {text}, ETA {eta:.0f} s\n")
+            self.stream.write(
+                f"sweep: {self.done}/{self.total} scenarios, {text}, ETA {eta:.0f} s\n"
+            )
             self.stream.flush()
 
     def close(self) -> None:

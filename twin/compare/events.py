@@ -9,7 +9,8 @@ from twin.model.types import Event
 
 @dataclass
 class EventDiff:
-    kind: str  # "missing" (in golden only), "extra" (in candidate only), "moved" (outside the window)
+    # "missing" (in golden only), "extra" (in candidate only), "moved" (outside the window)
+    kind: str
     event_kind: str
     body: str
     expected_step: int | None
@@ -21,7 +22,9 @@ class EventDiff:
         return min(s for s in (self.expected_step, self.actual_step) if s is not None)
 
 
-def by_key(events: list[Event], kinds: frozenset[str] | None = None) -> dict[tuple[str, str], list[Event]]:
+def by_key(
+    events: list[Event], kinds: frozenset[str] | None = None
+) -> dict[tuple[str, str], list[Event]]:
     """Events grouped by (kind, body), each group in order; only `kinds` when given."""
     out: dict[tuple[str, str], list[Event]] = {}
     for e in events:
@@ -30,8 +33,12 @@ def by_key(events: list[Event], kinds: frozenset[str] | None = None) -> dict[tup
     return out
 
 
-def match_events(golden: list[Event], candidate: list[Event], window_steps: int,
-                 kinds: frozenset[str] | None = None) -> tuple[int, int, list[EventDiff]]:
+def match_events(
+    golden: list[Event],
+    candidate: list[Event],
+    window_steps: int,
+    kinds: frozenset[str] | None = None,
+) -> tuple[int, int, list[EventDiff]]:
     """Pair events by (kind, body) in order: the i-th golden with the i-th candidate of that key.
 
     Returns (matched, shifted within the window, [missing / extra / moved beyond the window]).
@@ -48,7 +55,11 @@ def match_events(golden: list[Event], candidate: list[Event], window_steps: int,
             else:
                 matched += 1
                 shifted += shift > 0
-        diffs += [EventDiff("missing", key[0], key[1], e.step, None, e.message) for e in gs[len(cs):]]
-        diffs += [EventDiff("extra", key[0], key[1], None, e.step, e.message) for e in cs[len(gs):]]
+        diffs += [
+            EventDiff("missing", key[0], key[1], e.step, None, e.message) for e in gs[len(cs) :]
+        ]
+        diffs += [
+            EventDiff("extra", key[0], key[1], None, e.step, e.message) for e in cs[len(gs) :]
+        ]
     diffs.sort(key=lambda d: (d.step, d.kind, d.event_kind, d.body))
     return matched, shifted, diffs

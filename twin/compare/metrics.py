@@ -22,7 +22,9 @@ def abs_error(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def joint_error(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d = a[..., 0] - b[..., 0]
     # wrapped only beyond pi: (d + pi) rounds a difference below 4e-16 rad to 0
-    wrapped = np.where(np.abs(d) <= math.pi, np.abs(d), np.abs((d + math.pi) % (2 * math.pi) - math.pi))
+    wrapped = np.where(
+        np.abs(d) <= math.pi, np.abs(d), np.abs((d + math.pi) % (2 * math.pi) - math.pi)
+    )
     return np.where(REVOLUTE[: d.shape[1]], wrapped, np.abs(d))
 
 

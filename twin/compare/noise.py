@@ -33,7 +33,8 @@ class NoiseFloor:
     margin: float
     steps: np.ndarray
     envelopes: dict[str, np.ndarray]
-    scalars: dict[str, float] = field(default_factory=dict)  # final.*, run.length, counts.* (pictures: tolerance only)
+    # final.*, run.length, counts.* (pictures: tolerance only)
+    scalars: dict[str, float] = field(default_factory=dict)
     commands: float = 0.0
     commands_split_step: int | None = None
     event_shift_steps: int = 0
@@ -55,17 +56,24 @@ class NoiseFloor:
         def num(x: float) -> float | str:
             return x if math.isfinite(x) else str(x)
 
-        return {"perturbation": self.perturbation, "margin": self.margin,
-                "fields": {k: num(float(v[-1])) if len(v) else 0.0 for k, v in sorted(self.envelopes.items())}
-                | {k: num(v) for k, v in sorted(self.scalars.items())},
-                "commands": num(self.commands), "commands_split_step": self.commands_split_step,
-                "event_shift_steps": self.event_shift_steps, "events_split_step": self.events_split_step,
-                "outcome_differs": self.outcome_differs}
+        return {
+            "perturbation": self.perturbation,
+            "margin": self.margin,
+            "fields": {
+                k: num(float(v[-1])) if len(v) else 0.0 for k, v in sorted(self.envelopes.items())
+            }
+            | {k: num(v) for k, v in sorted(self.scalars.items())},
+            "commands": num(self.commands),
+            "commands_split_step": self.commands_split_step,
+            "event_shift_steps": self.event_shift_steps,
+            "events_split_step": self.events_split_step,
+            "outcome_differs": self.outcome_differs,
+        }
 
 
 def command_number_difference(a: Command, b: Command) -> float | None:
-    """The largest difference between the numbers of two commands' arguments; None when they differ in
-    anything else (step, kind, argument names, strings, booleans, list lengths)."""
+    """The largest difference between the numbers of two commands' arguments; None when they differ
+    in anything else (step, kind, argument names, strings, booleans, list lengths)."""
     if a.step != b.step or a.kind != b.kind:
         return None
     return _value_difference(a.args, b.args)
@@ -93,20 +101,30 @@ def _value_difference(a: object, b: object) -> float | None:
     return None if None in parts else max(parts, default=0.0)
 
 
-def measure(run: Recording, perturbed: Recording, series: tuple, perturbation: str, margin: float) -> NoiseFloor:
+def measure(
+    run: Recording, perturbed: Recording, series: tuple, perturbation: str, margin: float
+) -> NoiseFloor:
     """The floor of `run` from `perturbed`, a run of the same inputs with its math nudged; series is
     engine.error_series(run, perturbed) (the engine uses this module, not the other way round)."""
     steps, _t, errors = series
-    envelopes = {name: margin * np.maximum.accumulate(np.where(np.isnan(e), math.inf, e)) for name, e in errors.items()}
+    envelopes = {
+        name: margin * np.maximum.accumulate(np.where(np.isnan(e), math.inf, e))
+        for name, e in errors.items()
+    }
     a, b = run.frames.object_poses[-1], perturbed.frames.object_poses[-1]
     scalars = {
-        "final.position": margin * float(np.max(np.linalg.norm(a[:, :3] - b[:, :3], axis=-1), initial=0.0)),
+        "final.position": margin
+        * float(np.max(np.linalg.norm(a[:, :3] - b[:, :3], axis=-1), initial=0.0)),
         "final.orientation": margin * float(np.max(quat_angle(a[:, 3:], b[:, 3:]), initial=0.0)),
         "run.length": float(abs(int(run.frames.step[-1]) - int(perturbed.frames.step[-1]))),
     }
     for kind in COUNTED_EVENTS:
-        scalars[f"counts.{kind}"] = float(abs(sum(e.kind == kind for e in run.events)
-                                              - sum(e.kind == kind for e in perturbed.events)))
+        scalars[f"counts.{kind}"] = float(
+            abs(
+                sum(e.kind == kind for e in run.events)
+                - sum(e.kind == kind for e in perturbed.events)
+            )
+        )
     commands, split = 0.0, None
     for x, y in zip(run.commands, perturbed.commands, strict=False):
         d = command_number_difference(x, y)
@@ -118,16 +136,26 @@ def measure(run: Recording, perturbed: Recording, series: tuple, perturbation: s
         longer = run.commands if len(run.commands) > len(perturbed.commands) else perturbed.commands
         split = longer[min(len(run.commands), len(perturbed.commands))].step
     shift, unpaired = _event_drift(run.events, perturbed.events)
-    return NoiseFloor(perturbation, margin, np.asarray(steps), envelopes, scalars, margin * commands, split,
-                      shift, unpaired, run.outcome != perturbed.outcome)
+    return NoiseFloor(
+        perturbation,
+        margin,
+        np.asarray(steps),
+        envelopes,
+        scalars,
+        margin * commands,
+        split,
+        shift,
+        unpaired,
+        run.outcome != perturbed.outcome,
+    )
 
 
 def _event_drift(a: list, b: list) -> tuple[int, int | None]:
-    """Events of a and b paired by (kind, body) in order, as compare.events pairs them: the largest step
-    shift of a pair, and the first step of an event left without a pair (None: all paired)."""
+    """Events of a and b paired by (kind, body) in order, as compare.events pairs them: the largest
+    step shift of a pair, and the first step of an event left without a pair (None: all paired)."""
     ka, kb = by_key(a), by_key(b)
     shift, unpaired = 0, []
     for xs, ys in ((ka.get(k, []), kb.get(k, [])) for k in ka.keys() | kb.keys()):
         shift = max([shift] + [abs(x.step - y.step) for x, y in zip(xs, ys, strict=False)])
-        unpaired += [e.step for e in (xs[len(ys):] or ys[len(xs):])]
+        unpaired += [e.step for e in (xs[len(ys) :] or ys[len(xs) :])]
     return shift, min(unpaired, default=None)

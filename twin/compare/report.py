@@ -20,8 +20,8 @@ FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}
 
 
 def fmt(x: float, unit: str = "") -> str:
-    """A number for people: inf/nan spelled out, 4 significant digits (an exact 0 only for a true zero:
-    2.85e-51 stays 2.85e-51), unit appended."""
+    """A number for people: inf/nan spelled out, 4 significant digits (an exact 0 only for a true
+    zero: 2.85e-51 stays 2.85e-51), unit appended."""
     if isinstance(x, float) and math.isinf(x):
         text = "inf"
     elif isinstance(x, float) and math.isnan(x):
@@ -52,69 +52,111 @@ def first_line(d: Divergence) -> str:
 def first_detail(d: Divergence) -> str:
     if d.channel == "commands":
         what = "annotation" if d.field == "annotations" else "command"
-        return (f"the golden's {what} #{d.element.split()[0][1:]} is {d.expected[0] or 'absent'}; "
-                f"the candidate's is {d.actual[0] or 'absent'}")
+        return (
+            f"the golden's {what} #{d.element.split()[0][1:]} is {d.expected[0] or 'absent'}; "
+            f"the candidate's is {d.actual[0] or 'absent'}"
+        )
     if d.channel == "events":
         if d.field == "missing":
             return f"the golden has it at step {d.expected[0]}; the candidate has no such event"
         if d.field == "extra":
             return f"the candidate has it at step {d.actual[0]}; the golden has no such event"
-        return (f"expected at step {d.expected[0]}, actual at step {d.actual[0]}: moved {fmt(d.difference, 'steps')}, "
-                f"more than the event window")
-    text = (f"expected {fmt_values(d.expected)}, actual {fmt_values(d.actual)}, "
-            f"difference {fmt(d.difference, d.unit)}, tolerance {fmt(d.tolerance, d.unit)}")
+        return (
+            f"expected at step {d.expected[0]}, actual at step {d.actual[0]}: moved "
+            f"{fmt(d.difference, 'steps')}, "
+            f"more than the event window"
+        )
+    text = (
+        f"expected {fmt_values(d.expected)}, actual {fmt_values(d.actual)}, "
+        f"difference {fmt(d.difference, d.unit)}, tolerance {fmt(d.tolerance, d.unit)}"
+    )
     if d.floor > 0:
         text += f", noise floor {fmt(d.floor, d.unit)}"
     return text
 
 
 def allowance_text(d: Divergence) -> str:
-    """How far a divergence passed what was allowed there: "3.2x the allowance (noise floor F, tolerance T)";
-    "" for a field without a unit (commands, outcome) or an allowance of 0."""
+    """How far a divergence passed what was allowed there: "3.2x the allowance (noise floor F,
+    tolerance T)"; "" for a field without a unit (commands, outcome) or an allowance of 0."""
     limit = max(d.tolerance, d.floor)
     if not d.unit or not limit > 0:
         return ""
-    return (f"{d.difference / limit:.3g}x the allowance (noise floor {fmt(d.floor, d.unit)}, "
-            f"tolerance {fmt(d.tolerance, d.unit)})")
+    return (
+        f"{d.difference / limit:.3g}x the allowance (noise floor {fmt(d.floor, d.unit)}, "
+        f"tolerance {fmt(d.tolerance, d.unit)})"
+    )
 
 
 def noise_summary(result: DiffResult) -> str:
-    """One line on how the candidate stands to the golden: bit-identical; within numerical noise (the
-    largest difference against what was allowed there); or changed (how much, where, how many times the
-    allowance: the larger of the tolerance and the measured noise floor)."""
+    """One line on how the candidate stands to the golden: bit-identical; within numerical noise
+    (the largest difference against what was allowed there); or changed (how much, where, how many
+    times the allowance: the larger of the tolerance and the measured noise floor)."""
     if result.first is not None:
         d = result.first
         if not d.unit:
             return f"changed at step {d.step} ({d.name})"
         what = f"changed: {fmt(d.difference, d.unit)} at step {d.step} ({d.name}" + (
-            f" [{d.element}])" if d.element else ")")
+            f" [{d.element}])" if d.element else ")"
+        )
         allowance = allowance_text(d) if result.floor is not None else ""
         return f"{what}, {allowance}" if allowance else what
-    moved = [f for f in result.fields if not f.identical and f.worst > 0 and f.unit and math.isfinite(f.worst)]
+    moved = [
+        f
+        for f in result.fields
+        if not f.identical and f.worst > 0 and f.unit and math.isfinite(f.worst)
+    ]
     if not moved:
         return "bit-identical"
     worst = max(moved, key=lambda f: f.worst / max(f.floor, f.tolerance, 1e-300))
     unit = worst.unit.split("|")[0]
-    return (f"within numerical noise (max {fmt(worst.worst, unit)} in {worst.name}; noise floor "
-            f"{fmt(worst.floor, unit)}, tolerance {fmt(worst.tolerance, unit)})")
+    return (
+        f"within numerical noise (max {fmt(worst.worst, unit)} in {worst.name}; noise floor "
+        f"{fmt(worst.floor, unit)}, tolerance {fmt(worst.tolerance, unit)})"
+    )
 
 
 def _run_line(info: dict) -> str:
     run = info.get("run") or {}
     what = run.get("task") or run.get("source") or "?"
     params = json.dumps(run.get("params", {}), sort_keys=True)
-    return (f"{info.get('path') or '<memory>'} ({info['profile']}, {run.get('source', '?')} {what} {params}, "
-            f"{info['frames']} frames, steps {info['first_step']}..{info['last_step']})")
+    return (
+        f"{info.get('path') or '<memory>'} ({info['profile']}, {run.get('source', '?')} "
+        f"{what} {params}, "
+        f"{info['frames']} frames, steps {info['first_step']}..{info['last_step']})"
+    )
 
 
 def _field_row(f: FieldStat) -> list[str]:
-    status = "off" if f.tolerance == math.inf else ("FAIL" if not f.ok else "identical" if f.identical else "ok")
+    status = (
+        "off"
+        if f.tolerance == math.inf
+        else ("FAIL" if not f.ok else "identical" if f.identical else "ok")
+    )
     where = f"{f.worst_step}" + (f" [{f.worst_element}]" if f.worst_element else "")
-    return [f.name, f.unit, fmt(f.tolerance), fmt(f.floor), fmt(f.worst), where, fmt(f.rms), str(f.steps_over),
-            status]
+    return [
+        f.name,
+        f.unit,
+        fmt(f.tolerance),
+        fmt(f.floor),
+        fmt(f.worst),
+        where,
+        fmt(f.rms),
+        str(f.steps_over),
+        status,
+    ]
 
 
-_FIELD_HEAD = ["field", "unit", "tolerance", "noise floor", "worst", "at step", "rms", "steps over", "status"]
+_FIELD_HEAD = [
+    "field",
+    "unit",
+    "tolerance",
+    "noise floor",
+    "worst",
+    "at step",
+    "rms",
+    "steps over",
+    "status",
+]
 
 
 def _window_text(result: DiffResult) -> str:
@@ -124,35 +166,53 @@ def _window_text(result: DiffResult) -> str:
 
 def _event_lines(result: DiffResult, dt_s: float) -> list[str]:
     counts = "; counts: " + ", ".join(
-        f"{f.name.split('.')[1]} {'ok' if f.ok else 'FAIL'}" for f in result.fields if f.name.startswith("counts."))
+        f"{f.name.split('.')[1]} {'ok' if f.ok else 'FAIL'}"
+        for f in result.fields
+        if f.name.startswith("counts.")
+    )
     if not result.events_compared:
         return ["events: not paired one by one under these tolerances" + counts]
-    lines = [f"events: {result.events_matched} matched ({result.events_shifted} shifted within "
-             f"{result.tolerances.event_window_steps} steps), "
-             + ", ".join(f"{sum(d.kind == k for d in result.event_diffs)} {k}" for k in ("missing", "extra", "moved"))]
+    lines = [
+        f"events: {result.events_matched} matched ({result.events_shifted} shifted within "
+        f"{result.tolerances.event_window_steps} steps), "
+        + ", ".join(
+            f"{sum(d.kind == k for d in result.event_diffs)} {k}"
+            for k in ("missing", "extra", "moved")
+        )
+    ]
     for d in result.event_diffs:
-        where = ", ".join(f"{side} step {s} (t = {s * dt_s:.3f} s)" for side, s in
-                          (("expected", d.expected_step), ("actual", d.actual_step)) if s is not None)
+        where = ", ".join(
+            f"{side} step {s} (t = {s * dt_s:.3f} s)"
+            for side, s in (("expected", d.expected_step), ("actual", d.actual_step))
+            if s is not None
+        )
         lines.append(f"  {d.kind:<8} {d.event_kind} {d.body}".rstrip() + f": {where}")
     return lines
 
 
 def _cause_lines(result: DiffResult) -> list[str]:
-    """The first command difference (when it is not itself the first divergence) and the likely cause."""
+    """The first command difference (when it is not itself the first divergence) and the likely
+    cause."""
     lines = []
     fc = result.first_command
     if fc is not None and fc is not result.first:
         lines.append(f"first command difference: {first_line(fc)}: {first_detail(fc)}")
     if result.likely_cause and (fc is None or fc is not result.first):
-        lines.append(f"likely cause: the golden's last command at or before step {result.first.step}: "
-                     f"{result.likely_cause}")
+        lines.append(
+            f"likely cause: the golden's last command at or before step {result.first.step}: "
+            f"{result.likely_cause}"
+        )
     fa = result.first_annotation
     if fa is not None and fa is result.first:
-        lines.append("annotations only: the runs do not diverge physically (what the tasks said differs; "
-                     "--tol commands.annotations=inf leaves it out)")
+        lines.append(
+            "annotations only: the runs do not diverge physically (what the tasks said differs; "
+            "--tol commands.annotations=inf leaves it out)"
+        )
     elif fa is not None:
-        lines.append(f"annotations differ too (apart from the physical divergence): {first_line(fa)}: "
-                     f"{first_detail(fa)}")
+        lines.append(
+            f"annotations differ too (apart from the physical divergence): {first_line(fa)}: "
+            f"{first_detail(fa)}"
+        )
     return lines
 
 
@@ -160,31 +220,48 @@ def _final_lines(result: DiffResult) -> list[str]:
     lines = ["final object poses:"]
     for p in result.final_poses:
         e, a = p.expected, p.actual
-        lines.append(f"  {p.name}: expected ({e[0]:+.5f}, {e[1]:+.5f}, {e[2]:+.5f}) m, actual ({a[0]:+.5f}, "
-                     f"{a[1]:+.5f}, {a[2]:+.5f}) m, distance {p.distance_m * 1e3:.4g} mm, angle "
-                     f"{p.angle_rad * 1e3:.4g} mrad  [{'ok' if p.ok else 'FAIL'}]")
+        lines.append(
+            f"  {p.name}: expected ({e[0]:+.5f}, {e[1]:+.5f}, {e[2]:+.5f}) m, actual ({a[0]:+.5f}, "
+            f"{a[1]:+.5f}, {a[2]:+.5f}) m, distance {p.distance_m * 1e3:.4g} mm, angle "
+            f"{p.angle_rad * 1e3:.4g} mrad  [{'ok' if p.ok else 'FAIL'}]"
+        )
     return lines
 
 
 def render_text(result: DiffResult) -> str:
     dt_s = result.golden["dt_ns"] * 1e-9
     t = result.tolerances
-    lines = [f"{verdict(result)} (tolerance {t.preset}" + (f", {' '.join(t.overrides)}" if t.overrides else "")
-             + f", {_window_text(result)})",
-             f"  golden:    {_run_line(result.golden)}", f"  candidate: {_run_line(result.candidate)}"]
+    lines = [
+        f"{verdict(result)} (tolerance {t.preset}"
+        + (f", {' '.join(t.overrides)}" if t.overrides else "")
+        + f", {_window_text(result)})",
+        f"  golden:    {_run_line(result.golden)}",
+        f"  candidate: {_run_line(result.candidate)}",
+    ]
     lines += [f"  note: {n}" for n in result.notes]
     if result.config_differences:
-        lines.append("  configuration differences: " + "; ".join(f"{k} {a} -> {b}" for k, a, b in
-                                                                 result.config_differences[:8])
-                     + (f"; and {len(result.config_differences) - 8} more" if len(result.config_differences) > 8
-                        else ""))
+        lines.append(
+            "  configuration differences: "
+            + "; ".join(f"{k} {a} -> {b}" for k, a, b in result.config_differences[:8])
+            + (
+                f"; and {len(result.config_differences) - 8} more"
+                if len(result.config_differences) > 8
+                else ""
+            )
+        )
     if result.floor is not None:
-        lines.append(f"  noise floor: measured on a run with {result.floor.perturbation}, times {result.floor.margin:g}")
+        lines.append(
+            f"  noise floor: measured on a run with {result.floor.perturbation}, times "
+            f"{result.floor.margin:g}"
+        )
     lines.append(f"  {noise_summary(result)}")
     if result.first is None:
         lines.append(f"no divergence over {result.steps_compared} common steps")
     else:
-        lines += [f"first divergence: {first_line(result.first)}", f"  {first_detail(result.first)}"]
+        lines += [
+            f"first divergence: {first_line(result.first)}",
+            f"  {first_detail(result.first)}",
+        ]
         lines += [f"  {line}" for line in _cause_lines(result)]
     rows = [_FIELD_HEAD] + [_field_row(f) for f in result.fields]
     widths = [max(len(r[i]) for r in rows) for i in range(len(_FIELD_HEAD))]
@@ -196,10 +273,15 @@ def render_text(result: DiffResult) -> str:
 def render_markdown(result: DiffResult) -> str:
     dt_s = result.golden["dt_ns"] * 1e-9
     t = result.tolerances
-    out = [f"# twin diff: {verdict(result)}", "",
-           f"- tolerance: `{t.preset}`" + (f" with `{' '.join(t.overrides)}`" if t.overrides else "")
-           + f", {_window_text(result)}",
-           f"- golden: `{_run_line(result.golden)}`", f"- candidate: `{_run_line(result.candidate)}`"]
+    out = [
+        f"# twin diff: {verdict(result)}",
+        "",
+        f"- tolerance: `{t.preset}`"
+        + (f" with `{' '.join(t.overrides)}`" if t.overrides else "")
+        + f", {_window_text(result)}",
+        f"- golden: `{_run_line(result.golden)}`",
+        f"- candidate: `{_run_line(result.candidate)}`",
+    ]
     out += [f"- note: {n}" for n in result.notes]
     out += [f"- configuration differs: `{k}` {a} → {b}" for k, a, b in result.config_differences]
     out.append("")
@@ -207,12 +289,29 @@ def render_markdown(result: DiffResult) -> str:
     if result.first is None:
         out.append(f"No divergence over {result.steps_compared} common steps.")
     else:
-        out += ["## First divergence", "", f"**{first_line(result.first)}**", "", first_detail(result.first)]
+        out += [
+            "## First divergence",
+            "",
+            f"**{first_line(result.first)}**",
+            "",
+            first_detail(result.first),
+        ]
         out += ["", *(f"- {line}" for line in _cause_lines(result))] if _cause_lines(result) else []
-    out += ["", "## Fields", "", "| " + " | ".join(_FIELD_HEAD) + " |", "|" + "---|" * len(_FIELD_HEAD)]
-    out += ["| " + " | ".join(c.replace("|", "\\|") for c in _field_row(f)) + " |" for f in result.fields]
+    out += [
+        "",
+        "## Fields",
+        "",
+        "| " + " | ".join(_FIELD_HEAD) + " |",
+        "|" + "---|" * len(_FIELD_HEAD),
+    ]
+    out += [
+        "| " + " | ".join(c.replace("|", "\\|") for c in _field_row(f)) + " |"
+        for f in result.fields
+    ]
     out += ["", "## Events", ""] + [f"- {line.strip()}" for line in _event_lines(result, dt_s)]
-    out += ["", "## Final object poses", ""] + [f"- {line.strip()}" for line in _final_lines(result)[1:]]
+    out += ["", "## Final object poses", ""] + [
+        f"- {line.strip()}" for line in _final_lines(result)[1:]
+    ]
     return "\n".join(out) + "\n"
 
 
@@ -221,20 +320,36 @@ def render_json(result: DiffResult) -> str:
 
 
 def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
-    """One testcase per field (the final poses among them), one for the events; failures carry the details."""
+    """One testcase per field (the final poses among them), one for the events; failures carry the
+    details."""
     cases = []
     for f in result.fields:
         msg = None if f.ok else f"{first_line(f.first)}: {first_detail(f.first)}"
-        cases.append((f.name, msg, f"worst {fmt(f.worst, f.unit)} at step {f.worst_step}, rms {fmt(f.rms, f.unit)}"))
+        cases.append(
+            (
+                f.name,
+                msg,
+                f"worst {fmt(f.worst, f.unit)} at step {f.worst_step}, rms {fmt(f.rms, f.unit)}",
+            )
+        )
     ev_lines = _event_lines(result, result.golden["dt_ns"] * 1e-9)
     cases.append(("events", "; ".join(ev_lines[1:]) if result.event_diffs else None, ev_lines[0]))
-    suite_el = ET.Element("testsuite", name=suite, tests=str(len(cases)),
-                          failures=str(sum(m is not None for _, m, _ in cases)), errors="0")
+    suite_el = ET.Element(
+        "testsuite",
+        name=suite,
+        tests=str(len(cases)),
+        failures=str(sum(m is not None for _, m, _ in cases)),
+        errors="0",
+    )
     props = ET.SubElement(suite_el, "properties")
     for key in ("golden", "candidate"):
         ET.SubElement(props, "property", name=key, value=_run_line(getattr(result, key)))
-    ET.SubElement(props, "property", name="first_divergence",
-                  value="none" if result.first is None else first_line(result.first))
+    ET.SubElement(
+        props,
+        "property",
+        name="first_divergence",
+        value="none" if result.first is None else first_line(result.first),
+    )
     classname = Path(result.golden.get("path") or "golden").stem
     for name, msg, info in cases:
         case = ET.SubElement(suite_el, "testcase", classname=classname, name=name)
@@ -247,13 +362,24 @@ def render_junit(result: DiffResult, suite: str = "twin diff") -> str:
 
 
 def render_check_junit(outcomes: list, suite: str = "twin check") -> str:
-    """JUnit XML for `twin check`: one testcase per golden (check.Outcome), the text report on failure."""
-    suite_el = ET.Element("testsuite", name=suite, tests=str(len(outcomes)),
-                          failures=str(sum(o.status in ("differ", "refused") for o in outcomes)),
-                          errors=str(sum(o.status == "error" for o in outcomes)),
-                          time=f"{sum(o.seconds for o in outcomes):.3f}")
+    """JUnit XML for `twin check`: one testcase per golden (check.Outcome), the text report on
+    failure."""
+    suite_el = ET.Element(
+        "testsuite",
+        name=suite,
+        tests=str(len(outcomes)),
+        failures=str(sum(o.status in ("differ", "refused") for o in outcomes)),
+        errors=str(sum(o.status == "error" for o in outcomes)),
+        time=f"{sum(o.seconds for o in outcomes):.3f}",
+    )
     for o in outcomes:
-        case = ET.SubElement(suite_el, "testcase", classname="goldens", name=Path(o.path).name, time=f"{o.seconds:.3f}")
+        case = ET.SubElement(
+            suite_el,
+            "testcase",
+            classname="goldens",
+            name=Path(o.path).name,
+            time=f"{o.seconds:.3f}",
+        )
         if o.status in ("differ", "refused"):
             ET.SubElement(case, "failure", message=o.summary).text = o.report
         elif o.status == "error":
@@ -271,15 +397,22 @@ def _junit_document(suite: ET.Element) -> str:
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-RENDERERS = {"text": render_text, "markdown": render_markdown, "json": render_json, "junit": render_junit}
+RENDERERS = {
+    "text": render_text,
+    "markdown": render_markdown,
+    "json": render_json,
+    "junit": render_junit,
+}
 
 
 def report_format(path: str | os.PathLike) -> str:
     """The format a report path asks for, by its extension."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
-        raise ConfigError(f"report file {str(path)!r} has an unknown extension {suffix!r}; "
-                          f"expected one of {', '.join(FORMATS)}")
+        raise ConfigError(
+            f"report file {str(path)!r} has an unknown extension {suffix!r}; "
+            f"expected one of {', '.join(FORMATS)}"
+        )
     return FORMATS[suffix]
 
 

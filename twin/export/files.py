@@ -14,7 +14,8 @@ FORMATS = {"parquet": ".parquet", "csv": ".csv"}
 
 
 def write_table(rec: Recording, path: Path, fmt: str, table: str = "frames") -> int:
-    """Write one of rec's tables ("frames", "events", "commands") to path as fmt; returns its rows."""
+    """Write one of rec's tables ("frames", "events", "commands") to path as fmt; returns its
+    rows."""
     import pyarrow.csv as pa_csv
     import pyarrow.parquet as pq
 

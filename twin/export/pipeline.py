@@ -19,38 +19,63 @@ def check_folder(out: Path, inputs: list[str], overwrite: bool) -> Path:
     check_target(out, "dataset", "a folder path", folder=True)
     if out.is_dir() and any(out.iterdir()):
         if not overwrite:
-            raise ConfigError(f"dataset folder {str(out)!r} is not empty; expected a new or empty folder "
-                              "(or --overwrite to replace an earlier dataset)")
+            raise ConfigError(
+                f"dataset folder {str(out)!r} is not empty; expected a new or empty folder "
+                "(or --overwrite to replace an earlier dataset)"
+            )
         if not (out / "meta" / "info.json").is_file():
-            raise ConfigError(f"dataset folder {str(out)!r} holds no meta/info.json; --overwrite replaces only "
-                              "an earlier dataset")
+            raise ConfigError(
+                f"dataset folder {str(out)!r} holds no meta/info.json; --overwrite replaces only "
+                "an earlier dataset"
+            )
         inside = [p for p in inputs if out.resolve() in Path(p).resolve().parents]
         if inside:
-            raise ConfigError(f"input {inside[0]!r} is inside dataset folder {str(out)!r}, which --overwrite "
-                              "would replace; expected another folder")
+            raise ConfigError(
+                f"input {inside[0]!r} is inside dataset folder {str(out)!r}, which --overwrite "
+                "would replace; expected another folder"
+            )
     return out
 
 
-def export_lerobot(paths: list[str], out: Path, fps: int, *, mode: str = "recording", task: str | None = None,
-                   verify_first: bool = False, overwrite: bool = False,
-                   say: Callable[[str], None] = lambda line: None) -> tuple[Written | None, list[Source]]:
+def export_lerobot(
+    paths: list[str],
+    out: Path,
+    fps: int,
+    *,
+    mode: str = "recording",
+    task: str | None = None,
+    verify_first: bool = False,
+    overwrite: bool = False,
+    say: Callable[[str], None] = lambda line: None,
+) -> tuple[Written | None, list[Source]]:
     """Export the recordings at paths as a LeRobot dataset in out; returns what was written (None
-    when --verify left every recording out: then nothing is written) and every source, verified or not."""
+    when --verify left every recording out: then nothing is written) and every source, verified or
+    not."""
     check_folder(out, paths, overwrite)
     sources = [load_source(path) for path in paths]
-    for source in sources:  # a damaged file is exit 2 before any work, also before --verify's replay
+    # a damaged file is exit 2 before any work, also before --verify's replay
+    for source in sources:
         check_recording(source.rec, fps)
     if verify_first:
         for source in sources:
             verify(source)
-            say(f"{'verified' if source.verified else 'left out'} {source.path}: replay {source.replay}")
+            say(
+                f"{'verified' if source.verified else 'left out'} {source.path}: replay "
+                f"{source.replay}"
+            )
     kept = [s for s in sources if s.verified is not False]
     if not kept:
         return None, sources
     eps = episodes([s.rec for s in kept], fps, mode)
     tasks = [task if task is not None else _default_task(ep) for ep in eps]
-    written = write_dataset(eps, tasks, out.absolute(), fps, provenance(sources, eps, fps, mode, verify_first),
-                            overwrite=overwrite)  # absolute: `-o .` has a folder to write beside
+    written = write_dataset(
+        eps,
+        tasks,
+        out.absolute(),
+        fps,
+        provenance(sources, eps, fps, mode, verify_first),
+        overwrite=overwrite,
+    )  # absolute: `-o .` has a folder to write beside
     written.path = out
     return written, sources
 
@@ -60,7 +85,9 @@ def _default_task(ep: Episode) -> str:
     return str(run.get("task") or run.get("source") or "twin recording")
 
 
-def provenance(sources: list[Source], eps: list[Episode], fps: int, mode: str, verified: bool) -> dict:
+def provenance(
+    sources: list[Source], eps: list[Episode], fps: int, mode: str, verified: bool
+) -> dict:
     """meta/twin_provenance.json: how the dataset was made and from which files (name and sha256),
     whether each replayed exactly, and which episodes came from it."""
     from twin.record.mcap.metadata import versions
@@ -70,8 +97,21 @@ def provenance(sources: list[Source], eps: list[Episode], fps: int, mode: str, v
         entry = source.provenance()
         mine = [(i, ep) for i, ep in enumerate(eps) if ep.rec is source.rec]
         entry["exported"] = bool(mine)
-        entry["episodes"] = [{"episode_index": i, "cycle": ep.cycle, "first_step": int(ep.rec.frames.step[ep.rows[0]]),
-                              "frames": len(ep)} for i, ep in mine]
+        entry["episodes"] = [
+            {
+                "episode_index": i,
+                "cycle": ep.cycle,
+                "first_step": int(ep.rec.frames.step[ep.rows[0]]),
+                "frames": len(ep),
+            }
+            for i, ep in mine
+        ]
         entries.append(entry)
-    return {"exported_by": "twin export", "twin_version": versions()["twin"], "fps": fps, "episodes": mode,
-            "verify": verified, "sources": entries}
+    return {
+        "exported_by": "twin export",
+        "twin_version": versions()["twin"],
+        "fps": fps,
+        "episodes": mode,
+        "verify": verified,
+        "sources": entries,
+    }

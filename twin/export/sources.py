@@ -17,8 +17,9 @@ from twin.model.types import COMMAND_ARGS
 
 @dataclass
 class Source:
-    """One input recording and what is known of it: `replay` is "exact", "within numerical noise (...)", "differs: ...", or
-    "not checked" (no --verify); `verified` True, False or None (not checked)."""
+    """One input recording and what is known of it: `replay` is "exact", "within numerical noise
+    (...)", "differs: ...", or "not checked" (no --verify); `verified` True, False or None (not
+    checked)."""
 
     path: str
     rec: Recording
@@ -28,10 +29,18 @@ class Source:
 
     def provenance(self) -> dict:
         """The sidecar's entry: the file by name (no absolute path), its hash, what replay said."""
-        return {"file": Path(self.path).name, "sha256": self.sha256, "robot": self.rec.config.profile.name,
-                "task": str(self.rec.run.get("task", "")), "source": str(self.rec.run.get("source", "")),
-                "frames": len(self.rec.frames), "rate_steps": self.rec.rate_steps, "outcome": self.rec.outcome,
-                "verified": self.verified, "replay": self.replay}
+        return {
+            "file": Path(self.path).name,
+            "sha256": self.sha256,
+            "robot": self.rec.config.profile.name,
+            "task": str(self.rec.run.get("task", "")),
+            "source": str(self.rec.run.get("source", "")),
+            "frames": len(self.rec.frames),
+            "rate_steps": self.rec.rate_steps,
+            "outcome": self.rec.outcome,
+            "verified": self.verified,
+            "replay": self.replay,
+        }
 
 
 def load_source(path: str) -> Source:
@@ -47,17 +56,22 @@ def load_source(path: str) -> Source:
 
 
 def check_commands(rec: Recording) -> None:
-    """RecordingError (exit 2) for a command `twin replay` refuses (Twin.apply): an unknown kind, other
-    arguments than the kind's (model.types.COMMAND_ARGS), or, for what an export reads of them (the
-    suction.command column), a signal name or key that is no dictionary key or a value int() refuses."""
+    """RecordingError (exit 2) for a command `twin replay` refuses (Twin.apply): an unknown kind,
+    other arguments than the kind's (model.types.COMMAND_ARGS), or, for what an export reads of them
+    (the suction.command column), a signal name or key that is no dictionary key or a value int()
+    refuses."""
     for c in rec.commands:
         expected = COMMAND_ARGS.get(c.kind)
         if expected is None:
-            raise RecordingError(f"recording {rec.path!r}: unknown command kind {c.kind!r:.40} at step {c.step}; "
-                                 f"expected one of {sorted(COMMAND_ARGS)}")
+            raise RecordingError(
+                f"recording {rec.path!r}: unknown command kind {c.kind!r:.40} at step {c.step}; "
+                f"expected one of {sorted(COMMAND_ARGS)}"
+            )
         if not isinstance(c.args, dict) or sorted(c.args) != sorted(expected):
-            raise RecordingError(f"recording {rec.path!r}: {c.kind} command at step {c.step} has arguments "
-                                 f"{c.args!r:.80}; expected {', '.join(expected)}")
+            raise RecordingError(
+                f"recording {rec.path!r}: {c.kind} command at step {c.step} has arguments "
+                f"{c.args!r:.80}; expected {', '.join(expected)}"
+            )
         try:
             if c.kind == "signal":
                 hash(c.args["name"])
@@ -66,8 +80,10 @@ def check_commands(rec: Recording) -> None:
             elif c.kind == "key":
                 hash(c.args["key"])
         except (TypeError, ValueError, OverflowError) as err:
-            raise RecordingError(f"recording {rec.path!r}: {c.kind} command at step {c.step} is malformed: "
-                                 f"{str(err)[:80]}") from None
+            raise RecordingError(
+                f"recording {rec.path!r}: {c.kind} command at step {c.step} is malformed: "
+                f"{str(err)[:80]}"
+            ) from None
 
 
 def check_pictures(rec: Recording) -> None:
@@ -79,8 +95,8 @@ def check_pictures(rec: Recording) -> None:
 
 
 def check_recording(rec: Recording, fps: int | None = None) -> None:
-    """What an export refuses in a recording before any work: malformed commands, bad pictures, frame
-    times that are not their steps', and (for a dataset at fps) fps above its physics rate."""
+    """What an export refuses in a recording before any work: malformed commands, bad pictures,
+    frame times that are not their steps', and (for a dataset at fps) fps above its physics rate."""
     from twin.export.episodes import check_fps, check_times
 
     check_commands(rec)
@@ -91,8 +107,8 @@ def check_recording(rec: Recording, fps: int | None = None) -> None:
 
 
 def verify(source: Source) -> Source:
-    """Replay the recording and compare it as `twin replay` does (the default `noise` verdict: bits, or
-    within the replay's measured noise floor on another machine); sets replay and verified."""
+    """Replay the recording and compare it as `twin replay` does (the default `noise` verdict: bits,
+    or within the replay's measured noise floor on another machine); sets replay and verified."""
     from twin.compare.report import first_line, noise_summary
     from twin.compare.tolerances import DEFAULT, Tolerances
     from twin.verify.noise import judge
@@ -100,8 +116,14 @@ def verify(source: Source) -> Source:
 
     try:
         again = replay(source.rec)
-        result = judge(source.rec, again, Tolerances.from_preset(DEFAULT), replay, source=source.rec,
-                       event_kinds=replayed_event_kinds(source.rec))
+        result = judge(
+            source.rec,
+            again,
+            Tolerances.from_preset(DEFAULT),
+            replay,
+            source=source.rec,
+            event_kinds=replayed_event_kinds(source.rec),
+        )
     except TwinError as err:  # not replayable (no step 0, a malformed command, not comparable)
         source.replay, source.verified = f"not replayable: {err}", False
         return source

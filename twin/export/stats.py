@@ -1,4 +1,5 @@
-"""LeRobot's feature statistics: min, max, mean, std, count and the quantiles q01, q10, q50, q90, q99.
+"""LeRobot's feature statistics: min, max, mean, std, count and the quantiles q01, q10, q50, q90,
+q99.
 
 Numeric features are reduced over frames (one value per component); images per colour channel in
 [0, 1], shaped (3, 1, 1) as LeRobot keeps them. The quantiles here are exact (numpy's linear
@@ -21,16 +22,21 @@ def feature_stats(values: np.ndarray) -> dict[str, list]:
     feature's integers. Shapes follow LeRobot: (1,) for a scalar feature, (n,) for a vector."""
     data = values.reshape(values.shape[0], -1)
     as_float = data.astype(np.float64)
-    out = {"min": data.min(axis=0).tolist(), "max": data.max(axis=0).tolist(),
-           "mean": as_float.mean(axis=0).tolist(), "std": as_float.std(axis=0).tolist(),
-           "count": [int(data.shape[0])]}
+    out = {
+        "min": data.min(axis=0).tolist(),
+        "max": data.max(axis=0).tolist(),
+        "mean": as_float.mean(axis=0).tolist(),
+        "std": as_float.std(axis=0).tolist(),
+        "count": [int(data.shape[0])],
+    }
     for key, q in zip(_Q_KEYS, np.quantile(as_float, QUANTILES, axis=0), strict=True):
         out[key] = q.tolist()
     return out
 
 
 def image_sample(count: int) -> range:
-    """Which of an episode's `count` frames image_stats looks at: evenly spaced, at most IMAGE_SAMPLE_FRAMES."""
+    """Which of an episode's `count` frames image_stats looks at: evenly spaced, at most
+    IMAGE_SAMPLE_FRAMES."""
     return range(0, count, max(1, count // IMAGE_SAMPLE_FRAMES))[:IMAGE_SAMPLE_FRAMES]
 
 
@@ -51,5 +57,7 @@ def sampled_image_stats(thumbs: list[np.ndarray]) -> dict[str, list]:
     export keeps of an episode's pictures while it streams them into the video."""
     pixels = np.concatenate([t.reshape(-1, 3) for t in thumbs]).astype(np.float64) / 255.0
     flat = feature_stats(pixels)
-    return {key: value if key == "count" else [[[v]] for v in value] for key, value in {
-        **flat, "count": [len(thumbs)]}.items()}
+    return {
+        key: value if key == "count" else [[[v]] for v in value]
+        for key, value in {**flat, "count": [len(thumbs)]}.items()
+    }

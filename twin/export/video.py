@@ -26,26 +26,35 @@ def require_av():
     try:
         import av
     except ImportError:
-        raise ConfigError("video export needs the av package (PyAV): pip install 'twin[export]' or pip install av") \
-            from None
+        raise ConfigError(
+            "video export needs the av package (PyAV): pip install 'twin[export]' or pip install av"
+        ) from None
     return av
 
 
 def check_size(name: str, width_px: int, height_px: int) -> None:
     """yuv420p halves the colour resolution: both sides must be even."""
     if width_px % 2 or height_px % 2 or width_px <= 0 or height_px <= 0:
-        raise ConfigError(f"camera {name!r} is {width_px}x{height_px} px; video export needs an even width and height")
+        raise ConfigError(
+            f"camera {name!r} is {width_px}x{height_px} px; video export needs an even "
+            f"width and height"
+        )
 
 
-def encode_mp4(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int) -> int:
+def encode_mp4(
+    path: str | os.PathLike, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int
+) -> int:
     """Encode (H, W, 3) uint8 RGB frames into an MP4 file at fps; returns the number of frames."""
     av = require_av()
-    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 prints its configuration to stderr unless told not to
+    # SVT-AV1 prints its configuration to stderr unless told not to
+    os.environ.setdefault("SVT_LOG", "1")
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
         return _encode(av, path, frames, fps, width_px, height_px)
-    finally:  # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
-        os.sched_setscheduler(0, policy, param)  # later would inherit it (a spinning one starved the machine)
+    finally:
+        # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
+        # later would inherit it (a spinning one starved the machine)
+        os.sched_setscheduler(0, policy, param)
 
 
 def _encode(av, path, frames: Iterable[np.ndarray], fps: int, width_px: int, height_px: int) -> int:
@@ -61,7 +70,8 @@ def _encode(av, path, frames: Iterable[np.ndarray], fps: int, width_px: int, hei
                     out.mux(packet)
                 count += 1
         except BaseException:  # a bad picture, Ctrl-C: end the stream first, else SVT-AV1 prints
-            _end_quietly(stream)  # "Svt[error]: deinit called without sending EOS!" under the error line
+            # "Svt[error]: deinit called without sending EOS!" under the error line
+            _end_quietly(stream)
             raise
         for packet in stream.encode():
             out.mux(packet)
@@ -82,8 +92,16 @@ def probe(path: str | os.PathLike) -> dict:
     av = require_av()
     with av.open(str(Path(path))) as container:
         stream = container.streams.video[0]
-        return {"video.height": stream.height, "video.width": stream.width,
-                "video.codec": stream.codec_context.codec.canonical_name, "video.pix_fmt": stream.pix_fmt,
-                "video.fps": int(stream.base_rate), "video.channels": 3, "has_audio": False,
-                "video.g": int(OPTIONS["g"]), "video.crf": int(OPTIONS["crf"]), "video.preset": int(OPTIONS["preset"]),
-                "is_depth_map": False}
+        return {
+            "video.height": stream.height,
+            "video.width": stream.width,
+            "video.codec": stream.codec_context.codec.canonical_name,
+            "video.pix_fmt": stream.pix_fmt,
+            "video.fps": int(stream.base_rate),
+            "video.channels": 3,
+            "has_audio": False,
+            "video.g": int(OPTIONS["g"]),
+            "video.crf": int(OPTIONS["crf"]),
+            "video.preset": int(OPTIONS["preset"]),
+            "is_depth_map": False,
+        }

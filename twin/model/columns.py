@@ -39,9 +39,12 @@ class FrameColumns:
 
     @staticmethod
     def empty(n: int, n_joints: int = 4, n_objects: int = 1) -> FrameColumns:
-        return FrameColumns(**{
-            name: np.zeros((n, *shape(n_joints, n_objects)), dtype=dtype) for name, (dtype, shape) in FIELD_SPECS.items()
-        })
+        return FrameColumns(
+            **{
+                name: np.zeros((n, *shape(n_joints, n_objects)), dtype=dtype)
+                for name, (dtype, shape) in FIELD_SPECS.items()
+            }
+        )
 
     @staticmethod
     def from_frames(frames: list[Frame]) -> FrameColumns:
@@ -60,7 +63,12 @@ class FrameColumns:
 
     @staticmethod
     def concat(parts: list[FrameColumns]) -> FrameColumns:
-        return FrameColumns(**{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(FrameColumns)})
+        return FrameColumns(
+            **{
+                f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                for f in fields(FrameColumns)
+            }
+        )
 
     def equals(self, other: FrameColumns) -> bool:
         """Bit-identical (NaN-safe) equality of every column."""
@@ -76,8 +84,15 @@ def _tuple(a: np.ndarray) -> tuple:
 
 
 # a column's row back to the Frame's plain Python value, by the field's shape
-_PLAIN = {"frame": lambda v: v.item(), "joint": _tuple, "xyz": _tuple, "pose": _tuple,
-          "object_pose": lambda a: tuple(_tuple(p) for p in a)}
+_PLAIN = {
+    "frame": lambda v: v.item(),
+    "joint": _tuple,
+    "xyz": _tuple,
+    "pose": _tuple,
+    "object_pose": lambda a: tuple(_tuple(p) for p in a),
+}
 # Frame, FrameColumns and model.fields name the same fields in the same order
-if Frame._fields != tuple(FIELD_SPECS) or tuple(f.name for f in fields(FrameColumns)) != tuple(FIELD_SPECS):
+if Frame._fields != tuple(FIELD_SPECS) or tuple(f.name for f in fields(FrameColumns)) != tuple(
+    FIELD_SPECS
+):
     raise ImportError("twin.model: Frame, FrameColumns and model.fields.FRAME_FIELDS disagree")

@@ -41,7 +41,8 @@ class FrameField:
     name: str  # the Frame attribute and the FrameColumns column
     dtype: type
     shape: str  # a key of SHAPES
-    block: str  # "JointBlock" | "SuctionBlock" | "PoseBlock"; "*" for step and t_ns, which every block has
+    # "JointBlock" | "SuctionBlock" | "PoseBlock"; "*" for step and t_ns, which every block has
+    block: str
     proto_name: str
     number: int  # protobuf field number (3 is each block's names field)
     wire: str  # packed encoding: "<f8", "<i8", "<i4", "|u1"
@@ -55,36 +56,153 @@ _POSITION, _ORIENTATION = slice(0, 3), slice(3, 7)
 FRAME_FIELDS: tuple[FrameField, ...] = (
     FrameField("step", np.int64, "frame", "*", "step", 1, "<i8"),
     FrameField("t_ns", np.int64, "frame", "*", "t_ns", 2, "<i8"),
-    FrameField("joint_q", np.float64, "joint", "JointBlock", "position", 4, "<f8",
-               (Compared("joints.position", None, "joint", "rad|m", "joint angle (wrapped) or Z travel"),)),
-    FrameField("joint_qd", np.float64, "joint", "JointBlock", "velocity", 5, "<f8",
-               (Compared("joints.velocity", None, "abs", "rad/s|m/s", "joint velocity"),)),
-    FrameField("joint_effort", np.float64, "joint", "JointBlock", "effort", 6, "<f8",
-               (Compared("joints.effort", None, "abs", "N·m|N", "motor torque or force"),)),
-    FrameField("joint_target", np.float64, "joint", "JointBlock", "target", 7, "<f8",
-               (Compared("joints.target", None, "joint", "rad|m", "motor target (wrapped)"),)),
-    FrameField("suction_on", np.bool_, "frame", "SuctionBlock", "on", 4, "|u1",
-               (Compared("suction.on", None, "discrete", "", "pad switched on (exact or off)"),)),
-    FrameField("sensed_body", np.int32, "frame", "SuctionBlock", "sensed_body", 5, "<i4",
-               (Compared("suction.sensed", None, "discrete", "", "object the pad's sensor sees (exact or off)"),)),
-    FrameField("held_body", np.int32, "frame", "SuctionBlock", "held_body", 6, "<i4",
-               (Compared("suction.held", None, "discrete", "", "object the pad holds (exact or off)"),)),
-    FrameField("hold_force_n", np.float64, "xyz", "SuctionBlock", "hold_force_n", 7, "<f8",
-               (Compared("hold.force", None, "norm", "N", "norm of the hold force difference"),)),
-    FrameField("hold_torque_nm", np.float64, "xyz", "SuctionBlock", "hold_torque_nm", 8, "<f8",
-               (Compared("hold.torque", None, "norm", "N·m", "norm of the hold torque difference"),)),
-    FrameField("pad_pose", np.float64, "pose", "PoseBlock", "pad_pose", 4, "<f8",
-               (Compared("pad.position", _POSITION, "norm", "m", "distance between pad tips"),
-                Compared("pad.orientation", _ORIENTATION, "angle", "rad", "angle between pad orientations"))),
-    FrameField("object_poses", np.float64, "object_pose", "PoseBlock", "object_poses", 5, "<f8",
-               (Compared("objects.position", _POSITION, "norm", "m", "distance between object positions, every step"),
-                Compared("objects.orientation", _ORIENTATION, "angle", "rad",
-                         "angle between object orientations, every step"))),
+    FrameField(
+        "joint_q",
+        np.float64,
+        "joint",
+        "JointBlock",
+        "position",
+        4,
+        "<f8",
+        (Compared("joints.position", None, "joint", "rad|m", "joint angle (wrapped) or Z travel"),),
+    ),
+    FrameField(
+        "joint_qd",
+        np.float64,
+        "joint",
+        "JointBlock",
+        "velocity",
+        5,
+        "<f8",
+        (Compared("joints.velocity", None, "abs", "rad/s|m/s", "joint velocity"),),
+    ),
+    FrameField(
+        "joint_effort",
+        np.float64,
+        "joint",
+        "JointBlock",
+        "effort",
+        6,
+        "<f8",
+        (Compared("joints.effort", None, "abs", "N·m|N", "motor torque or force"),),
+    ),
+    FrameField(
+        "joint_target",
+        np.float64,
+        "joint",
+        "JointBlock",
+        "target",
+        7,
+        "<f8",
+        (Compared("joints.target", None, "joint", "rad|m", "motor target (wrapped)"),),
+    ),
+    FrameField(
+        "suction_on",
+        np.bool_,
+        "frame",
+        "SuctionBlock",
+        "on",
+        4,
+        "|u1",
+        (Compared("suction.on", None, "discrete", "", "pad switched on (exact or off)"),),
+    ),
+    FrameField(
+        "sensed_body",
+        np.int32,
+        "frame",
+        "SuctionBlock",
+        "sensed_body",
+        5,
+        "<i4",
+        (
+            Compared(
+                "suction.sensed",
+                None,
+                "discrete",
+                "",
+                "object the pad's sensor sees (exact or off)",
+            ),
+        ),
+    ),
+    FrameField(
+        "held_body",
+        np.int32,
+        "frame",
+        "SuctionBlock",
+        "held_body",
+        6,
+        "<i4",
+        (Compared("suction.held", None, "discrete", "", "object the pad holds (exact or off)"),),
+    ),
+    FrameField(
+        "hold_force_n",
+        np.float64,
+        "xyz",
+        "SuctionBlock",
+        "hold_force_n",
+        7,
+        "<f8",
+        (Compared("hold.force", None, "norm", "N", "norm of the hold force difference"),),
+    ),
+    FrameField(
+        "hold_torque_nm",
+        np.float64,
+        "xyz",
+        "SuctionBlock",
+        "hold_torque_nm",
+        8,
+        "<f8",
+        (Compared("hold.torque", None, "norm", "N·m", "norm of the hold torque difference"),),
+    ),
+    FrameField(
+        "pad_pose",
+        np.float64,
+        "pose",
+        "PoseBlock",
+        "pad_pose",
+        4,
+        "<f8",
+        (
+            Compared("pad.position", _POSITION, "norm", "m", "distance between pad tips"),
+            Compared(
+                "pad.orientation", _ORIENTATION, "angle", "rad", "angle between pad orientations"
+            ),
+        ),
+    ),
+    FrameField(
+        "object_poses",
+        np.float64,
+        "object_pose",
+        "PoseBlock",
+        "object_poses",
+        5,
+        "<f8",
+        (
+            Compared(
+                "objects.position",
+                _POSITION,
+                "norm",
+                "m",
+                "distance between object positions, every step",
+            ),
+            Compared(
+                "objects.orientation",
+                _ORIENTATION,
+                "angle",
+                "rad",
+                "angle between object orientations, every step",
+            ),
+        ),
+    ),
 )
 BY_NAME = {f.name: f for f in FRAME_FIELDS}
 BLOCKS = ("JointBlock", "SuctionBlock", "PoseBlock")  # the MCAP block messages, in channel order
 NAMES_FIELD = 3  # each block's names: joint names (JointBlock) or object names
-NAMES_FIELD_NAME = {"JointBlock": "joint_names", "SuctionBlock": "object_names", "PoseBlock": "object_names"}
+NAMES_FIELD_NAME = {
+    "JointBlock": "joint_names",
+    "SuctionBlock": "object_names",
+    "PoseBlock": "object_names",
+}
 
 
 def block_fields(block: str) -> tuple[FrameField, ...]:
@@ -92,4 +210,6 @@ def block_fields(block: str) -> tuple[FrameField, ...]:
     return tuple(f for f in FRAME_FIELDS if f.block in ("*", block))
 
 
-COMPARED: tuple[tuple[FrameField, Compared], ...] = tuple((f, c) for f in FRAME_FIELDS for c in f.compared)
+COMPARED: tuple[tuple[FrameField, Compared], ...] = tuple(
+    (f, c) for f in FRAME_FIELDS for c in f.compared
+)

@@ -1,5 +1,5 @@
-"""Cameras: where a camera sits and what it sees (CameraSpec), one rendered picture (CameraImage, what
-sinks get through on_image) and all of one camera's pictures in a recording (CameraTrack).
+"""Cameras: where a camera sits and what it sees (CameraSpec), one rendered picture (CameraImage,
+what sinks get through on_image) and all of one camera's pictures in a recording (CameraTrack).
 
 A camera is part of the scene's configuration (TwinConfig.cameras), so a replay renders it again.
 Pictures are stored encoded (twin.pictures) and decoded only when asked (CameraTrack.rgb). A picture
@@ -21,7 +21,8 @@ from twin.model.quat import quat_from_axes, rotate
 from twin.pictures import checked_header, decode_rgb
 
 FORMATS = ("png", "jpeg")
-MOUNTS = ("world", "pad")  # eye and target in world axes, or in the pad tip's frame (x along its heading, z up)
+# eye and target in world axes, or in the pad tip's frame (x along its heading, z up)
+MOUNTS = ("world", "pad")
 DEFAULT_SIZE_PX = (320, 240)
 DEFAULT_RATE_HZ = 15.0
 MAX_SIDE_PX = 4096
@@ -30,9 +31,9 @@ CAMERA_FRAME_PREFIX = "camera_"  # a camera's frame_id in /tf: the prefix, then 
 
 @dataclass(frozen=True)
 class CameraSpec:
-    """A pinhole camera: image size, rate in simulated time, vertical field of view, clip planes, and
-    its eye, target and up direction, in world axes (mount "world") or in the pad tip's frame (mount
-    "pad": it moves and turns with the pad)."""
+    """A pinhole camera: image size, rate in simulated time, vertical field of view, clip planes,
+    and its eye, target and up direction, in world axes (mount "world") or in the pad tip's frame
+    (mount "pad": it moves and turns with the pad)."""
 
     name: str
     width_px: int = DEFAULT_SIZE_PX[0]
@@ -49,20 +50,32 @@ class CameraSpec:
 
     def __post_init__(self) -> None:
         if not self.name or not all(c.isalnum() or c in "_-" for c in self.name):
-            raise ConfigError(f"camera name {self.name!r} is invalid; expected letters, digits, '_' or '-'")
+            raise ConfigError(
+                f"camera name {self.name!r} is invalid; expected letters, digits, '_' or '-'"
+            )
         for side in (self.width_px, self.height_px):
             if isinstance(side, bool) or not isinstance(side, int) or not 16 <= side <= MAX_SIDE_PX:
-                raise ConfigError(f"camera {self.name!r} size {self.width_px}x{self.height_px} is invalid; "
-                                  f"expected whole numbers of pixels 16..{MAX_SIDE_PX}")
+                raise ConfigError(
+                    f"camera {self.name!r} size {self.width_px}x{self.height_px} is invalid; "
+                    f"expected whole numbers of pixels 16..{MAX_SIDE_PX}"
+                )
         if not (math.isfinite(self.rate_hz) and 0.1 <= self.rate_hz <= 1000):
-            raise ConfigError(f"camera {self.name!r} rate {self.rate_hz} Hz is invalid; expected 0.1..1000 Hz")
+            raise ConfigError(
+                f"camera {self.name!r} rate {self.rate_hz} Hz is invalid; expected 0.1..1000 Hz"
+            )
         if self.mount not in MOUNTS:
-            raise ConfigError(f"camera {self.name!r} mount {self.mount!r} is invalid; expected one of {MOUNTS}")
+            raise ConfigError(
+                f"camera {self.name!r} mount {self.mount!r} is invalid; expected one of {MOUNTS}"
+            )
         if self.format not in FORMATS:
-            raise ConfigError(f"camera {self.name!r} format {self.format!r} is invalid; expected one of {FORMATS}")
+            raise ConfigError(
+                f"camera {self.name!r} format {self.format!r} is invalid; expected one of {FORMATS}"
+            )
         if not (0 < self.near_m < self.far_m and 1 <= self.fov_deg <= 170):
-            raise ConfigError(f"camera {self.name!r}: near {self.near_m} m, far {self.far_m} m, field of view "
-                              f"{self.fov_deg} deg; expected 0 < near < far and 1..170 deg")
+            raise ConfigError(
+                f"camera {self.name!r}: near {self.near_m} m, far {self.far_m} m, field of view "
+                f"{self.fov_deg} deg; expected 0 < near < far and 1..170 deg"
+            )
 
     def every_steps(self, dt_ns: int) -> int:
         """Every how many physics steps this camera takes a picture (step 0 always)."""
@@ -78,7 +91,8 @@ class CameraSpec:
         return (f, 0.0, self.width_px / 2, 0.0, f, self.height_px / 2, 0.0, 0.0, 1.0)
 
     def projection(self) -> tuple[float, ...]:
-        """The 3x4 projection matrix P of this undistorted camera (K and a zero fourth column), row-major."""
+        """The 3x4 projection matrix P of this undistorted camera (K and a zero fourth column),
+        row-major."""
         k = self.intrinsics()
         return (*k[0:3], 0.0, *k[3:6], 0.0, *k[6:9], 0.0)
 
@@ -93,16 +107,28 @@ class CameraSpec:
 # and 6 cm behind it, looking down at what the pad picks.
 CAMERAS = {
     "overhead": CameraSpec("overhead"),
-    "wrist": CameraSpec("wrist", mount="pad", fov_deg=75.0, near_m=0.01, far_m=2.0,
-                        eye_m=(-0.06, 0.0, 0.03), target_m=(0.0, 0.0, -0.05), up=(1.0, 0.0, 0.0)),
+    "wrist": CameraSpec(
+        "wrist",
+        mount="pad",
+        fov_deg=75.0,
+        near_m=0.01,
+        far_m=2.0,
+        eye_m=(-0.06, 0.0, 0.03),
+        target_m=(0.0, 0.0, -0.05),
+        up=(1.0, 0.0, 0.0),
+    ),
 }
 
 
-def camera(name: str, size_px: tuple[int, int] = DEFAULT_SIZE_PX, rate_hz: float = DEFAULT_RATE_HZ) -> CameraSpec:
+def camera(
+    name: str, size_px: tuple[int, int] = DEFAULT_SIZE_PX, rate_hz: float = DEFAULT_RATE_HZ
+) -> CameraSpec:
     """A built-in camera by name, at this size and rate."""
     if name not in CAMERAS:
         raise ConfigError(f"unknown camera {name!r}; expected one of {', '.join(CAMERAS)}")
-    return replace(CAMERAS[name], width_px=int(size_px[0]), height_px=int(size_px[1]), rate_hz=float(rate_hz))
+    return replace(
+        CAMERAS[name], width_px=int(size_px[0]), height_px=int(size_px[1]), rate_hz=float(rate_hz)
+    )
 
 
 def camera_view(spec: CameraSpec, pad_pose: tuple[float, ...]) -> tuple[tuple[float, ...], ...]:
@@ -111,11 +137,16 @@ def camera_view(spec: CameraSpec, pad_pose: tuple[float, ...]) -> tuple[tuple[fl
     if spec.mount == "world":
         return spec.eye_m, spec.target_m, spec.up
     origin, turn = pad_pose[:3], pad_pose[3:7]
-    eye, target = (tuple(o + v for o, v in zip(origin, rotate(turn, p), strict=True)) for p in (spec.eye_m, spec.target_m))
+    eye, target = (
+        tuple(o + v for o, v in zip(origin, rotate(turn, p), strict=True))
+        for p in (spec.eye_m, spec.target_m)
+    )
     return eye, target, rotate(turn, spec.up)
 
 
-def optical_pose(eye: tuple[float, ...], target: tuple[float, ...], up: tuple[float, ...]) -> tuple[float, ...]:
+def optical_pose(
+    eye: tuple[float, ...], target: tuple[float, ...], up: tuple[float, ...]
+) -> tuple[float, ...]:
     """The camera's optical frame in world axes as (x, y, z, qx, qy, qz, qw): z looks at the target,
     x to the image's right, y down the image (the convention of Foxglove's CameraCalibration)."""
     forward = _unit(tuple(t - e for t, e in zip(target, eye, strict=True)))
@@ -148,8 +179,9 @@ class CameraImage(NamedTuple):
 @dataclass
 class CameraTrack:
     """All pictures of one camera in a recording, in step order; data[i] shows step[i] (at t_ns[i]),
-    taken from pose[i] (x, y, z, qx, qy, qz, qw: the camera's /tf in the file; empty when a file holds
-    none). source: the file they were read from ("" in memory), named when a picture is bad."""
+    taken from pose[i] (x, y, z, qx, qy, qz, qw: the camera's /tf in the file; empty when a file
+    holds none). source: the file they were read from ("" in memory), named when a picture is
+    bad."""
 
     name: str
     width_px: int
@@ -165,16 +197,18 @@ class CameraTrack:
         return len(self.data)
 
     def rgb(self, i: int) -> np.ndarray:
-        """Picture i decoded: (height, width, 3) uint8. Its header is checked first (check): a picture
-        that is not the camera's format and size is a RecordingError, and is never decoded."""
+        """Picture i decoded: (height, width, 3) uint8. Its header is checked first (check): a
+        picture that is not the camera's format and size is a RecordingError, and is never
+        decoded."""
         try:
             return decode_rgb(self.data[i], self.format, (self.width_px, self.height_px))
         except ValueError as err:
             raise self._bad(i, str(err)) from None
 
     def check(self, i: int | None = None) -> None:
-        """Picture i's header (every picture's with i None) against the camera: RecordingError unless it
-        is a picture of the camera's format and configured size. Reads headers only: microseconds each."""
+        """Picture i's header (every picture's with i None) against the camera: RecordingError
+        unless it is a picture of the camera's format and configured size. Reads headers only:
+        microseconds each."""
         for k in range(len(self.data)) if i is None else (i,):
             try:
                 checked_header(self.data[k], self.format, (self.width_px, self.height_px))
@@ -184,29 +218,43 @@ class CameraTrack:
     def _bad(self, i: int, why: str) -> RecordingError:
         where = f"recording {self.source!r}: " if self.source else ""
         step = f"step {int(self.step[i])}" if i < len(self.step) else f"picture {i}"
-        return RecordingError(f"{where}camera {self.name!r} picture at {step} {why}; expected a "
-                              f"{self.format.upper()} picture of {self.width_px}x{self.height_px} px (the camera's "
-                              "configured format and size)")
+        return RecordingError(
+            f"{where}camera {self.name!r} picture at {step} {why}; expected a "
+            f"{self.format.upper()} picture of {self.width_px}x{self.height_px} px (the camera's "
+            "configured format and size)"
+        )
 
     @staticmethod
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
-        return CameraTrack(spec.name, spec.width_px, spec.height_px, spec.format,
-                           np.array([im.step for im in images], dtype=np.int64),
-                           np.array([im.t_ns for im in images], dtype=np.int64), [im.data for im in images],
-                           pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7))
+        return CameraTrack(
+            spec.name,
+            spec.width_px,
+            spec.height_px,
+            spec.format,
+            np.array([im.step for im in images], dtype=np.int64),
+            np.array([im.t_ns for im in images], dtype=np.int64),
+            [im.data for im in images],
+            pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7),
+        )
 
 
 def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[str, CameraTrack]:
     """Each camera's pictures among images (in the order they came), as tracks by camera name."""
-    return {spec.name: CameraTrack.from_images(spec, [im for im in images if im.camera == spec.name])
-            for spec in cameras}
+    return {
+        spec.name: CameraTrack.from_images(spec, [im for im in images if im.camera == spec.name])
+        for spec in cameras
+    }
 
 
-def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTrack], frame_steps: np.ndarray,
-                    pad_poses: np.ndarray) -> list[CameraImage]:
-    """A recording's pictures as CameraImages in step order (camera order within a step), each with the
-    pose its track holds (the file's /tf). A track without poses (a file that holds none) has them
-    worked out from the recorded frame at (or, in a decimated file, just before) its step."""
+def recorded_images(
+    cameras: tuple[CameraSpec, ...],
+    by_name: dict[str, CameraTrack],
+    frame_steps: np.ndarray,
+    pad_poses: np.ndarray,
+) -> list[CameraImage]:
+    """A recording's pictures as CameraImages in step order (camera order within a step), each with
+    the pose its track holds (the file's /tf). A track without poses (a file that holds none) has
+    them worked out from the recorded frame at (or, in a decimated file, just before) its step."""
     out = []
     for spec in cameras:
         track = by_name.get(spec.name)
@@ -220,5 +268,7 @@ def recorded_images(cameras: tuple[CameraSpec, ...], by_name: dict[str, CameraTr
             else:
                 row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
                 pose = optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))
-            out.append(CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose))
+            out.append(
+                CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose)
+            )
     return sorted(out, key=lambda im: im.step)

@@ -1,6 +1,6 @@
 """JSON values as recordings hold them: finite numbers only (NaN and infinities are not JSON); and
-reading the JSON and TOML files a user hands twin (profiles, key maps, sweep definitions and summaries)
-as one-line ConfigErrors, never a traceback.
+reading the JSON and TOML files a user hands twin (profiles, key maps, sweep definitions and
+summaries) as one-line ConfigErrors, never a traceback.
 
 Nesting is bounded: a file twin reads may nest arrays and tables (objects) at most MAX_DEPTH deep
 (twin's own files nest 4 deep at most). Deeper text is refused when it is read (the parsers recurse
@@ -37,7 +37,9 @@ def all_finite(value: object) -> bool:
 def finite_number(value: object) -> float | None:
     """value as a float if it is a finite int or float (a bool is no number), else None."""
     try:
-        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        ok = (
+            not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        )
     except OverflowError:  # an int too large for a float
         return None
     return float(value) if ok else None
@@ -55,8 +57,8 @@ def finite_or_null(value: object) -> object:
 
 
 def nesting_depth(value: object, limit: int = MAX_DEPTH) -> int:
-    """How deep lists (tuples) and dicts nest in value (a number or string: 0; [] and {}: 1), counted
-    level by level without recursion; counting stops past `limit` (then limit + 1)."""
+    """How deep lists (tuples) and dicts nest in value (a number or string: 0; [] and {}: 1),
+    counted level by level without recursion; counting stops past `limit` (then limit + 1)."""
     depth, level = 0, [value]
     while True:
         containers = [v for v in level if isinstance(v, dict | list | tuple)]
@@ -69,8 +71,8 @@ def nesting_depth(value: object, limit: int = MAX_DEPTH) -> int:
 
 
 def shown(value: object, width: int = 60, *, as_json: bool = False) -> str:
-    """repr(value) (or its JSON) cut to `width` characters, for an error message: a value read from a
-    file may nest as deep as its parser allowed, and printing it recurses again."""
+    """repr(value) (or its JSON) cut to `width` characters, for an error message: a value read from
+    a file may nest as deep as its parser allowed, and printing it recurses again."""
     try:
         text = json.dumps(value) if as_json else repr(value)
     except RecursionError:
@@ -81,7 +83,9 @@ def shown(value: object, width: int = 60, *, as_json: bool = False) -> str:
 
 
 def _too_deep(what: str, limit: int) -> ConfigError:
-    return ConfigError(f"{what}: arrays or tables nest more than {limit} levels deep; twin reads at most {limit}")
+    return ConfigError(
+        f"{what}: arrays or tables nest more than {limit} levels deep; twin reads at most {limit}"
+    )
 
 
 def _first_line(err: BaseException) -> str:
@@ -90,9 +94,10 @@ def _first_line(err: BaseException) -> str:
 
 
 def load_json_text(text: str | bytes, what: str, *, max_depth: int = MAX_DEPTH) -> object:
-    """JSON text as Python values (json.loads), or a one-line ConfigError `{what}: {why}` for malformed
-    JSON, undecodable bytes, or nesting deeper than max_depth (also where json would recurse too deep).
-    `what` names the file and says what went wrong, e.g. "key map 'k.json' cannot be read"."""
+    """JSON text as Python values (json.loads), or a one-line ConfigError `{what}: {why}` for
+    malformed JSON, undecodable bytes, or nesting deeper than max_depth (also where json would
+    recurse too deep). `what` names the file and says what went wrong, e.g. "key map 'k.json' cannot
+    be read"."""
     try:
         value = json.loads(text)
     except RecursionError:
@@ -105,8 +110,8 @@ def load_json_text(text: str | bytes, what: str, *, max_depth: int = MAX_DEPTH) 
 
 
 def load_toml_text(text: str, what: str, *, max_depth: int = MAX_DEPTH) -> dict:
-    """TOML text as a dict (tomllib.loads), or a one-line ConfigError `{what}: {why}` for malformed TOML
-    or nesting deeper than max_depth (also where tomllib would recurse too deep)."""
+    """TOML text as a dict (tomllib.loads), or a one-line ConfigError `{what}: {why}` for malformed
+    TOML or nesting deeper than max_depth (also where tomllib would recurse too deep)."""
     try:
         value = tomllib.loads(text)
     except RecursionError:

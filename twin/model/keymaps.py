@@ -3,12 +3,16 @@
 A key map is plain data carried in TwinConfig.keymap (so a recording replays its keys the same
 way): key name -> list of actions, in SI units (rad for revolute joints, m for Z):
   ["jog", joint, delta]               the joint's target moves by delta
-  ["jog_keep_heading", joint, delta]  shoulder/elbow jog; the wrist turns back so the pad keeps its heading
-  ["target", joint, value|"min"|"max"|"down"|"up"]   ("down"/"up": the scene's Z values, profile.z_down/z_up)
+  ["jog_keep_heading", joint, delta]  shoulder/elbow jog; the wrist turns back so the pad keeps
+                                      its heading
+  ["target", joint, value|"min"|"max"|"down"|"up"]
+                                      ("down"/"up": the scene's Z values, profile.z_down/z_up)
   ["position", joint, value]          set at once (a jump, like sim.setJointPosition)
   ["add", joint, delta, "target"|"position"]  the map's own variable for the joint (from 0, as the
-                                      reports' scripts keep one) moves by delta; the joint is sent there
-  ["diff", joint, a, b]               the joint's variable becomes a's minus b's; its target goes there
+                                      reports' scripts keep one) moves by delta; the joint is
+                                      sent there
+  ["diff", joint, a, b]               the joint's variable becomes a's minus b's; its target goes
+                                      there
   ["signal", name, value]             an integer signal
   ["suction", 0|1]                    the profile's suction signal
 Joints are named by role (shoulder, elbow, z, wrist) or by the profile's own joint names.
@@ -29,12 +33,36 @@ from twin.errors import ConfigError, UnknownName
 from twin.model.json_values import load_json_text, load_toml_text
 from twin.model.profiles import ROLES, RobotProfile
 
-NAMED_KEYS = ("up", "down", "left", "right", "space", "enter", "tab", "backspace", "delete", "insert",
-              "home", "end", "pageup", "pagedown", *(f"f{i}" for i in range(1, 13)))
+NAMED_KEYS = (
+    "up",
+    "down",
+    "left",
+    "right",
+    "space",
+    "enter",
+    "tab",
+    "backspace",
+    "delete",
+    "insert",
+    "home",
+    "end",
+    "pageup",
+    "pagedown",
+    *(f"f{i}" for i in range(1, 13)),
+)
 ALWAYS_QUIT = ("esc", "ctrl-c", "ctrl-d")
 WAIT = "wait"  # in a --keys script: no key for one interval
 OPS = ("jog", "jog_keep_heading", "target", "position", "add", "diff", "signal", "suction")
-_ARITY = {"jog": 3, "jog_keep_heading": 3, "target": 3, "position": 3, "add": 4, "diff": 4, "signal": 3, "suction": 2}
+_ARITY = {
+    "jog": 3,
+    "jog_keep_heading": 3,
+    "target": 3,
+    "position": 3,
+    "add": 4,
+    "diff": 4,
+    "signal": 3,
+    "suction": 2,
+}
 HOW = ("target", "position")
 
 
@@ -50,10 +78,10 @@ def _jog_kh(role: str, delta: float) -> list:
     return ["jog_keep_heading", role, delta]
 
 
-# seed000, as report 000's Lua does it: its variables angle1, angle2, d start at 0; a/d: angle1 -/+1 deg,
-# q/e: angle2 -/+1 deg, each set at once (sim.setJointPosition); 8: d = d - 0.05, joint3 set to d and
-# suction on (its first press sets -0.05, wherever Z is); 5: joint3 set to 0.084 (the lower stop; d
-# unchanged); s: suction off.
+# seed000, as report 000's Lua does it: its variables angle1, angle2, d start at 0; a/d: angle1 -/+1
+# deg, q/e: angle2 -/+1 deg, each set at once (sim.setJointPosition); 8: d = d - 0.05, joint3 set to
+# d and suction on (its first press sets -0.05, wherever Z is); 5: joint3 set to 0.084 (the lower
+# stop; d unchanged); s: suction off.
 SEED000 = {
     "a": [["add", "shoulder", -_deg(1), "position"]],
     "d": [["add", "shoulder", _deg(1), "position"]],
@@ -95,7 +123,13 @@ MTB = {
     "r": [["suction", 0]],
 }
 
-BUILTIN: dict[str, dict] = {"mtb": MTB, "seed000": SEED000, "seed001": SEED001, "seed002": MTB, "seed003": MTB}
+BUILTIN: dict[str, dict] = {
+    "mtb": MTB,
+    "seed000": SEED000,
+    "seed001": SEED001,
+    "seed002": MTB,
+    "seed003": MTB,
+}
 
 
 def builtin_keymap(profile_name: str) -> dict:
@@ -104,7 +138,9 @@ def builtin_keymap(profile_name: str) -> dict:
 
 
 def is_key_name(name: object) -> bool:
-    return isinstance(name, str) and ((len(name) == 1 and 33 <= ord(name) <= 126) or name in NAMED_KEYS)
+    return isinstance(name, str) and (
+        (len(name) == 1 and 33 <= ord(name) <= 126) or name in NAMED_KEYS
+    )
 
 
 def quit_keys(keymap: dict) -> tuple[str, ...]:
@@ -116,8 +152,9 @@ MAX_REPEAT = 100_000  # presses per token: ample for any session, and no runaway
 
 
 def parse_keys(text: str) -> list[str]:
-    """A --keys script: whitespace-separated tokens, each a key name or `wait` (no key for one interval),
-    optionally `*N` to repeat it N times ("d*30 e 8 wait*4 s"). Quit keys end the session there."""
+    """A --keys script: whitespace-separated tokens, each a key name or `wait` (no key for one
+    interval), optionally `*N` to repeat it N times ("d*30 e 8 wait*4 s"). Quit keys end the session
+    there."""
     keys: list[str] = []
     for token in text.split():
         name, count = token, 1
@@ -125,11 +162,15 @@ def parse_keys(text: str) -> list[str]:
         if star and head and tail.isdigit():
             name, count = head, int(tail)
             if not 1 <= count <= MAX_REPEAT:
-                raise ConfigError(f"--keys token {token!r}: repeat count {count} is invalid; "
-                                  f"expected *1 to *{MAX_REPEAT}")
+                raise ConfigError(
+                    f"--keys token {token!r}: repeat count {count} is invalid; "
+                    f"expected *1 to *{MAX_REPEAT}"
+                )
         if not (is_key_name(name) or name in ALWAYS_QUIT or name == WAIT):
-            raise ConfigError(f"--keys token {token!r} is not a key; expected a single character or one of "
-                              f"{', '.join(NAMED_KEYS[:8])}, ..., esc, or wait, optionally followed by *N")
+            raise ConfigError(
+                f"--keys token {token!r} is not a key; expected a single character or one of "
+                f"{', '.join(NAMED_KEYS[:8])}, ..., esc, or wait, optionally followed by *N"
+            )
         keys.extend([name] * count)
     return keys
 
@@ -146,7 +187,7 @@ def _value(src: str, key: str, action: list, raw: object, joint: int) -> float:
     except OverflowError:  # a JSON integer too large for a float
         finite = False
     if not finite:
-        unit = "metres" if joint == ROLES.index("z") else "radians or a string like \"5deg\""
+        unit = "metres" if joint == ROLES.index("z") else 'radians or a string like "5deg"'
         raise _bad(src, key, action, f"value {raw!r} is not a finite number; expected {unit}")
     return float(raw)
 
@@ -160,10 +201,18 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
         raise _bad(src, key, action, f"expected a list [op, ...] with op one of {', '.join(OPS)}")
     op = action[0]
     if len(action) != _ARITY[op]:
-        shapes = {"jog": "[op, joint, delta]", "target": "[op, joint, value|\"min\"|\"max\"|\"down\"|\"up\"]",
-                  "position": "[op, joint, value]", "add": "[op, joint, delta, \"target\"|\"position\"]",
-                  "diff": "[op, joint, a, b]", "signal": "[op, name, integer]", "suction": "[op, 0|1]"}
-        raise _bad(src, key, action, f"has {len(action)} items; expected {shapes.get(op, shapes['jog'])}")
+        shapes = {
+            "jog": "[op, joint, delta]",
+            "target": '[op, joint, value|"min"|"max"|"down"|"up"]',
+            "position": "[op, joint, value]",
+            "add": '[op, joint, delta, "target"|"position"]',
+            "diff": "[op, joint, a, b]",
+            "signal": "[op, name, integer]",
+            "suction": "[op, 0|1]",
+        }
+        raise _bad(
+            src, key, action, f"has {len(action)} items; expected {shapes.get(op, shapes['jog'])}"
+        )
     if op == "suction":
         if action[1] not in (0, 1) or isinstance(action[1], bool):
             raise _bad(src, key, action, f"suction value {action[1]!r} is invalid; expected 0 or 1")
@@ -171,21 +220,33 @@ def _action(src: str, key: str, action: object, profile: RobotProfile) -> list:
     if op == "signal":
         name, value = action[1], action[2]
         if not isinstance(name, str) or not name:
-            raise _bad(src, key, action, f"signal name {name!r} is invalid; expected a non-empty string")
+            raise _bad(
+                src, key, action, f"signal name {name!r} is invalid; expected a non-empty string"
+            )
         if isinstance(value, bool) or not isinstance(value, int):
             raise _bad(src, key, action, f"signal value {value!r} is invalid; expected an integer")
         return [op, name, value]
     joint_name = action[1]
     joint = _joint(src, key, action, joint_name, profile)
     if op == "jog_keep_heading" and ROLES[joint] not in ("shoulder", "elbow"):
-        raise _bad(src, key, action, f"keeping the heading needs the shoulder or elbow, not {joint_name!r}")
-    if op == "target" and (action[2] in ("min", "max") or action[2] in ("down", "up") and ROLES[joint] == "z"):
+        raise _bad(
+            src, key, action, f"keeping the heading needs the shoulder or elbow, not {joint_name!r}"
+        )
+    if op == "target" and (
+        action[2] in ("min", "max") or action[2] in ("down", "up") and ROLES[joint] == "z"
+    ):
         return [op, ROLES[joint], action[2]]
     if op == "diff":
-        return [op, ROLES[joint], *(ROLES[_joint(src, key, action, name, profile)] for name in action[2:4])]
+        return [
+            op,
+            ROLES[joint],
+            *(ROLES[_joint(src, key, action, name, profile)] for name in action[2:4]),
+        ]
     if op == "add":
         if action[3] not in HOW:
-            raise _bad(src, key, action, f"how {action[3]!r} is invalid; expected one of {', '.join(HOW)}")
+            raise _bad(
+                src, key, action, f"how {action[3]!r} is invalid; expected one of {', '.join(HOW)}"
+            )
         return [op, ROLES[joint], _value(src, key, action, action[2], joint), action[3]]
     return [op, ROLES[joint], _value(src, key, action, action[2], joint)]
 
@@ -197,8 +258,13 @@ def _joint(src: str, key: str, action: list, name: object, profile: RobotProfile
             return profile.joint_index(name)
     except UnknownName:
         pass
-    raise _bad(src, key, action, f"unknown joint {name!r}; expected one of {', '.join(ROLES)} "
-                                 f"or {', '.join(profile.joint_names)}")
+    raise _bad(
+        src,
+        key,
+        action,
+        f"unknown joint {name!r}; expected one of {', '.join(ROLES)} "
+        f"or {', '.join(profile.joint_names)}",
+    )
 
 
 def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in)") -> dict:
@@ -208,12 +274,16 @@ def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in
     out = {}
     for key in sorted(keymap):
         if not is_key_name(key):
-            raise ConfigError(f"key map {src}: key {key!r} is not a key name; expected a single printable "
-                              f"character or one of {', '.join(NAMED_KEYS)}")
+            raise ConfigError(
+                f"key map {src}: key {key!r} is not a key name; expected a single printable "
+                f"character or one of {', '.join(NAMED_KEYS)}"
+            )
         actions = keymap[key]
         if not isinstance(actions, list) or not actions:
-            raise ConfigError(f"key map {src}: key {key!r}: expected a non-empty list of actions, got "
-                              f"{json.dumps(actions)}")
+            raise ConfigError(
+                f"key map {src}: key {key!r}: expected a non-empty list of actions, got "
+                f"{json.dumps(actions)}"
+            )
         if all(not isinstance(a, list) for a in actions):
             actions = [actions]  # a single action written without the outer list
         out[key] = [_action(src, key, a, profile) for a in actions]
@@ -221,8 +291,8 @@ def validate_keymap(keymap: object, profile: RobotProfile, src: str = "(built-in
 
 
 def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
-    """A user's key map file (.toml or .json): a table `keys` of key = list of actions, and optionally
-    `extends = "mtb"|"seed000"|...` to start from a built-in map."""
+    """A user's key map file (.toml or .json): a table `keys` of key = list of actions, and
+    optionally `extends = "mtb"|"seed000"|...` to start from a built-in map."""
     p = Path(path)
     src = repr(str(p))
     if p.suffix not in (".toml", ".json"):
@@ -232,19 +302,26 @@ def load_keymap(path: str | Path, profile: RobotProfile) -> dict:
     try:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"key map {src} cannot be read: {(str(err).splitlines() or [type(err).__name__])[0]}") from err
-    what = f"key map {src} cannot be read"  # malformed or nested too deep: one line, never a RecursionError
+        raise ConfigError(
+            f"key map {src} cannot be read: {(str(err).splitlines() or [type(err).__name__])[0]}"
+        ) from err
+    # malformed or nested too deep: one line, never a RecursionError
+    what = f"key map {src} cannot be read"
     data = load_toml_text(text, what) if p.suffix == ".toml" else load_json_text(text, what)
     if not isinstance(data, dict) or not isinstance(data.get("keys"), dict):
         raise ConfigError(f"key map {src}: expected a table `keys` (key = list of actions)")
     unknown = sorted(str(k) for k in set(data) - {"keys", "extends"})
     if unknown:
-        raise ConfigError(f"key map {src}: unknown entries {unknown}; expected `keys` and optionally `extends`")
+        raise ConfigError(
+            f"key map {src}: unknown entries {unknown}; expected `keys` and optionally `extends`"
+        )
     base: dict = {}
     if "extends" in data:
         if not isinstance(data["extends"], str) or data["extends"] not in BUILTIN:
-            raise ConfigError(f"key map {src}: extends {data['extends']!r} is unknown; expected one of "
-                              f"{', '.join(BUILTIN)}")
+            raise ConfigError(
+                f"key map {src}: extends {data['extends']!r} is unknown; expected one of "
+                f"{', '.join(BUILTIN)}"
+            )
         base = builtin_keymap(data["extends"])
     return validate_keymap({**base, **data["keys"]}, profile, src)
 
@@ -290,7 +367,8 @@ class KeyPlayer:
             j = hands.joint(action[1])
             before = hands.target(j)
             hands.drive(j, before + float(action[2]))
-            if op == "jog_keep_heading" and hands.target(j) != before:  # turn back by what the joint moved
+            # turn back by what the joint moved
+            if op == "jog_keep_heading" and hands.target(j) != before:
                 wrist = _WRIST
                 hands.drive(wrist, hands.target(wrist) - (hands.target(j) - before))
         elif op == "target":
@@ -330,7 +408,11 @@ def describe_action(action: list) -> str:
     if op == "diff":
         return f"{joint} target = {value} - {action[3]}"
     if op == "position":
-        return f"set Z to {value:.3f} m" if joint == "z" else f"set {joint} to {math.degrees(value):+g} deg"
+        return (
+            f"set Z to {value:.3f} m"
+            if joint == "z"
+            else f"set {joint} to {math.degrees(value):+g} deg"
+        )
     if op == "add":
         how = "set" if action[3] == "position" else "target"
         step = f"{value * 100:+g} cm" if joint == "z" else f"{math.degrees(value):+.4g} deg"
@@ -348,10 +430,23 @@ def describe_action(action: list) -> str:
 
 
 def help_lines(keymap: dict) -> list[str]:
-    """One line per key: `key  what it does`, grouped by joint (shoulder, elbow, Z, wrist, then the rest)."""
+    """One line per key: `key  what it does`, grouped by joint (shoulder, elbow, Z, wrist, then
+    the rest)."""
+
     def order(key: str) -> tuple:
         first = keymap[key][0]
-        joint = first[1] if first[0] in ("jog", "jog_keep_heading", "target", "position", "add", "diff") else ""
-        return (ROLES.index(joint) if joint in ROLES else len(ROLES), key.lower(), key != key.lower())
+        joint = (
+            first[1]
+            if first[0] in ("jog", "jog_keep_heading", "target", "position", "add", "diff")
+            else ""
+        )
+        return (
+            ROLES.index(joint) if joint in ROLES else len(ROLES),
+            key.lower(),
+            key != key.lower(),
+        )
 
-    return [f"{key:>5}  " + " + ".join(describe_action(a) for a in keymap[key]) for key in sorted(keymap, key=order)]
+    return [
+        f"{key:>5}  " + " + ".join(describe_action(a) for a in keymap[key])
+        for key in sorted(keymap, key=order)
+    ]

@@ -59,17 +59,22 @@ class RobotProfile:
     pad_link: str = ""  # the user URDF's link whose origin is the pad root
     description: str = ""
     extra: dict = field(default_factory=dict, compare=False)
-    # The scene's own joint conventions (docs/seed-conventions.md derives each seed's from its report):
+    # The scene's own joint conventions (docs/seed-conventions.md derives each seed's from its
+    # report):
     shoulder_zero_rad: float = 0.0  # direction of link 1 at shoulder 0, counter-clockwise from +x
-    axis_signs: tuple[int, int, int, int] = (1, 1, 1, 1)  # +1: revolute turns counter-clockwise seen from
-    #                                   above (axis +z); Z lowers the pad with positive values (axis -z)
-    revolute_cyclic: bool = False  # CoppeliaSim's default revolute joint: no limits, turns the short way
+    # +1: revolute turns counter-clockwise seen from
+    axis_signs: tuple[int, int, int, int] = (1, 1, 1, 1)
+    # above (axis +z); Z lowers the pad with positive values (axis -z)
+    # CoppeliaSim's default revolute joint: no limits, turns the short way
+    revolute_cyclic: bool = False
     z_lower_m: float = 0.0  # the Z joint's lower limit; its upper limit is z_lower_m + z_stroke_m
-    z_down_m: float | None = None  # the Z value that puts the pad on a 50 mm box (None: the stroke's low end)
+    # the Z value that puts the pad on a 50 mm box (None: the stroke's low end)
+    z_down_m: float | None = None
     z_up_m: float | None = None  # the Z value the scene travels at (None: the stroke's high end)
 
     def __post_init__(self) -> None:
-        """Fill in z_down_m / z_up_m from the stroke's ends (so a profile's dict always holds numbers)."""
+        """Fill in z_down_m / z_up_m from the stroke's ends (so a profile's dict always holds
+        numbers)."""
         lo, hi = self.z_lower_m, self.z_lower_m + self.z_stroke_m
         lowering = self.axis_signs[2] > 0
         if self.z_down_m is None:
@@ -84,18 +89,27 @@ class RobotProfile:
         l1, l2 = self.link1_m, self.link2_m
         if self.revolute_cyclic:  # the elbow folds all the way
             return abs(l1 - l2), l1 + l2
-        inner = math.sqrt(max(0.0, l1 * l1 + l2 * l2 + 2 * l1 * l2 * math.cos(self.elbow_limit_rad)))
+        inner = math.sqrt(
+            max(0.0, l1 * l1 + l2 * l2 + 2 * l1 * l2 * math.cos(self.elbow_limit_rad))
+        )
         return inner, l1 + l2
 
     def joint_limits(self) -> tuple[tuple[float, float], ...]:
         """(lower, upper) per joint in role order: rad, rad, m, rad. A cyclic revolute joint has no
-        limit; it reports +-2 pi (one turn either way of zero), which its short-way targets never pass."""
+        limit; it reports +-2 pi (one turn either way of zero), which its short-way targets never
+        pass."""
         turn = CYCLIC_RANGE_RAD
         return (
-            (-turn, turn) if self.revolute_cyclic else (-self.shoulder_limit_rad, self.shoulder_limit_rad),
-            (-turn, turn) if self.revolute_cyclic else (-self.elbow_limit_rad, self.elbow_limit_rad),
+            (-turn, turn)
+            if self.revolute_cyclic
+            else (-self.shoulder_limit_rad, self.shoulder_limit_rad),
+            (-turn, turn)
+            if self.revolute_cyclic
+            else (-self.elbow_limit_rad, self.elbow_limit_rad),
             (self.z_lower_m, self.z_lower_m + self.z_stroke_m),
-            (-turn, turn) if self.revolute_cyclic else (-self.wrist_limit_rad, self.wrist_limit_rad),
+            (-turn, turn)
+            if self.revolute_cyclic
+            else (-self.wrist_limit_rad, self.wrist_limit_rad),
         )
 
     def z_down(self) -> float:
@@ -109,13 +123,16 @@ class RobotProfile:
     def joint_index(self, name: str) -> int:
         """Resolve any variant's joint name (with or without a leading '/') to a role index."""
         bare = name.lstrip("/")
-        if bare in self.joint_names:  # the profile's own names first: a user's "joint3" may be its wrist
+        # the profile's own names first: a user's "joint3" may be its wrist
+        if bare in self.joint_names:
             return self.joint_names.index(bare)
         for index, role in enumerate(ROLES):
             if bare in JOINT_ALIASES[role]:
                 return index
         known = ", ".join(self.joint_names)
-        raise UnknownName(f"unknown joint {name!r} for robot {self.name!r}; expected one of {known}")
+        raise UnknownName(
+            f"unknown joint {name!r} for robot {self.name!r}; expected one of {known}"
+        )
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -135,38 +152,71 @@ class RobotProfile:
 
 PROFILES: dict[str, RobotProfile] = {
     "mtb": RobotProfile(
-        name="mtb", link1_m=0.467, link2_m=0.4005,
+        name="mtb",
+        link1_m=0.467,
+        link2_m=0.4005,
         joint_names=("MTB_axis1", "MTB_axis2", "MTB_axis3", "MTB_axis4"),
         suction_signals=(DEFAULT_SUCTION_SIGNAL, "suctionPad"),
         description="CoppeliaSim's MTB (Machine Type B) SCARA",
     ),
-    # Reports 000-002 built their own joints: CoppeliaSim's default revolute joint (cyclic, 360 deg/s).
-    # Their zero directions, turning senses and Z values come from their code (docs/seed-conventions.md).
+    # Reports 000-002 built their own joints: CoppeliaSim's default revolute joint (cyclic, 360
+    # deg/s). Their zero directions, turning senses and Z values come from their code
+    # (docs/seed-conventions.md).
     "seed000": RobotProfile(
-        name="seed000", link1_m=0.8, link2_m=0.8,
+        name="seed000",
+        link1_m=0.8,
+        link2_m=0.8,
         joint_names=("joint1", "joint2", "joint3", "joint4"),
-        description="report 000: 0.8 m / 0.8 m links; shoulder zero along +y; Z 0.06 on the box, -0.06 up",
-        shoulder_zero_rad=math.pi / 2, revolute_cyclic=True, revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S,
-        revolute_max_torque_nm=300.0, tip_z0_m=0.115, z_lower_m=-0.116, z_stroke_m=0.2, z_down_m=0.06, z_up_m=-0.06,
+        description="report 000: 0.8 m / 0.8 m links; shoulder zero along +y; Z 0.06 on the box, "
+        "-0.06 up",
+        shoulder_zero_rad=math.pi / 2,
+        revolute_cyclic=True,
+        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S,
+        revolute_max_torque_nm=300.0,
+        tip_z0_m=0.115,
+        z_lower_m=-0.116,
+        z_stroke_m=0.2,
+        z_down_m=0.06,
+        z_up_m=-0.06,
     ),
     "seed001": RobotProfile(
-        name="seed001", link1_m=0.467, link2_m=0.401,
+        name="seed001",
+        link1_m=0.467,
+        link2_m=0.401,
         joint_names=("Revolute_joint", "Revolute_joint1", "Prismatic_joint", "Revolute_joint0"),
-        description="report 001: MTB-like links, arrow-key control; zero along +y, clockwise; Z -0.055 down, 0 up",
-        shoulder_zero_rad=math.pi / 2, axis_signs=(-1, -1, -1, -1), revolute_cyclic=True,
-        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S, revolute_max_torque_nm=150.0, tip_z0_m=0.11, z_lower_m=-0.055, z_stroke_m=0.055,
+        description="report 001: MTB-like links, arrow-key control; zero along +y, clockwise; Z "
+        "-0.055 down, 0 up",
+        shoulder_zero_rad=math.pi / 2,
+        axis_signs=(-1, -1, -1, -1),
+        revolute_cyclic=True,
+        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S,
+        revolute_max_torque_nm=150.0,
+        tip_z0_m=0.11,
+        z_lower_m=-0.055,
+        z_stroke_m=0.055,
     ),
     "seed002": RobotProfile(
-        name="seed002", link1_m=0.5, link2_m=0.5,
+        name="seed002",
+        link1_m=0.5,
+        link2_m=0.5,
         joint_names=("AB", "BC", "Z", "CD"),
         description="report 002: 0.5 m / 0.5 m links; zero along +y, clockwise; Z -0.09 down, 0 up",
-        shoulder_zero_rad=math.pi / 2, axis_signs=(-1, -1, -1, -1), revolute_cyclic=True,
-        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S, revolute_max_torque_nm=150.0, tip_z0_m=0.145, z_lower_m=-0.09, z_stroke_m=0.09,
+        shoulder_zero_rad=math.pi / 2,
+        axis_signs=(-1, -1, -1, -1),
+        revolute_cyclic=True,
+        revolute_max_velocity_rad_s=COPPELIASIM_REVOLUTE_RAD_S,
+        revolute_max_torque_nm=150.0,
+        tip_z0_m=0.145,
+        z_lower_m=-0.09,
+        z_stroke_m=0.09,
     ),
     "seed003": RobotProfile(
-        name="seed003", link1_m=0.468, link2_m=0.4,
+        name="seed003",
+        link1_m=0.468,
+        link2_m=0.4,
         joint_names=("MTB_axis1", "MTB_axis2", "MTB_axis3", "MTB_axis4"),
         suction_signals=("suctionPad", DEFAULT_SUCTION_SIGNAL),
-        description="report 003: MTB names and conventions (its IK is CoppeliaSim's MTB frame), suction signal 'suctionPad'",
+        description="report 003: MTB names and conventions (its IK is CoppeliaSim's MTB frame), "
+        "suction signal 'suctionPad'",
     ),
 }

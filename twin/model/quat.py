@@ -1,5 +1,5 @@
-"""Quaternion arithmetic on (x, y, z, w): tuples, and numpy columns of them (quat_mul_columns). The one
-place for rotation math, shared by the recorders, the viewer and the remote API."""
+"""Quaternion arithmetic on (x, y, z, w): tuples, and numpy columns of them (quat_mul_columns). The
+one place for rotation math, shared by the recorders, the viewer and the remote API."""
 
 from __future__ import annotations
 
@@ -15,8 +15,12 @@ def quat_from_rpy(roll: float, pitch: float, yaw: float) -> Quat:
     cr, sr = math.cos(roll / 2), math.sin(roll / 2)
     cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy)
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
 
 
 def yaw_quat(yaw_rad: float) -> Quat:
@@ -28,8 +32,12 @@ def quat_mul(a: tuple[float, ...], b: tuple[float, ...]) -> Quat:
     """The Hamilton product a·b (apply b, then a)."""
     ax, ay, az, aw = a
     bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def rotate(q: tuple[float, ...], v: tuple[float, float, float]) -> tuple[float, float, float]:
@@ -42,12 +50,15 @@ def quat_mul_columns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """quat_mul over arrays of quaternions (x, y, z, w), broadcast over leading axes."""
     ax, ay, az, aw = np.moveaxis(np.asarray(a), -1, 0)
     bx, by, bz, bw = np.moveaxis(np.asarray(b), -1, 0)
-    return np.stack([
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    ], axis=-1)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
 
 
 def quat_from_axes(x: tuple[float, ...], y: tuple[float, ...], z: tuple[float, ...]) -> Quat:

@@ -11,7 +11,8 @@ from twin.model.config import TwinConfig
 from twin.model.images import CameraTrack
 from twin.model.types import Command, Event
 
-META_FINALIZED = "twin.finalized"  # the metadata record a cleanly closed file ends with (outcome, error)
+# the metadata record a cleanly closed file ends with (outcome, error)
+META_FINALIZED = "twin.finalized"
 META_RECORDING = "twin.recording"  # the recording's layout: rate_steps, block_frames, ...
 META_MACHINE = "twin.machine"  # where it was made: cpu, blas_core, ...; older files have none
 
@@ -33,8 +34,10 @@ class Recording:
     finalized: bool = False
     urdf: str = ""
     path: str = ""
-    assets: dict[str, bytes] = field(default_factory=dict)  # attachments: robot.urdf and meshes, by name
-    cameras: dict[str, CameraTrack] = field(default_factory=dict)  # each camera's pictures, by camera name
+    # attachments: robot.urdf and meshes, by name
+    assets: dict[str, bytes] = field(default_factory=dict)
+    # each camera's pictures, by camera name
+    cameras: dict[str, CameraTrack] = field(default_factory=dict)
 
     @property
     def outcome(self) -> str:
@@ -49,11 +52,16 @@ class Recording:
         return outcome
 
     def to_arrow(self, table: str = "frames"):
-        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per scalar,
-        units in the names), "events" or "commands"; the columns are described in model.tables."""
+        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per
+        scalar, units in the names), "events" or "commands"; the columns are described in
+        model.tables."""
         from twin.model import tables
 
-        builders = {"frames": tables.frames_table, "events": tables.events_table, "commands": tables.commands_table}
+        builders = {
+            "frames": tables.frames_table,
+            "events": tables.events_table,
+            "commands": tables.commands_table,
+        }
         if table not in builders:
             raise ValueError(f"table {table!r} is unknown; expected one of {', '.join(builders)}")
         return builders[table](self)
@@ -63,7 +71,9 @@ class Recording:
         try:
             import pandas  # noqa: F401 - only to say clearly that it is missing
         except ImportError:
-            raise ImportError("Recording.to_pandas needs the pandas package: pip install pandas") from None
+            raise ImportError(
+                "Recording.to_pandas needs the pandas package: pip install pandas"
+            ) from None
         return self.to_arrow(table).to_pandas()
 
     @property

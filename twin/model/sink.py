@@ -17,9 +17,9 @@ class Sink:
         pass
 
     def on_rows(self, rows, buf) -> None:
-        """Many Frames at once, packed as `rows` (a record.rows.FrameRows) lays them out (the recorder
-        process is fed so):
-        the same as on_frame for each; writers override it to take the rows as columns."""
+        """Many Frames at once, packed as `rows` (a record.rows.FrameRows) lays them out (the
+        recorder process is fed so): the same as on_frame for each; writers override it to take the
+        rows as columns."""
         for i in range(rows.count(buf)):
             self.on_frame(rows.frame(buf, i))
 

@@ -3,18 +3,20 @@ and commands. Column names carry their unit; they come from the one Frame field 
 (model.fields): a field added there fails here at import until it is given a column name.
 
 Frame columns, in field order:
-  step, t_ns                                        int64
-  joint.<role>.position_rad|_m                      float64 (role: shoulder, elbow, z, wrist; z in m)
+  step, t_ns                                      int64
+  joint.<role>.position_rad|_m                    float64 (role: shoulder, elbow, z, wrist; z in m)
   joint.<role>.velocity_rad_s|_m_s, .effort_Nm|_N, .target_rad|_m
-  suction.on                                        bool (the pad switched on)
-  suction.sensed, suction.held                      int32 (object index in scene order, -1 none)
+  suction.on                                      bool (the pad switched on)
+  suction.sensed, suction.held                    int32 (object index in scene order, -1 none)
   hold.force_x_N .. hold.force_z_N, hold.torque_x_Nm .. _z_Nm   float64 (world axes)
   pad.x_m, pad.y_m, pad.z_m, pad.qx, pad.qy, pad.qz, pad.qw     float64 (pad tip, world frame)
-  <object>.x_m .. <object>.qw                       float64 (each scene object by name)
-  suction.command                                   bool: a suction signal was on for the physics step
-                                                    that made this frame (Commands stamped before it)
+  <object>.x_m .. <object>.qw                     float64 (each scene object by name)
+  suction.command                                 bool: a suction signal was on for the physics
+                                                  step that made this frame (Commands stamped
+                                                  before it)
 
-pyarrow is imported when a table is built, not with the module: importing the model needs only numpy.
+pyarrow is imported when a table is built, not with the module: importing the model needs only
+numpy.
 """
 
 from __future__ import annotations
@@ -28,21 +30,32 @@ from twin.model.profiles import ROLES
 
 # The column stem of each Frame field; units and components come from model.fields.
 _STEMS = {
-    "step": "step", "t_ns": "t_ns",
-    "joint_q": "position", "joint_qd": "velocity", "joint_effort": "effort", "joint_target": "target",
-    "suction_on": "suction.on", "sensed_body": "suction.sensed", "held_body": "suction.held",
-    "hold_force_n": "hold.force", "hold_torque_nm": "hold.torque", "pad_pose": "pad", "object_poses": "",
+    "step": "step",
+    "t_ns": "t_ns",
+    "joint_q": "position",
+    "joint_qd": "velocity",
+    "joint_effort": "effort",
+    "joint_target": "target",
+    "suction_on": "suction.on",
+    "sensed_body": "suction.sensed",
+    "held_body": "suction.held",
+    "hold_force_n": "hold.force",
+    "hold_torque_nm": "hold.torque",
+    "pad_pose": "pad",
+    "object_poses": "",
 }
 if tuple(_STEMS) != tuple(f.name for f in FRAME_FIELDS):
     raise ImportError("twin.model.tables: give every model.fields.FRAME_FIELDS entry a column stem")
 _POSE = ("x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
 _XYZ = ("x", "y", "z")
 _PRISMATIC = ROLES.index("z")
-_RESERVED = {"step", "t_ns", "joint", "suction", "hold", "pad"}  # an object so named is `object.<name>`
+# an object so named is `object.<name>`
+_RESERVED = {"step", "t_ns", "joint", "suction", "hold", "pad"}
 
 
 def _unit(field, *, prismatic: bool = False) -> str:
-    """The field's unit as a column suffix: "rad|m" picks by joint type, "N·m" becomes Nm, "/" becomes _."""
+    """The field's unit as a column suffix: "rad|m" picks by joint type, "N·m" becomes Nm, "/"
+    becomes _."""
     unit = field.compared[0].unit.split("|")[1 if prismatic else 0]
     return unit.replace("·", "").replace("/", "_")
 
@@ -60,7 +73,10 @@ def frame_column_names(object_names: list[str]) -> list[str]:
         if f.shape == "frame":
             names.append(stem)
         elif f.shape == "joint":
-            names += [f"joint.{role}.{stem}_{_unit(f, prismatic=j == _PRISMATIC)}" for j, role in enumerate(ROLES)]
+            names += [
+                f"joint.{role}.{stem}_{_unit(f, prismatic=j == _PRISMATIC)}"
+                for j, role in enumerate(ROLES)
+            ]
         elif f.shape == "xyz":
             names += [f"{stem}_{axis}_{_unit(f)}" for axis in _XYZ]
         elif f.shape == "pose":
@@ -71,7 +87,8 @@ def frame_column_names(object_names: list[str]) -> list[str]:
 
 
 def frames_table(rec):
-    """One row per recorded frame of a model.recording.Recording, one column per scalar (see module doc)."""
+    """One row per recorded frame of a model.recording.Recording, one column per scalar (see module
+    doc)."""
     import pyarrow as pa
 
     cols = rec.frames
@@ -83,12 +100,18 @@ def frames_table(rec):
         arrays += [np.ascontiguousarray(flat[:, i]) for i in range(flat.shape[1])]
     names = frame_column_names([o.name for o in rec.config.objects])
     if len(names) != len(arrays):
-        raise ValueError(f"recording {rec.path or '<memory>'}: {len(arrays)} frame columns for {len(names)} names; "
-                         "its frames do not match its configuration's joints and objects")
+        raise ValueError(
+            f"recording {rec.path or '<memory>'}: {len(arrays)} frame columns for "
+            f"{len(names)} names; "
+            "its frames do not match its configuration's joints and objects"
+        )
     arrays.append(suction_command(rec))
     names.append("suction.command")
-    meta = {"twin.robot": rec.config.profile.name, "twin.objects": json.dumps([o.name for o in rec.config.objects]),
-            "twin.rate_steps": str(rec.rate_steps)}
+    meta = {
+        "twin.robot": rec.config.profile.name,
+        "twin.objects": json.dumps([o.name for o in rec.config.objects]),
+        "twin.rate_steps": str(rec.rate_steps),
+    }
     return pa.table(dict(zip(names, arrays, strict=True)), metadata=meta)
 
 
@@ -97,14 +120,16 @@ def events_table(rec):
     import pyarrow as pa
 
     ev = rec.events
-    return pa.table({
-        "step": pa.array([e.step for e in ev], pa.int64()),
-        "t_ns": pa.array([e.t_ns for e in ev], pa.int64()),
-        "kind": pa.array([e.kind for e in ev], pa.string()),
-        "body": pa.array([e.body for e in ev], pa.string()),
-        "message": pa.array([e.message for e in ev], pa.string()),
-        "data_json": pa.array([json.dumps(e.data, sort_keys=True) for e in ev], pa.string()),
-    })
+    return pa.table(
+        {
+            "step": pa.array([e.step for e in ev], pa.int64()),
+            "t_ns": pa.array([e.t_ns for e in ev], pa.int64()),
+            "kind": pa.array([e.kind for e in ev], pa.string()),
+            "body": pa.array([e.body for e in ev], pa.string()),
+            "message": pa.array([e.message for e in ev], pa.string()),
+            "data_json": pa.array([json.dumps(e.data, sort_keys=True) for e in ev], pa.string()),
+        }
+    )
 
 
 def commands_table(rec):
@@ -113,12 +138,14 @@ def commands_table(rec):
 
     cmds = rec.commands
     dt_ns = rec.config.dt_ns
-    return pa.table({
-        "step": pa.array([c.step for c in cmds], pa.int64()),
-        "t_ns": pa.array([c.step * dt_ns for c in cmds], pa.int64()),
-        "kind": pa.array([c.kind for c in cmds], pa.string()),
-        "args_json": pa.array([json.dumps(c.args, sort_keys=True) for c in cmds], pa.string()),
-    })
+    return pa.table(
+        {
+            "step": pa.array([c.step for c in cmds], pa.int64()),
+            "t_ns": pa.array([c.step * dt_ns for c in cmds], pa.int64()),
+            "kind": pa.array([c.kind for c in cmds], pa.string()),
+            "args_json": pa.array([json.dumps(c.args, sort_keys=True) for c in cmds], pa.string()),
+        }
+    )
 
 
 def suction_command(rec) -> np.ndarray:
@@ -139,7 +166,8 @@ def suction_command(rec) -> np.ndarray:
     steps = rec.frames.step
     if not changes_steps:
         return np.zeros(len(steps), dtype=np.bool_)
-    # the last change stamped before each frame's step (commands at s act on the step that makes frame s+1)
+    # the last change stamped before each frame's step (commands at s act on the step that makes
+    # frame s+1)
     at = np.searchsorted(np.asarray(changes_steps, dtype=np.int64), steps, side="left") - 1
     on = np.asarray(changes_on, dtype=np.bool_)
     return np.where(at >= 0, on[np.maximum(at, 0)], False)

@@ -28,8 +28,10 @@ class Frame(NamedTuple):
     suction_on: bool
     sensed_body: int  # index into the scene's objects, NO_BODY when nothing is sensed
     held_body: int  # index into the scene's objects, NO_BODY when nothing is held
-    hold_force_n: tuple[float, float, float]  # the pad's force on the held object, world frame (hanging: +m·g z)
-    hold_torque_nm: tuple[float, float, float]  # the pad's torque on it about its centre of mass, world frame
+    # the pad's force on the held object, world frame (hanging: +m·g z)
+    hold_force_n: tuple[float, float, float]
+    # the pad's torque on it about its centre of mass, world frame
+    hold_torque_nm: tuple[float, float, float]
     pad_pose: Pose  # the pad tip (centre of the cup's face), world frame
     object_poses: tuple[Pose, ...]  # per scene object, in scene order
 

@@ -1,4 +1,5 @@
-"""Recording a run: `open_recorders(...)` gives the sinks (MCAP, optionally Rerun) and ends them cleanly."""
+"""Recording a run: `open_recorders(...)` gives the sinks (MCAP, optionally Rerun) and ends them
+cleanly."""
 
 from __future__ import annotations
 
@@ -14,13 +15,20 @@ from twin.signals import Terminated
 
 
 @contextmanager
-def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | None = None,
-                   rrd_path: str | Path | None = None, rate: int = 1, background: bool = True,
-                   engine: dict[str, str] | None = None) -> Iterator[list]:
-    """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file is
-    finalized with run_outcome ok, or error/interrupted (and the message) when the block raised
-    (interrupted: Ctrl-C, SIGTERM or SIGHUP). Files are written as NAME.partial and renamed into place
-    when finalized; the folders must exist.
+def open_recorders(
+    config: TwinConfig,
+    run: dict,
+    *,
+    mcap_path: str | Path | None = None,
+    rrd_path: str | Path | None = None,
+    rate: int = 1,
+    background: bool = True,
+    engine: dict[str, str] | None = None,
+) -> Iterator[list]:
+    """Yield the sinks to pass to Twin(..., sinks=...). On exit every file is closed; the MCAP file
+    is finalized with run_outcome ok, or error/interrupted (and the message) when the block raised
+    (interrupted: Ctrl-C, SIGTERM or SIGHUP). Files are written as NAME.partial and renamed into
+    place when finalized; the folders must exist.
 
     background: the writers run in a recorder process on the other core (the same files, byte for
     byte, at a fraction of the stepping thread's time); False keeps them in this process.
@@ -34,12 +42,24 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
         if background and (mcap_path is not None or rrd_path is not None):
             from twin.record.process import RecorderProcess
 
-            sinks.append(RecorderProcess(config, run, urdf=urdf, meshes=meshes,
-                                         mcap_path=mcap_path, rrd_path=rrd_path, rate=rate,
-                                         engine=engine))
+            sinks.append(
+                RecorderProcess(
+                    config,
+                    run,
+                    urdf=urdf,
+                    meshes=meshes,
+                    mcap_path=mcap_path,
+                    rrd_path=rrd_path,
+                    rate=rate,
+                    engine=engine,
+                )
+            )
         elif mcap_path is not None:
-            sinks.append(McapRecorder(mcap_path, config, run, urdf=urdf, meshes=meshes,
-                                      rate=rate, engine=engine))
+            sinks.append(
+                McapRecorder(
+                    mcap_path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine
+                )
+            )
         if rrd_path is not None and not background:
             from twin.record.rerun.writer import RerunRecorder
 
@@ -56,7 +76,8 @@ def open_recorders(config: TwinConfig, run: dict, *, mcap_path: str | Path | Non
     except BaseException as err:
         _note(err, close_all(sinks, "error", _error_text(err)))
         raise
-    failure = close_all(sinks, "ok", "")  # a task error the caller suppressed: the MCAP writer says error
+    # a task error the caller suppressed: the MCAP writer says error
+    failure = close_all(sinks, "ok", "")
     if failure is not None:
         raise failure
 

@@ -18,8 +18,8 @@ DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no 
 
 
 def make_default_folder(folder: str | os.PathLike) -> bool:
-    """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so the
-    README's first command works in a fresh clone; any other folder is the user's to create.
+    """Create `runs/` (relative to the working directory) if `folder` is it and it is missing, so
+    the README's first command works in a fresh clone; any other folder is the user's to create.
     True if `folder` exists (now). OutputError if runs/ cannot be made."""
     folder = Path(folder)
     if folder.is_dir() or folder != Path(DEFAULT_FOLDER):
@@ -29,12 +29,15 @@ def make_default_folder(folder: str | os.PathLike) -> bool:
     except FileExistsError:  # a file of that name
         return False
     except OSError as err:
-        raise OutputError(f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}") from err
+        raise OutputError(
+            f"cannot create the folder {DEFAULT_FOLDER!r}: {err.strerror or err}"
+        ) from err
     return True
 
 
 def partial_path(path: str | os.PathLike) -> Path:
-    """Where a recording of `path` is written until it is finalized: `runs/x.mcap` -> `runs/x.mcap.partial`."""
+    """Where a recording of `path` is written until it is finalized: `runs/x.mcap` ->
+    `runs/x.mcap.partial`."""
     p = Path(path)
     return p.with_name(p.name + PARTIAL_SUFFIX)
 
@@ -45,37 +48,64 @@ def final_path(partial: str | os.PathLike) -> Path | None:
     return p.with_name(p.name[: -len(PARTIAL_SUFFIX)]) if p.name.endswith(PARTIAL_SUFFIX) else None
 
 
-def check_output(path: str | os.PathLike, suffix: str, *, inputs: Iterable[str | os.PathLike] = (),
-                 option: str = "output") -> Path:
-    """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder exists
-    (runs/ is made if missing: make_default_folder), and it is none of `inputs` (nor the same file
-    through a link). ConfigError (exit 2) otherwise."""
+def check_output(
+    path: str | os.PathLike,
+    suffix: str,
+    *,
+    inputs: Iterable[str | os.PathLike] = (),
+    option: str = "output",
+) -> Path:
+    """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder
+    exists (runs/ is made if missing: make_default_folder), and it is none of `inputs` (nor the same
+    file through a link). ConfigError (exit 2) otherwise."""
     p = Path(path)
     if p.suffix != suffix:
         raise ConfigError(f"{option} {str(path)!r} should end in {suffix}")
     if p.is_dir():
-        raise ConfigError(f"cannot write {option} {str(path)!r}: it is a folder; expected a {suffix} file path")
+        raise ConfigError(
+            f"cannot write {option} {str(path)!r}: it is a folder; expected a {suffix} file path"
+        )
     folder = p.parent
     if not make_default_folder(folder):
         why = "is not a folder" if folder.exists() else "does not exist"
-        raise ConfigError(f"cannot write {option} {str(path)!r}: folder {str(folder)!r} {why}; create it first")
+        raise ConfigError(
+            f"cannot write {option} {str(path)!r}: folder {str(folder)!r} {why}; create it first"
+        )
     for source in inputs:
         if _same_file(p, Path(source)):
-            link = "" if p.absolute() == Path(source).absolute() else " (the same file under another name)"
-            raise ConfigError(f"{option} {str(path)!r} would overwrite its input {str(source)!r}{link}; "
-                              "expected another path")
+            link = (
+                ""
+                if p.absolute() == Path(source).absolute()
+                else " (the same file under another name)"
+            )
+            raise ConfigError(
+                f"{option} {str(path)!r} would overwrite its input {str(source)!r}{link}; "
+                "expected another path"
+            )
     return p
 
 
-def check_target(path: str | os.PathLike, what: str, expected: str, *, error: type[TwinError] = ConfigError,
-                 folder: bool = False) -> Path:
+def check_target(
+    path: str | os.PathLike,
+    what: str,
+    expected: str,
+    *,
+    error: type[TwinError] = ConfigError,
+    folder: bool = False,
+) -> Path:
     """`path` as a Path a writer may create: the folder it goes in exists, and it is no folder (with
     folder=True: no file). `error` saying which, naming `what` and the `expected` kind of path."""
     p = Path(path)
     if not p.parent.is_dir():
-        raise error(f"cannot write {what} {str(path)!r}: folder {str(p.parent)!r} does not exist; create it first")
+        raise error(
+            f"cannot write {what} {str(path)!r}: folder {str(p.parent)!r} does not "
+            f"exist; create it first"
+        )
     if (p.exists() and not p.is_dir()) if folder else p.is_dir():
-        raise error(f"cannot write {what} {str(path)!r}: it is a {'file' if folder else 'folder'}; expected {expected}")
+        raise error(
+            f"cannot write {what} {str(path)!r}: it is a "
+            f"{'file' if folder else 'folder'}; expected {expected}"
+        )
     return p
 
 

@@ -5,13 +5,13 @@ The stepping thread packs each Frame into a ring of rows in shared memory (twin.
 microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
 events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
 timer (every millisecond while rows come), takes in what was published and says how far it read. The
-twin wakes a recorder through the pipe when it has used half its slack, and waits for it only when it
-has used all of it (the MCAP writer's: 0.4 s of simulated time, which bounds what a kill -9 loses; the
-Rerun writer's: the ring). Files are byte-for-byte what the
-in-process writers make, since the same writer code sees the same stream. If the twin's process dies,
-the recorder sees the pipe close, takes in every row that was published and leaves the MCAP file
-unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it
-then finalizes the files): the recorder ignores them.
+twin wakes a recorder through the pipe when it has used half its slack, and waits for it only when
+it has used all of it (the MCAP writer's: 0.4 s of simulated time, which bounds what a kill -9
+loses; the Rerun writer's: the ring). Files are byte-for-byte what the in-process writers make,
+since the same writer code sees the same stream. If the twin's process dies, the recorder sees the
+pipe close, takes in every row that was published and leaves the MCAP file unfinalized (and
+recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it then
+finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
@@ -33,15 +33,18 @@ from twin.record.ring import FrameRing
 from twin.record.rows import FrameRows
 
 PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames at 240 Hz
-MAX_AHEAD_S = 0.4  # simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
-RING_S = 4096 / 240  # simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
+# simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
+MAX_AHEAD_S = 0.4
+# simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
+RING_S = 4096 / 240
 POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
 IDLE_POLL_S = 0.016
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
 _OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
-_HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}  # item kind -> the sinks' method
+# item kind -> the sinks' method
+_HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}
 
 
 def _frames(config: TwinConfig, seconds: float) -> int:
@@ -53,40 +56,67 @@ class RecorderProcess(Sink):
     the MCAP file, one for the .rrd, both reading the same ring. Apart, a burst of the Rerun writer
     (it sends its columns every 8192 frames) cannot hold the MCAP writer, nor the twin, up."""
 
-    def __init__(self, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path],
-                 mcap_path: str | Path | None, rrd_path: str | Path | None, rate: int,
-                 engine: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        config: TwinConfig,
+        run: dict,
+        *,
+        urdf: str,
+        meshes: list[Path],
+        mcap_path: str | Path | None,
+        rrd_path: str | Path | None,
+        rate: int,
+        engine: dict[str, str] | None = None,
+    ) -> None:
         self._rows = FrameRows(len(config.profile.joint_names), len(config.objects))
         self._publish_every = _frames(config, PUBLISH_S)
         mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
         capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
-        writers = [(w, p, ahead) for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
-                   if p is not None]
+        writers = [
+            (w, p, ahead)
+            for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
+            if p is not None
+        ]
         self._ring = FrameRing(self._rows, capacity, len(writers))
         # what on_frame needs, bound once: it runs every step
-        self._pack, self._row_size, self._memory = self._rows.pack_into, self._rows.size, self._ring.memory
-        self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)  # the ring's first and last rows
+        self._pack, self._row_size, self._memory = (
+            self._rows.pack_into,
+            self._rows.size,
+            self._ring.memory,
+        )
+        # the ring's first and last rows
+        self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
         self._written = 0
         self._next_publish = self._publish_every
         self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
         self._closed = False
-        self.waits = 0  # how often the twin waited for a recorder (tools/bench_record.py reports it)
+        # how often the twin waited for a recorder (tools/bench_record.py reports it)
+        self.waits = 0
         # Load the writers here, once: every forked recorder inherits them instead of importing anew
         # (rerun alone takes ~0.3 s to import).
         import twin.record.mcap.writer
+
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
         self._children: list[_Child] = []
         starting = None
         try:
             for reader, (writer, path, ahead) in enumerate(writers):
-                self._children.append(_Child(writer, reader, ahead, self._children, (
-                    self._ring, config, run, urdf, meshes, path, rate, engine)))
+                self._children.append(
+                    _Child(
+                        writer,
+                        reader,
+                        ahead,
+                        self._children,
+                        (self._ring, config, run, urdf, meshes, path, rate, engine),
+                    )
+                )
             for starting in self._children:  # they start side by side; each says when it is ready
                 starting.expect_ok("recording could not start")
         except BaseException:
-            for child in self._children:  # as one process with both writers did: the others end as error
+            # as one process with both writers did: the others end as error
+            for child in self._children:
                 if child is starting:
                     child.stop()
                     continue
@@ -108,17 +138,24 @@ class RecorderProcess(Sink):
     # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
     # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
     def on_command(self, command: Command) -> None:
-        self._others.append((self._written, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append(
+            (self._written, _COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL))
+        )
 
     def on_event(self, event: Event) -> None:
-        self._others.append((self._written, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append(
+            (self._written, _EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL))
+        )
 
     def on_image(self, image: CameraImage) -> None:
-        self._others.append((self._written, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL)))
+        self._others.append(
+            (self._written, _IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL))
+        )
 
     def _publish(self) -> None:
-        """The others down the pipes, then the rows up to here published; then room for the next ones
-        (the others first: a recorder that sees the rows must find every message that came before them)."""
+        """The others down the pipes, then the rows up to here published; then room for the next
+        ones (the others first: a recorder that sees the rows must find every message that came
+        before them)."""
         self._send_others()
         written = self._written
         reads = self._ring.publish(written)
@@ -163,16 +200,24 @@ class RecorderProcess(Sink):
 
 class _Child:
     """One recorder process, the twin's end of its pipe, and how far ahead of it the twin may go
-    (`ahead` rows: for the MCAP file that bounds what a kill -9 loses; the view gets the whole ring)."""
+    (`ahead` rows: for the MCAP file that bounds what a kill -9 loses; the view gets the whole
+    ring)."""
 
-    def __init__(self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple) -> None:
+    def __init__(
+        self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple
+    ) -> None:
         self.writer = writer
         self.reader = reader
         self.ahead = ahead
         self.wakes = 0  # wake-ups the twin sent it (it falls behind)
         self._nudged_at = -1
-        self.conn, self.process = start_helper(self, _serve, (writer, reader, *args), name=f"twin-recorder-{writer}",
-                                               other_ends=[s.conn for s in siblings])
+        self.conn, self.process = start_helper(
+            self,
+            _serve,
+            (writer, reader, *args),
+            name=f"twin-recorder-{writer}",
+            other_ends=[s.conn for s in siblings],
+        )
 
     def send(self, message: bytes) -> None:
         try:
@@ -202,7 +247,9 @@ class _Child:
         try:
             reply = self.conn.recv_bytes()
         except (EOFError, OSError) as err:
-            raise RecordingError(f"{what}: the recorder process stopped ({self._exit_text()})") from err
+            raise RecordingError(
+                f"{what}: the recorder process stopped ({self._exit_text()})"
+            ) from err
         if reply != b"OK":
             self.process.join(timeout=5)
             raise RecordingError(reply.decode(errors="replace"))
@@ -213,8 +260,10 @@ class _Child:
             try:
                 self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
             except OSError as err:
-                raise RecordingError(f"recording could not be finished: the recorder process stopped "
-                                     f"({self._exit_text()})") from err
+                raise RecordingError(
+                    f"recording could not be finished: the recorder process stopped "
+                    f"({self._exit_text()})"
+                ) from err
             self.expect_ok("recording could not be finished")
         finally:
             self.stop()
@@ -229,23 +278,37 @@ class _Child:
         return "still running" if code is None else f"exit code {code}"
 
 
-def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, run: dict, urdf: str,
-           meshes: list[Path], path: str | Path, rate: int, engine: dict[str, str] | None) -> None:
-    """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes, finish
-    on request.
+def _serve(
+    conn,
+    writer: str,
+    reader: int,
+    ring: FrameRing,
+    config: TwinConfig,
+    run: dict,
+    urdf: str,
+    meshes: list[Path],
+    path: str | Path,
+    rate: int,
+    engine: dict[str, str] | None,
+) -> None:
+    """A recorder process: build its writer ("mcap" or "rrd"), feed it what the twin publishes,
+    finish on request.
 
     A writer that fails stops the recording there (what was written is kept, unfinalized, as after a
     crash); the process goes on reading (so the twin never waits for it) until the close request and
     answers it with the failure, so the twin reports it as one line instead of losing the run's
     remaining output."""
     if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
-        sys.meta_path.insert(0, _NoPandas())  # whether arrays are pandas objects: they never are here
+        # whether arrays are pandas objects: they never are here
+        sys.meta_path.insert(0, _NoPandas())
     from twin.record.mcap.writer import McapRecorder  # already loaded by the parent
 
     sinks = []
     try:
         if writer == "mcap":
-            sinks.append(McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine))
+            sinks.append(
+                McapRecorder(path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine)
+            )
         else:
             from twin.record.rerun.writer import RerunRecorder
 
@@ -260,14 +323,18 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
     while True:
         conn.poll(timeout)  # a message, or the timer
         written = ring.written()
-        end = _take_messages(conn, feed)  # all the twin sent before publishing `written`, and maybe more
+        # all the twin sent before publishing `written`, and maybe more
+        end = _take_messages(conn, feed)
         if end is not None:
-            written = ring.written()  # the twin publishes its last rows before it closes (or has died)
+            # the twin publishes its last rows before it closes (or has died)
+            written = ring.written()
         came = written > feed.read
         feed.take(written, final=end is not None)
         ring.release(reader, feed.read)
         # More rows while it wrote (a block, a burst): at once; rows: the timer; none: a slower one.
-        timeout = 0.0 if ring.written() > feed.read else POLL_S if came else min(2 * timeout, IDLE_POLL_S)
+        timeout = (
+            0.0 if ring.written() > feed.read else POLL_S if came else min(2 * timeout, IDLE_POLL_S)
+        )
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
             if not feed.failure:
                 _abandon(sinks)
@@ -280,7 +347,8 @@ def _serve(conn, writer: str, reader: int, ring: FrameRing, config: TwinConfig, 
 
 def _take_messages(conn, feed: _Feed):
     """Read every message waiting in the pipe: the others go to the feed's queue. Returns None, the
-    close request's (outcome, error), or "died" when the pipe has closed (the twin's process died)."""
+    close request's (outcome, error), or "died" when the pipe has closed (the twin's process
+    died)."""
     while conn.poll(0):
         try:
             message = conn.recv_bytes()
@@ -295,16 +363,19 @@ def _take_messages(conn, feed: _Feed):
 
 
 class _Feed:
-    """Rows from the ring and the others from the pipe, to the writers in the order the twin made them."""
+    """Rows from the ring and the others from the pipe, to the writers in the order the twin made
+    them."""
 
     def __init__(self, ring: FrameRing, sinks: list) -> None:
         self.ring, self.sinks = ring, sinks
         self.read = 0  # rows taken in (or, after a failure, passed over)
-        self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()  # (frames before it, kind, pickle)
+        # (frames before it, kind, pickle)
+        self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
         self.failure = ""
 
     def take(self, written: int, *, final: bool) -> None:
-        """Rows [read, written) and the others that come before row `written` (all of them when final)."""
+        """Rows [read, written) and the others that come before row `written` (all of them when
+        final)."""
         try:
             while self.queue and (final or self.queue[0][0] <= written):
                 before, kind, data = self.queue.popleft()
@@ -315,7 +386,10 @@ class _Feed:
                         getattr(sink, _HANDLERS[kind])(message)
             self._rows(written)
         except Exception as err:  # noqa: BLE001 - e.g. a full disk
-            self.failure = f"recording stopped by a writer error (what came before is kept): {type(err).__name__}: {err}"
+            self.failure = (
+                f"recording stopped by a writer error (what came before is kept): "
+                f"{type(err).__name__}: {err}"
+            )
             _abandon(self.sinks)
         self.read = max(self.read, written)
 
@@ -351,4 +425,3 @@ def _abandon(sinks: list) -> None:
             sink.abandon()
         except Exception:  # noqa: BLE001, S110 - already failing: keep what can be kept
             pass
-

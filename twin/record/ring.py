@@ -26,16 +26,20 @@ class FrameRing:
 
     def __init__(self, rows: FrameRows, capacity: int, readers: int) -> None:
         if capacity < 1 or readers < 1:
-            raise ValueError(f"a ring of {capacity} rows for {readers} readers; expected at least one of each")
+            raise ValueError(
+                f"a ring of {capacity} rows for {readers} readers; expected at least one of each"
+            )
         self.rows = rows
         self.capacity = capacity
         self.readers = readers
         self._header = _COUNTER.size * (1 + readers)  # written, then each reader's read
-        self.memory = mmap.mmap(-1, self._header + capacity * rows.size)  # anonymous, shared with forks
+        # anonymous, shared with forks
+        self.memory = mmap.mmap(-1, self._header + capacity * rows.size)
         self._lock = multiprocessing.get_context("fork").Lock()
 
     def offset(self, frame: int) -> int:
-        """Where the row of frame number `frame` (counted from the run's first) lives in `memory`."""
+        """Where the row of frame number `frame` (counted from the run's first) lives in
+        `memory`."""
         return self._header + (frame % self.capacity) * self.rows.size
 
     # -- the twin's side ------------------------------------------------------------------------
@@ -43,7 +47,10 @@ class FrameRing:
         """Say that rows [0, written) are in the ring; returns each reader's read counter."""
         with self._lock:
             _COUNTER.pack_into(self.memory, 0, written)
-            return [_COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + i))[0] for i in range(self.readers)]
+            return [
+                _COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + i))[0]
+                for i in range(self.readers)
+            ]
 
     def read(self, reader: int) -> int:
         """How many rows reader `reader` has taken in."""
@@ -62,12 +69,14 @@ class FrameRing:
             _COUNTER.pack_into(self.memory, _COUNTER.size * (1 + reader), read)
 
     def runs(self, start: int, end: int) -> list[memoryview]:
-        """Rows [start, end) as views into the ring: one run, or two where they wrap around. Valid until
-        `release` passes them."""
+        """Rows [start, end) as views into the ring: one run, or two where they wrap around. Valid
+        until `release` passes them."""
         view, runs = memoryview(self.memory), []
         while start < end:
-            stop = min(end, start - start % self.capacity + self.capacity)  # the ring's end, or `end`
-            runs.append(view[self.offset(start):self.offset(start) + (stop - start) * self.rows.size])
+            # the ring's end, or `end`
+            stop = min(end, start - start % self.capacity + self.capacity)
+            runs.append(
+                view[self.offset(start) : self.offset(start) + (stop - start) * self.rows.size]
+            )
             start = stop
         return runs
-

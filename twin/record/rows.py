@@ -48,13 +48,19 @@ class FrameRows:
         self.dtype = np.dtype(dtype_fields)  # packed: numpy's offsets are the struct's
         if self.dtype.itemsize != self.size:
             raise ImportError("twin.record.rows: the numpy row and the struct row disagree")
-        # The pack and unpack expressions are written out from the field description once: as fast as
-        # hand-written ones, which a loop over the fields is not (about 2.5 against 1.1 us a frame).
+        # The pack and unpack expressions are written out from the field description once: as fast
+        # as hand-written ones, which a loop over the fields is not (about 2.5 against 1.1 us a
+        # frame).
         scope = {"pack_into": self._struct.pack_into, "unpack": self._struct.unpack_from,
                  "chain": itertools.chain.from_iterable, "Frame": Frame}
-        self.pack_into = eval(f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope)
-        self._unpack = eval(f"lambda buf, offset: (lambda v: Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
-                            scope)
+        self.pack_into = eval(
+            f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope
+        )
+        self._unpack = eval(
+            f"lambda buf, offset: (lambda v: "
+            f"Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
+            scope,
+        )
 
     def pack(self, frame: Frame) -> bytes:
         """One Frame as its row."""
@@ -75,10 +81,14 @@ class FrameRows:
         return np.frombuffer(buf, dtype=self.dtype)
 
     def columns(self, buf, *, copy: bool = True) -> FrameColumns:
-        """A buffer of rows as FrameColumns: each column a contiguous copy, or (copy=False) a strided
-        view into the buffer, for a reader that copies the values out at once."""
+        """A buffer of rows as FrameColumns: each column a contiguous copy, or (copy=False) a
+        strided view into the buffer, for a reader that copies the values out at once."""
         records = self.records(buf)
         if not copy:
             return FrameColumns(**{f.name: records[f.name] for f in FRAME_FIELDS})
-        return FrameColumns(**{f.name: np.ascontiguousarray(records[f.name]).astype(f.dtype, copy=False)
-                               for f in FRAME_FIELDS})
+        return FrameColumns(
+            **{
+                f.name: np.ascontiguousarray(records[f.name]).astype(f.dtype, copy=False)
+                for f in FRAME_FIELDS
+            }
+        )

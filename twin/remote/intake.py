@@ -1,4 +1,5 @@
-"""How much a connection may make `twin serve` hold before it has sent a whole request: one frame's worth.
+"""How much a connection may make `twin serve` hold before it has sent a whole request: one frame's
+worth.
 
 ZMQ hands a message to the server only once every part of it is in, and ZMQ_MAXMSGSIZE bounds each
 part (frame) alone. So a peer sending one multipart message of many large parts, or request after
@@ -12,8 +13,8 @@ plus the handshake's few bytes: a request is one frame, and a REQ client sends t
 its reply), the server shuts the connection down. ZMQ then reads end of file, drops the unfinished
 message and frees it; the peer sees its connection close (there is no reply to give: its message
 never ended). The measure is taken each time data arrives on a connection (edge-triggered epoll, in
-a thread of its own: the server's loop does not wake for it), so what one connection makes the server
-hold stays within about MAX_UNREAD_BYTES.
+a thread of its own: the server's loop does not wake for it), so what one connection makes the
+server hold stays within about MAX_UNREAD_BYTES.
 
 Where TCP_INFO or epoll is missing (not Linux), nothing is measured: each frame is still bounded by
 MAX_FRAME_BYTES, a multipart message is not.
@@ -29,30 +30,34 @@ import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-_BYTES_RECEIVED_AT = 128  # offset of the u64 tcpi_bytes_received in Linux's struct tcp_info (kernel >= 4.1)
+# offset of the u64 tcpi_bytes_received in Linux's struct tcp_info (kernel >= 4.1)
+_BYTES_RECEIVED_AT = 128
 _TCP_INFO_LEN = _BYTES_RECEIVED_AT + 8
 
 
 def wire_bytes(frames: Iterable) -> int:
-    """Bytes these frames took on the wire: each its body and a ZMTP header (2 bytes up to 255, else 9)."""
+    """Bytes these frames took on the wire: each its body and a ZMTP header (2 bytes up to 255, else
+    9)."""
     return sum(len(f) + (2 if len(f) <= 255 else 9) for f in frames)
 
 
 @dataclass(slots=True)
 class _Connection:
-    peer: tuple  # getpeername(): tells this connection from a later one given the same descriptor number
+    # getpeername(): tells this connection from a later one given the same descriptor number
+    peer: tuple
     family: int
     taken: int = 0  # wire bytes of the whole messages the server received from it
     cut: bool = False
 
 
 class Intake:
-    """Unread bytes per connection; over `limit`, the connection is shut down (see the module docstring).
+    """Unread bytes per connection; over `limit`, the connection is shut down (see the module
+    docstring).
 
-    The server reports, in order, each connection ZMQ accepted (its descriptor, from the socket monitor),
-    each one that closed, and each message it received (the descriptor it came over, ZMQ_SRCFD); a thread
-    of ours measures a connection whenever data arrives on it. Its status lines wait in `lines()` for the
-    server's loop to print them (one writer: lines never interleave)."""
+    The server reports, in order, each connection ZMQ accepted (its descriptor, from the socket
+    monitor), each one that closed, and each message it received (the descriptor it came over,
+    ZMQ_SRCFD); a thread of ours measures a connection whenever data arrives on it. Its status lines
+    wait in `lines()` for the server's loop to print them (one writer: lines never interleave)."""
 
     def __init__(self, limit: int) -> None:
         self.limit = limit
@@ -60,11 +65,15 @@ class Intake:
         self._lock = threading.Lock()  # _conns: the server's loop reports, the thread measures
         self._lines: list[str] = []
         self._thread: threading.Thread | None = None
-        self._epoll = select.epoll() if hasattr(select, "epoll") and hasattr(socket, "TCP_INFO") else None
+        self._epoll = (
+            select.epoll() if hasattr(select, "epoll") and hasattr(socket, "TCP_INFO") else None
+        )
         self._unmeasurable_said = self._epoll is None
         if self._epoll is None:
-            self._lines.append("note: this system offers no TCP_INFO/epoll: a multipart message is bounded per "
-                               "part only")
+            self._lines.append(
+                "note: this system offers no TCP_INFO/epoll: a multipart message is bounded per "
+                "part only"
+            )
             return
         self._wake_r, self._wake_w = os.pipe()  # a byte in it ends the thread
         self._epoll.register(self._wake_r, select.EPOLLIN)
@@ -72,7 +81,9 @@ class Intake:
     def start(self) -> None:
         """Measure from now on, in a thread (until close())."""
         if self._epoll is not None and self._thread is None:
-            self._thread = threading.Thread(target=self._watch, name="twin-serve-intake", daemon=True)
+            self._thread = threading.Thread(
+                target=self._watch, name="twin-serve-intake", daemon=True
+            )
             self._thread.start()
 
     def lines(self) -> list[str]:
@@ -92,7 +103,8 @@ class Intake:
                 return  # closed already (its DISCONNECTED follows), or no measure here
             peer, family, _ = probe
             conn = self._conns.get(fd)
-            if conn is None or conn.peer != peer:  # the same connection (reported twice) keeps its count
+            # the same connection (reported twice) keeps its count
+            if conn is None or conn.peer != peer:
                 self._conns[fd] = _Connection(peer, family)
             try:
                 self._epoll.register(fd, select.EPOLLIN | select.EPOLLET)
@@ -143,7 +155,9 @@ class Intake:
                         self._measure(fd)
                 except Exception as err:  # noqa: BLE001 - never end the thread: report it, go on measuring
                     with self._lock:
-                        self._lines.append(f"internal error measuring a connection: {type(err).__name__}: {err}")
+                        self._lines.append(
+                            f"internal error measuring a connection: {type(err).__name__}: {err}"
+                        )
 
     def _measure(self, fd: int) -> None:
         """Shut connection `fd` down if it is over the limit (called holding the lock)."""
@@ -152,9 +166,11 @@ class Intake:
             return
         probe = self._probe(fd, conn.family)
         if probe is None or probe[0] != conn.peer:
-            return  # that connection is gone; the monitor reports it (and any new one on this number)
+            # that connection is gone; the monitor reports it (and any new one on this number)
+            return
         received = probe[2]
-        conn.taken = min(conn.taken, received)  # a message counted against the wrong connection gives no credit
+        # a message counted against the wrong connection gives no credit
+        conn.taken = min(conn.taken, received)
         unread = received - conn.taken
         if unread <= self.limit:
             return
@@ -165,25 +181,33 @@ class Intake:
         try:
             if s.getpeername() != conn.peer:
                 return
-            s.shutdown(socket.SHUT_RDWR)  # ZMQ reads end of file, drops the unfinished message, closes
+            # ZMQ reads end of file, drops the unfinished message, closes
+            s.shutdown(socket.SHUT_RDWR)
         except OSError:
             return
         finally:
             s.detach()  # the descriptor stays ZMQ's
         conn.cut = True
         where = ":".join(str(p) for p in conn.peer[:2])
-        self._lines.append(f"closed the connection from {where}: it sent {unread} bytes without completing a "
-                           f"message, over the limit of {self.limit} (a request is one frame; multipart messages "
-                           "and requests sent before the previous reply are refused once they exceed it)")
+        self._lines.append(
+            f"closed the connection from {where}: it sent {unread} bytes without completing a "
+            f"message, over the limit of {self.limit} (a request is one frame; multipart messages "
+            "and requests sent before the previous reply are refused once they exceed it)"
+        )
 
     def _probe(self, fd: int, family: int) -> tuple[tuple, int, int] | None:
         """(peer address, address family, bytes received) of TCP socket `fd`, or None."""
         try:  # a family given spares two system calls; -1: find out
-            s = socket.socket(family, socket.SOCK_STREAM, 0, fd) if family != -1 else socket.socket(fileno=fd)
+            s = (
+                socket.socket(family, socket.SOCK_STREAM, 0, fd)
+                if family != -1
+                else socket.socket(fileno=fd)
+            )
         except OSError:
             return None  # closed, or not a socket
         try:
-            if s.type != socket.SOCK_STREAM:  # (given a family, the type is ours; then TCP_INFO tells)
+            # (given a family, the type is ours; then TCP_INFO tells)
+            if s.type != socket.SOCK_STREAM:
                 return None
             peer = s.getpeername()
             info = s.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, _TCP_INFO_LEN)
@@ -195,7 +219,9 @@ class Intake:
         if len(info) < _TCP_INFO_LEN:
             if not self._unmeasurable_said:
                 self._unmeasurable_said = True
-                self._lines.append("note: this kernel's TCP_INFO has no tcpi_bytes_received: a multipart message "
-                                   "is bounded per part only")
+                self._lines.append(
+                    "note: this kernel's TCP_INFO has no tcpi_bytes_received: a multipart message "
+                    "is bounded per part only"
+                )
             return None
         return peer, family, struct.unpack_from("=Q", info, _BYTES_RECEIVED_AT)[0]

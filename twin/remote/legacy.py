@@ -1,8 +1,8 @@
 """CoppeliaSim's legacy remote API (`import sim as vrep`, CoppeliaSim <= 4.2), in pure Python.
 
-Same call signatures, return conventions and simx_* constants as the old module, implemented over the
-ZeroMQ remote API (protocol v2) with the official client, so an old program runs against
-`twin serve` after changing only its import line:
+Same call signatures, return conventions and simx_* constants as the old module, implemented over
+the ZeroMQ remote API (protocol v2) with the official client, so an old program runs against `twin
+serve` after changing only its import line:
 
     from twin.remote import legacy as vrep      # or: import twin.remote.legacy as sim
 
@@ -27,7 +27,8 @@ try:
     from coppeliasim_zmqremoteapi_client import RemoteAPIClient
 except ImportError as _err:  # the official client is what speaks the protocol underneath
     raise ImportError(
-        "twin.remote.legacy needs the official client: pip install coppeliasim-zmqremoteapi-client==2.0.4"
+        "twin.remote.legacy needs the official client: pip install "
+        "coppeliasim-zmqremoteapi-client==2.0.4"
     ) from _err
 
 LEGACY_PORT = 19997
@@ -120,9 +121,16 @@ def _endpoint(address: str, port: int) -> tuple[str, int]:
     return host, port
 
 
-def simxStart(connectionAddress: str, connectionPort: int, waitUntilConnected: bool, doNotReconnectOnceDisconnected: bool,
-              timeOutInMs: int, commThreadCycleInMs: int) -> int:
-    """Connect; the client id (>= 0), or -1 when no server answers within timeOutInMs (5000 if <= 0)."""
+def simxStart(
+    connectionAddress: str,
+    connectionPort: int,
+    waitUntilConnected: bool,
+    doNotReconnectOnceDisconnected: bool,
+    timeOutInMs: int,
+    commThreadCycleInMs: int,
+) -> int:
+    """Connect; the client id (>= 0), or -1 when no server answers within timeOutInMs (5000 if <=
+    0)."""
     global _next_id
     host, port = _endpoint(connectionAddress, int(connectionPort))
     timeout_ms = int(timeOutInMs) if timeOutInMs and timeOutInMs > 0 else 5000
@@ -182,11 +190,15 @@ def _get(clientID: int, func: str, operationMode: int, *args: Any) -> tuple[int,
     return _do(clientID, func, *args)
 
 
-def simxSetJointTargetPosition(clientID: int, jointHandle: int, targetPosition: float, operationMode: int) -> int:
+def simxSetJointTargetPosition(
+    clientID: int, jointHandle: int, targetPosition: float, operationMode: int
+) -> int:
     return _set(clientID, "sim.setJointTargetPosition", operationMode, jointHandle, targetPosition)
 
 
-def simxSetJointPosition(clientID: int, jointHandle: int, position: float, operationMode: int) -> int:
+def simxSetJointPosition(
+    clientID: int, jointHandle: int, position: float, operationMode: int
+) -> int:
     return _set(clientID, "sim.setJointPosition", operationMode, jointHandle, position)
 
 
@@ -195,7 +207,9 @@ def simxGetJointPosition(clientID: int, jointHandle: int, operationMode: int) ->
     return rc, (q if rc == simx_return_ok else 0.0)
 
 
-def simxSetIntegerSignal(clientID: int, signalName: str, signalValue: int, operationMode: int) -> int:
+def simxSetIntegerSignal(
+    clientID: int, signalName: str, signalValue: int, operationMode: int
+) -> int:
     return _set(clientID, "sim.setInt32Signal", operationMode, signalName, signalValue)
 
 
@@ -237,15 +251,21 @@ def simxSynchronousTrigger(clientID: int) -> int:
     return _do(clientID, "sim.step")[0]
 
 
-def simxGetObjectPosition(clientID: int, objectHandle: int, relativeToObjectHandle: int,
-                          operationMode: int) -> tuple[int, list[float]]:
-    rc, pos = _get(clientID, "sim.getObjectPosition", operationMode, objectHandle, relativeToObjectHandle)
+def simxGetObjectPosition(
+    clientID: int, objectHandle: int, relativeToObjectHandle: int, operationMode: int
+) -> tuple[int, list[float]]:
+    rc, pos = _get(
+        clientID, "sim.getObjectPosition", operationMode, objectHandle, relativeToObjectHandle
+    )
     return rc, (pos if rc == simx_return_ok else [0.0, 0.0, 0.0])
 
 
-def simxGetObjectOrientation(clientID: int, objectHandle: int, relativeToObjectHandle: int,
-                             operationMode: int) -> tuple[int, list[float]]:
-    rc, euler = _get(clientID, "sim.getObjectOrientation", operationMode, objectHandle, relativeToObjectHandle)
+def simxGetObjectOrientation(
+    clientID: int, objectHandle: int, relativeToObjectHandle: int, operationMode: int
+) -> tuple[int, list[float]]:
+    rc, euler = _get(
+        clientID, "sim.getObjectOrientation", operationMode, objectHandle, relativeToObjectHandle
+    )
     return rc, (euler if rc == simx_return_ok else [0.0, 0.0, 0.0])
 
 

@@ -18,18 +18,22 @@ from twin.errors import exception_text
 from twin.model.json_values import finite_number
 
 PROTOCOL_VERSION = 2
-# Limits on what a client may send (README, "Remote control"); over each, the client gets an error reply.
+# Limits on what a client may send (README, "Remote control"); over each, the client gets an error
+# reply.
 MAX_REQUEST_BYTES = 1 << 20  # a real request is a few hundred bytes; 1 MiB is generous
 MAX_FRAME_BYTES = 256 << 20  # hard cap: ZMQ closes a connection announcing a bigger frame, unread
-MAX_UNREAD_BYTES = MAX_FRAME_BYTES + (64 << 10)  # per connection: sent, not yet a whole message the server
-# took (one frame at the hard cap, its framing and the handshake); above, the connection is closed (intake.py)
+# per connection: sent, not yet a whole message the server
+MAX_UNREAD_BYTES = MAX_FRAME_BYTES + (64 << 10)
+# took (one frame at the hard cap, its framing and the handshake); above, the connection is closed
+# (intake.py)
 MAX_DEPTH = 32  # nested arrays/maps (a request map holding args is 2 deep)
 MAX_ITEMS = 100_000  # CBOR data items in one request (a request of n bytes holds at most n)
 MAX_ARGS = 64
 MAX_NAME_CHARS = 256  # signal names: a name is kept in the scene for the whole run
 MAX_SIGNALS = 1024  # signals set at once in a scene
 MAX_TEXT_CHARS = 4096  # log messages: printed and recorded
-INT64 = (-(1 << 63), (1 << 63) - 1)  # integer arguments (handles, levels, signal values) are at most 64-bit
+# integer arguments (handles, levels, signal values) are at most 64-bit
+INT64 = (-(1 << 63), (1 << 63) - 1)
 BRIEF_CHARS = 60  # how much of a client's string an error message quotes
 
 WAIT_REPLY = cbor2.dumps({"func": "_*wait*_", "args": []})
@@ -51,21 +55,30 @@ class Request:
 def decode(raw: bytes) -> Request:
     """Parse one raw request; raises RequestError naming what is wrong with it.
 
-    Error messages show a client's values in brief (brief_value()), never format them whole: a value can
-    be an integer of a million digits, which repr() refuses.
+    Error messages show a client's values in brief (brief_value()), never format them whole: a value
+    can be an integer of a million digits, which repr() refuses.
     """
     if len(raw) > MAX_REQUEST_BYTES:
-        raise RequestError(f"request of {len(raw)} bytes exceeds the limit of {MAX_REQUEST_BYTES} bytes (1 MiB)")
+        raise RequestError(
+            f"request of {len(raw)} bytes exceeds the limit of {MAX_REQUEST_BYTES} bytes (1 MiB)"
+        )
     if len(raw) > MAX_ITEMS:  # only then can it hold more than MAX_ITEMS items
         _check_item_count(raw)
     try:
-        msg = cbor2.loads(raw, max_depth=MAX_DEPTH, semantic_decoders=_REFUSED_TAGS, tag_hook=_refuse_tag,
-                          strict_hashable_types=True)
+        msg = cbor2.loads(
+            raw,
+            max_depth=MAX_DEPTH,
+            semantic_decoders=_REFUSED_TAGS,
+            tag_hook=_refuse_tag,
+            strict_hashable_types=True,
+        )
     except Exception as err:  # noqa: BLE001 - cbor2 raises CBORDecodeError, ValueError, MemoryError, ...
         refused = _refused_tag(err)
         if refused is not None:
             raise RequestError(f"malformed request: {refused}") from None
-        raise RequestError(f"malformed request: not valid CBOR ({type(err).__name__}: {safe_str(err)})") from None
+        raise RequestError(
+            f"malformed request: not valid CBOR ({type(err).__name__}: {safe_str(err)})"
+        ) from None
     if not isinstance(msg, dict):
         raise RequestError(f"malformed request: expected a CBOR map, got {type(msg).__name__}")
     uuid = msg.get("uuid")
@@ -76,16 +89,23 @@ def decode(raw: bytes) -> Request:
         )
     func = msg.get("func")
     if not isinstance(func, str) or not func:
-        raise RequestError(f"malformed request: 'func' must be a non-empty string, got {brief_value(func)}")
+        raise RequestError(
+            f"malformed request: 'func' must be a non-empty string, got {brief_value(func)}"
+        )
     args = msg.get("args", [])
     if args is None:
         args = []
     if not isinstance(args, list):
-        raise RequestError(f"malformed request to {brief(func)}: 'args' must be an array, got {type(args).__name__}")
+        raise RequestError(
+            f"malformed request to {brief(func)}: 'args' must be an array, got "
+            f"{type(args).__name__}"
+        )
     n = msg.get("argsL", len(args))
     if isinstance(n, bool) or not isinstance(n, int) or not len(args) <= n <= MAX_ARGS:
-        raise RequestError(f"malformed request to {brief(func)}: 'argsL' {brief_value(n)} must be an integer "
-                           f"{len(args)}..{MAX_ARGS}")
+        raise RequestError(
+            f"malformed request to {brief(func)}: 'argsL' {brief_value(n)} must be an integer "
+            f"{len(args)}..{MAX_ARGS}"
+        )
     if n > len(args):
         args = args + [None] * (n - len(args))  # trailing nulls the encoder dropped
     first = None
@@ -93,7 +113,8 @@ def decode(raw: bytes) -> Request:
         ver = msg["ver"]
         if isinstance(ver, bool) or ver != PROTOCOL_VERSION:
             raise VersionMismatch(
-                f"client version does not match: protocol version {brief_value(ver)}; this server speaks version "
+                f"client version does not match: protocol version {brief_value(ver)}; "
+                f"this server speaks version "
                 f"{PROTOCOL_VERSION}"
             )
         first = {"lang": msg.get("lang"), "timeout": msg.get("timeout")}
@@ -101,7 +122,8 @@ def decode(raw: bytes) -> Request:
 
 
 def _refuse_tag(*args: Any) -> Any:
-    """cbor2's hook for tags it does not know (called with the CBORTag; the order differs by version)."""
+    """cbor2's hook for tags it does not know (called with the CBORTag; the order differs by
+    version)."""
     number = next((a.tag for a in args if isinstance(a, cbor2.CBORTag)), "")
     raise RequestError(f"CBOR tag {number} is not accepted (only 2 and 3, big integers)")
 
@@ -109,13 +131,16 @@ def _refuse_tag(*args: Any) -> Any:
 def _refuse_semantic_tag(number: int) -> Callable[..., Any]:
     def refuse(*_: Any) -> Any:
         raise RequestError(f"CBOR tag {number} is not accepted (only 2 and 3, big integers)")
+
     return refuse
 
 
 # cbor2's own tags (dates, decimals, shared references 28/29 whose values repeat without end, string
 # references, regular expressions, sets, ...) are refused; 2 and 3 (big integers) stay.
-_REFUSED_TAGS = {t: _refuse_semantic_tag(t) for t in
-                 (0, 1, 4, 5, 25, 28, 29, 30, 35, 36, 37, 100, 256, 258, 260, 261, 1004, 55799)}
+_REFUSED_TAGS = {
+    t: _refuse_semantic_tag(t)
+    for t in (0, 1, 4, 5, 25, 28, 29, 30, 35, 36, 37, 100, 256, 258, 260, 261, 1004, 55799)
+}
 
 
 def _refused_tag(err: BaseException) -> RequestError | None:
@@ -139,7 +164,7 @@ def _check_item_count(raw: bytes) -> None:
         length = info
         if 24 <= info <= 27:
             width = 1 << (info - 24)
-            length = int.from_bytes(raw[i:i + width], "big")
+            length = int.from_bytes(raw[i : i + width], "big")
             i += width
         if major in (2, 3) and info != 31:
             i += length  # a string's bytes
@@ -271,8 +296,17 @@ def _list_or_none(v: Any) -> list:
     return v
 
 
-KINDS = {"int": _int, "float": _float, "str": _str, "name": _name, "text": _text, "bool": _bool, "any": _any,
-         "map?": _map_or_none, "list?": _list_or_none}
+KINDS = {
+    "int": _int,
+    "float": _float,
+    "str": _str,
+    "name": _name,
+    "text": _text,
+    "bool": _bool,
+    "any": _any,
+    "map?": _map_or_none,
+    "list?": _list_or_none,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -307,6 +341,7 @@ def check_args(signature: Signature, args: list) -> list:
         try:
             out.append(KINDS[p.kind](args[i]))
         except TypeError as err:
-            raise RequestError(f"argument {i + 1} ({p.name}) is {brief_value(args[i])}; expected {err}") from None
+            raise RequestError(
+                f"argument {i + 1} ({p.name}) is {brief_value(args[i])}; expected {err}"
+            ) from None
     return out
-

@@ -12,11 +12,12 @@ once every stepping client has asked for its next step. Wall-clock time never en
 every call that changes it is a Command stamped with the step it took effect at.
 
 Bounds on what peers can make the server hold:
-- Bytes: each frame is at most MAX_FRAME_BYTES (ZMQ closes a connection announcing a bigger one), and
-  each connection may have sent at most MAX_UNREAD_BYTES that the server has not yet taken as whole
-  messages (one frame's worth). Over that, the server shuts the connection down (intake.py): ZMQ hands
-  a multipart message over only once all its parts are in, so this is what stops a peer from making it
-  buffer an endless multipart message (or requests sent without waiting for the replies).
+- Bytes: each frame is at most MAX_FRAME_BYTES (ZMQ closes a connection announcing a bigger one),
+  and each connection may have sent at most MAX_UNREAD_BYTES that the server has not yet taken as
+  whole messages (one frame's worth). Over that, the server shuts the connection down (intake.py):
+  ZMQ hands a multipart message over only once all its parts are in, so this is what stops a peer
+  from making it buffer an endless multipart message (or requests sent without waiting for the
+  replies).
 - Clients: at most MAX_CLIENTS uuids at once, MAX_CLIENTS_PER_CONNECTION per connection. A client is
   forgotten when its connection closes or after its own timeout; and when all MAX_CLIENTS slots are
   taken, a new uuid takes the slot of the least recently seen client that has been silent for at
@@ -64,13 +65,17 @@ from twin.remote.sim_api import SimApi
 
 MODES = ("realtime", "stepped")
 IDLE_POLL_S = 0.1
-MAX_LAG_S = 0.25  # simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
+# simulated seconds owed beyond which the twin stops catching up (slow machine): time slips
+MAX_LAG_S = 0.25
 DEFAULT_CLIENT_TIMEOUT_S = 600.0
 WAIT_BACKOFF_S = 0.0002  # before repeating _*wait*_ to a client whose step has not come yet
-MAX_CLIENTS = 64  # uuids served at once; a client is forgotten when its connection closes or it times out
+# uuids served at once; a client is forgotten when its connection closes or it times out
+MAX_CLIENTS = 64
 MAX_CLIENTS_PER_CONNECTION = 4  # the official client sends one uuid per connection
-EVICT_IDLE_S = 2.0  # all slots taken: a new client takes the slot of the least recently seen one silent this long
-RCVHWM = 4  # requests queued per connection (a REQ client has one at a time): bounds what a peer can park
+# all slots taken: a new client takes the slot of the least recently seen one silent this long
+EVICT_IDLE_S = 2.0
+# requests queued per connection (a REQ client has one at a time): bounds what a peer can park
+RCVHWM = 4
 
 
 @dataclass(slots=True)
@@ -89,20 +94,33 @@ class Server:
 
     What a peer can make it hold is bounded (module docstring): MAX_FRAME_BYTES per frame and
     MAX_UNREAD_BYTES per connection (a connection over it is shut down); MAX_CLIENTS clients,
-    MAX_CLIENTS_PER_CONNECTION per connection, and when all slots are taken a new client takes the slot
-    of the least recently seen one silent for EVICT_IDLE_S or more (step_grace_s if it is stepping).
+    MAX_CLIENTS_PER_CONNECTION per connection, and when all slots are taken a new client takes the
+    slot of the least recently seen one silent for EVICT_IDLE_S or more (step_grace_s if it is
+    stepping).
     """
 
-    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
-                 speed: float = 1.0, step_grace_s: float = DEFAULT_STEP_GRACE_S,
-                 log: Callable[[str], None] = print) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 23000,
+        mode: str = "realtime",
+        speed: float = 1.0,
+        step_grace_s: float = DEFAULT_STEP_GRACE_S,
+        log: Callable[[str], None] = print,
+    ) -> None:
         if mode not in MODES:
-            raise ConfigError(f"server mode {mode!r} is unknown; expected one of {', '.join(MODES)}")
+            raise ConfigError(
+                f"server mode {mode!r} is unknown; expected one of {', '.join(MODES)}"
+            )
         if not (math.isfinite(speed) and 0.01 <= speed <= 1000.0):
             raise ConfigError(f"speed {speed} is out of range; expected 0.01..1000 (1 = real time)")
         low, high = STEP_GRACE_RANGE_S
         if not (math.isfinite(step_grace_s) and low <= step_grace_s <= high):
-            raise ConfigError(f"step grace {step_grace_s} s is out of range; expected {low:g}..{high:g} seconds")
+            raise ConfigError(
+                f"step grace {step_grace_s} s is out of range; expected {low:g}..{high:g} seconds"
+            )
         self.scene = scene
         self.mode = mode
         self.speed = speed
@@ -110,9 +128,11 @@ class Server:
         self.log = log
         self.api = SimApi(scene)
         self.clients: dict[str, _Client] = {}
-        self._peer_fds: dict[bytes, int] = {}  # connections seen: routing id -> file descriptor (ZMQ_SRCFD)
+        # connections seen: routing id -> file descriptor (ZMQ_SRCFD)
+        self._peer_fds: dict[bytes, int] = {}
         self._n_clients = 0
-        self._anchor: tuple[float, int] | None = None  # (wall s, step) where realtime pacing started
+        # (wall s, step) where realtime pacing started
+        self._anchor: tuple[float, int] | None = None
         self._slipping = False  # said once: the machine cannot step at --speed
         self._stop = False
         self._next_reap_s = 0.0
@@ -120,9 +140,11 @@ class Server:
         self.context = zmq.Context()
         self.socket = self.context.socket(zmq.ROUTER)
         self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)  # above: ZMQ closes the connection, unread
+        # above: ZMQ closes the connection, unread
+        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)
         self.socket.setsockopt(zmq.RCVHWM, RCVHWM)
-        self._intake = Intake(MAX_UNREAD_BYTES)  # what a connection sent beyond one frame: shut down
+        # what a connection sent beyond one frame: shut down
+        self._intake = Intake(MAX_UNREAD_BYTES)
         try:
             if port == 0:
                 port = self.socket.bind_to_random_port(f"tcp://{host}")
@@ -159,8 +181,10 @@ class Server:
                 if now >= self._next_reap_s:
                     self._reap(now)
                 continue
-            self._drain_monitor()  # the connections accepted and closed before it, in order: then count it
-            intake.took(_source_fd(parts[-1]), wire_bytes(parts[1:]))  # parts[0], the routing id, is ZMQ's
+            # the connections accepted and closed before it, in order: then count it
+            self._drain_monitor()
+            # parts[0], the routing id, is ZMQ's
+            intake.took(_source_fd(parts[-1]), wire_bytes(parts[1:]))
             now = time.monotonic()
             self._pace(now)
             if now >= self._next_reap_s:
@@ -176,18 +200,25 @@ class Server:
             envelope, body = [peer, b""], parts[2:]
         else:
             cut = next((i for i in range(1, len(parts)) if not parts[i].bytes), 0)
-            envelope, body = [p.bytes for p in parts[:cut + 1]], parts[cut + 1:]
+            envelope, body = [p.bytes for p in parts[: cut + 1]], parts[cut + 1 :]
         if peer not in self._peer_fds:
             self._drain_monitor()  # first: a closed connection's fd may be this new one's
             self._peer_fds[peer] = _source_fd(parts[-1])
         if len(body) != 1:
-            reply = encode_err(f"malformed request: {len(body)} message parts; expected one CBOR map in one part")
+            reply = encode_err(
+                f"malformed request: {len(body)} message parts; expected one CBOR map in one part"
+            )
         else:
             frame = body[0]  # an oversized one is only measured, not copied
             try:
-                reply = self.handle(frame.buffer if len(frame) > MAX_REQUEST_BYTES else frame.bytes, now, peer)
+                reply = self.handle(
+                    frame.buffer if len(frame) > MAX_REQUEST_BYTES else frame.bytes, now, peer
+                )
             except Exception as err:  # noqa: BLE001 - a bug of ours: no request may end the server
-                self.log(f"internal error: {type(err).__name__}: {safe_str(err)}\n{traceback.format_exc()}")
+                self.log(
+                    f"internal error: {type(err).__name__}: {safe_str(err)}\n"
+                    f"{traceback.format_exc()}"
+                )
                 reply = encode_err(f"internal error: {type(err).__name__}")
         return [*envelope, reply]
 
@@ -207,24 +238,38 @@ class Server:
 
     def _poll_timeout_ms(self) -> int:
         if self._anchor is not None:
-            return max(1, min(int(IDLE_POLL_S * 1000), int(self.scene.config.dt_s / self.speed * 1000)))
+            return max(
+                1, min(int(IDLE_POLL_S * 1000), int(self.scene.config.dt_s / self.speed * 1000))
+            )
         return int(IDLE_POLL_S * 1000)
 
     def _pace(self, now: float) -> None:
         """Realtime mode: step the twin up to the wall clock, unless a client is stepping."""
         scene = self.scene
-        if self.mode != "realtime" or not scene.running or any(c.stepping for c in self.clients.values()):
+        if (
+            self.mode != "realtime"
+            or not scene.running
+            or any(c.stepping for c in self.clients.values())
+        ):
             self._anchor = None
             return
         if self._anchor is None:
             self._anchor = (now, scene.twin.step_index)
             return
         wall0, step0 = self._anchor
-        due = step0 + int((now - wall0) * self.speed * 1e9 / scene.config.dt_ns) - scene.twin.step_index
+        due = (
+            step0
+            + int((now - wall0) * self.speed * 1e9 / scene.config.dt_ns)
+            - scene.twin.step_index
+        )
         max_due = max(1, round(MAX_LAG_S * 1e9 / scene.config.dt_ns))
-        if due > max_due:  # the machine cannot step that fast: let simulated time slip, keep serving
+        # the machine cannot step that fast: let simulated time slip, keep serving
+        if due > max_due:
             if not self._slipping:
-                self.log(f"the twin cannot keep up with {self.speed:g}x real time here; simulated time slips")
+                self.log(
+                    f"the twin cannot keep up with {self.speed:g}x real time here; "
+                    f"simulated time slips"
+                )
                 self._slipping = True
             self._anchor = (now, scene.twin.step_index + max_due)
             due = max_due
@@ -232,16 +277,22 @@ class Server:
             try:
                 scene.advance(due)
             except Exception as err:  # noqa: BLE001 - e.g. a recorder failing: end the run, keep serving
-                self.log(f"error while stepping the twin: {type(err).__name__}: {err}; stopping the simulation")
+                self.log(
+                    f"error while stepping the twin: {type(err).__name__}: {err}; "
+                    f"stopping the simulation"
+                )
                 self._anchor = None
                 try:
                     scene.stop()
                 except Exception as stop_err:  # noqa: BLE001
-                    self.log(f"error while stopping the simulation: {type(stop_err).__name__}: {stop_err}")
+                    self.log(
+                        f"error while stopping the simulation: "
+                        f"{type(stop_err).__name__}: {stop_err}"
+                    )
 
     def _drain_monitor(self) -> None:
-        """Connections ZMQ accepted (measured from now on) and closed (a client's program ended or closed
-        its socket: forget its clients), in the order they happened."""
+        """Connections ZMQ accepted (measured from now on) and closed (a client's program ended or
+        closed its socket: forget its clients), in the order they happened."""
         while self._monitor.get(zmq.EVENTS) & zmq.POLLIN:
             event = parse_monitor_message(self._monitor.recv_multipart())
             fd = int(event["value"])
@@ -319,35 +370,60 @@ class Server:
             return encode_err(f"{func}: internal error: {message}")
 
     def _make_room(self, peer: bytes, now: float) -> str:
-        """Why a new uuid cannot be served now, or '' if it can (having forgotten an idle client if need be).
+        """Why a new uuid cannot be served now, or '' if it can (having forgotten an idle client if
+        need be).
 
-        At most MAX_CLIENTS_PER_CONNECTION uuids per connection and MAX_CLIENTS in all. When all slots are
-        taken, the least recently seen client silent for EVICT_IDLE_S or more (step_grace_s if it is in
-        stepping mode, which would hold the others' sim.step() back that long anyway) is forgotten: its
-        slot goes to the new one. If it calls again it is served as a new client."""
-        if peer and sum(1 for c in self.clients.values() if c.peer == peer) >= MAX_CLIENTS_PER_CONNECTION:
-            return (f"too many clients on one connection: {MAX_CLIENTS_PER_CONNECTION} uuids already came over it "
-                    "(the limit)")
+        At most MAX_CLIENTS_PER_CONNECTION uuids per connection and MAX_CLIENTS in all. When all
+        slots are taken, the least recently seen client silent for EVICT_IDLE_S or more
+        (step_grace_s if it is in stepping mode, which would hold the others' sim.step() back that
+        long anyway) is forgotten: its slot goes to the new one. If it calls again it is served as a
+        new client."""
+        if (
+            peer
+            and sum(1 for c in self.clients.values() if c.peer == peer)
+            >= MAX_CLIENTS_PER_CONNECTION
+        ):
+            return (
+                f"too many clients on one connection: {MAX_CLIENTS_PER_CONNECTION} uuids "
+                f"already came over it "
+                "(the limit)"
+            )
         if len(self.clients) < MAX_CLIENTS:
             return ""
-        idle = [(c.last_seen_s, uuid) for uuid, c in self.clients.items()
-                if now - c.last_seen_s >= (self.step_grace_s if c.stepping else EVICT_IDLE_S)]
+        idle = [
+            (c.last_seen_s, uuid)
+            for uuid, c in self.clients.items()
+            if now - c.last_seen_s >= (self.step_grace_s if c.stepping else EVICT_IDLE_S)
+        ]
         if not idle:
-            return (f"too many clients: {MAX_CLIENTS} are connected (the limit), none silent long enough to give "
-                    f"up its slot; when all slots are taken, a new client takes the slot of the least recently seen "
-                    f"one silent for {EVICT_IDLE_S:g} s or more ({self.step_grace_s:g} s, --step-grace, if it is in "
-                    "stepping mode): try again then. A client is also forgotten when its connection closes or "
-                    "after its timeout")
+            return (
+                f"too many clients: {MAX_CLIENTS} are connected (the limit), none silent "
+                f"long enough to give "
+                f"up its slot; when all slots are taken, a new client takes the slot of "
+                f"the least recently seen "
+                f"one silent for {EVICT_IDLE_S:g} s or more ({self.step_grace_s:g} s, "
+                f"--step-grace, if it is in "
+                "stepping mode): try again then. A client is also forgotten when its "
+                "connection closes or "
+                "after its timeout"
+            )
         _, uuid = min(idle)
         c = self.clients.pop(uuid)
-        self.log(f"{c.label} forgotten: silent for {now - c.last_seen_s:.1f} s while all {MAX_CLIENTS} client "
-                 "slots were taken (a new client takes its slot)")
+        self.log(
+            f"{c.label} forgotten: silent for {now - c.last_seen_s:.1f} s while all "
+            f"{MAX_CLIENTS} client "
+            "slots were taken (a new client takes its slot)"
+        )
         return ""
 
     def _connect(self, uuid: str, first: dict | None, now: float) -> _Client:
         self._n_clients += 1
         timeout = (first or {}).get("timeout")
-        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout < 1e7:
+        if (
+            isinstance(timeout, bool)
+            or not isinstance(timeout, (int, float))
+            or not 0 < timeout < 1e7
+        ):
             timeout = DEFAULT_CLIENT_TIMEOUT_S
         c = _Client(label=f"client {self._n_clients}", last_seen_s=now, timeout_s=float(timeout))
         self.clients[uuid] = c
@@ -400,7 +476,10 @@ class Server:
                 if now - c.last_seen_s < self.step_grace_s:
                     return
                 c.stepping = False
-                self.log(f"{c.label} silent for {self.step_grace_s:g} s (--step-grace): no longer holds back stepping")
+                self.log(
+                    f"{c.label} silent for {self.step_grace_s:g} s (--step-grace): no "
+                    f"longer holds back stepping"
+                )
         if asked and self.scene.running:
             self.scene.advance(1)
             for c in self.clients.values():
@@ -431,22 +510,40 @@ _STEP_PARAMS = Signature(Param("wait", "bool", True))
 _MODULE_PARAMS = Signature(Param("name", "str"))
 
 
-def serve(config: TwinConfig, *, host: str = "127.0.0.1", port: int = 23000, mode: str = "realtime",
-          speed: float = 1.0, step_grace_s: float = DEFAULT_STEP_GRACE_S, mcap_path: str | None = None,
-          rrd_path: str | None = None, rate: int = 1, start: bool = False, log: Callable[[str], None] = print) -> int:
+def serve(
+    config: TwinConfig,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 23000,
+    mode: str = "realtime",
+    speed: float = 1.0,
+    step_grace_s: float = DEFAULT_STEP_GRACE_S,
+    mcap_path: str | None = None,
+    rrd_path: str | None = None,
+    rate: int = 1,
+    start: bool = False,
+    log: Callable[[str], None] = print,
+) -> int:
     """Run the server until SIGINT/SIGTERM; each start..stop run is recorded to its own file."""
     scene = Scene(config, mcap_path=mcap_path, rrd_path=rrd_path, rate=rate, mode=mode, log=log)
     try:
-        server = Server(scene, host=host, port=port, mode=mode, speed=speed, step_grace_s=step_grace_s, log=log)
+        server = Server(
+            scene, host=host, port=port, mode=mode, speed=speed, step_grace_s=step_grace_s, log=log
+        )
     except BaseException:
         scene.twin.close()
         raise
-    previous = {s: signal.signal(s, lambda *_: server.stop()) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {
+        s: signal.signal(s, lambda *_: server.stop()) for s in (signal.SIGINT, signal.SIGTERM)
+    }
     try:
         pace = f"{mode}, speed {speed:g}x" if mode == "realtime" else mode
         if host not in ("127.0.0.1", "localhost", "::1"):
             log(f"warning: listening on {host}, reachable from other machines")
-        log(f"twin serve: listening on tcp://{server.host}:{server.port} (robot {config.profile.name}, {pace})")
+        log(
+            f"twin serve: listening on tcp://{server.host}:{server.port} (robot "
+            f"{config.profile.name}, {pace})"
+        )
         if start:
             scene.start()
         server.serve_forever()

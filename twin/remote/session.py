@@ -1,4 +1,5 @@
-"""The scene a remote server exposes: stopped, running or paused, one Twin and one recording per run.
+"""The scene a remote server exposes: stopped, running or paused, one Twin and one recording per
+run.
 
 As in CoppeliaSim, the scene waits stopped until a client starts the simulation; stopping ends the
 run, finalizes its recording and resets the scene (a fresh Twin). Calls made while stopped act on
@@ -52,8 +53,10 @@ class _Relay(Sink):
     def on_command(self, command: Command) -> None:
         if self.holding:
             if self.pending_commands >= MAX_PENDING_COMMANDS:  # raised before the twin applies it
-                raise ConfigError(f"the simulation is stopped and already holds {MAX_PENDING_COMMANDS} commands "
-                                  "for its next run; start it (sim.startSimulation) or stop sending")
+                raise ConfigError(
+                    f"the simulation is stopped and already holds {MAX_PENDING_COMMANDS} commands "
+                    "for its next run; start it (sim.startSimulation) or stop sending"
+                )
             self.pending_commands += 1
         self._pass("on_command", command)
 
@@ -79,10 +82,19 @@ def run_path(base: Path, run_index: int) -> Path:
 
 
 class Scene:
-    """A Twin behind CoppeliaSim's simulation states, recording each start..stop run to its own file."""
+    """A Twin behind CoppeliaSim's simulation states, recording each start..stop run to its own
+    file."""
 
-    def __init__(self, config: TwinConfig, *, mcap_path: str | None = None, rrd_path: str | None = None,
-                 rate: int = 1, mode: str = "realtime", log: Callable[[str], None] = print) -> None:
+    def __init__(
+        self,
+        config: TwinConfig,
+        *,
+        mcap_path: str | None = None,
+        rrd_path: str | None = None,
+        rate: int = 1,
+        mode: str = "realtime",
+        log: Callable[[str], None] = print,
+    ) -> None:
         self.config = config
         self.mcap_path = Path(mcap_path) if mcap_path else None
         self.rrd_path = Path(rrd_path) if rrd_path else None
@@ -118,7 +130,10 @@ class Scene:
         self.relay.attach(sinks)
         self.state = SIMULATION_ADVANCING_RUNNING
         where = f", recording to {', '.join(self._files)}" if self._files else ""
-        self.log(f"simulation started: run {self.run_index}, robot {self.config.profile.name}, {self.mode}{where}")
+        self.log(
+            f"simulation started: run {self.run_index}, robot "
+            f"{self.config.profile.name}, {self.mode}{where}"
+        )
 
     def _open_recorders(self) -> list:
         try:
@@ -130,12 +145,23 @@ class Scene:
         for path in (mcap, rrd):
             if path:
                 Path(path).parent.mkdir(parents=True, exist_ok=True)
-        run = {"source": "remote", "task": "",
-               "params": {"robot": self.config.profile.name, "mode": self.mode, "run": self.run_index}}
+        run = {
+            "source": "remote",
+            "task": "",
+            "params": {"robot": self.config.profile.name, "mode": self.mode, "run": self.run_index},
+        }
         stack = contextlib.ExitStack()
         try:
-            sinks = stack.enter_context(open_recorders(self.config, run, mcap_path=mcap, rrd_path=rrd,
-                                                      rate=self.rate, engine=engine_versions()))
+            sinks = stack.enter_context(
+                open_recorders(
+                    self.config,
+                    run,
+                    mcap_path=mcap,
+                    rrd_path=rrd,
+                    rate=self.rate,
+                    engine=engine_versions(),
+                )
+            )
         except BaseException:
             stack.close()
             self.run_index -= 1
@@ -150,11 +176,12 @@ class Scene:
             self.log(f"simulation paused at t={self.twin.t_s:.3f} s")
 
     def stop(self, *, reset: bool = True) -> None:
-        """End the run: finalize its recording, then reset the scene (which releases what the pad held);
-        reset=False at shutdown, where no next run needs a fresh twin.
+        """End the run: finalize its recording, then reset the scene (which releases what the pad
+        held); reset=False at shutdown, where no next run needs a fresh twin.
 
-        The recording ends with the run's last step as simulated; the release is the reset's doing, not
-        an event of the run, so `twin replay` (which feeds the Commands back) reproduces the file exactly.
+        The recording ends with the run's last step as simulated; the release is the reset's doing,
+        not an event of the run, so `twin replay` (which feeds the Commands back) reproduces the
+        file exactly.
         """
         if self.state == SIMULATION_STOPPED:
             return
@@ -172,7 +199,10 @@ class Scene:
                 self.twin = self._fresh_twin()
         where = f"; recorded {', '.join(self._files)}" if self._files else ""
         holding = f", released {twin.config.objects[held].name}" if held >= 0 else ""
-        self.log(f"simulation stopped: run {self.run_index} lasted {steps} steps ({t_s:.3f} s){holding}{where}")
+        self.log(
+            f"simulation stopped: run {self.run_index} lasted {steps} steps ({t_s:.3f} "
+            f"s){holding}{where}"
+        )
 
     def _close_recorders(self) -> None:
         stack, self._recorders = self._recorders, None

@@ -28,32 +28,64 @@ HANDLE_ROBOT = 10
 HANDLE_JOINT0 = 11  # 11..14: shoulder, elbow, z, wrist
 HANDLE_PAD = 15
 HANDLE_OBJECT0 = 20  # 20, 21, ...: the scene's objects in scene order
-BOX_ALIASES = ("Cuboid", "box", "Box", "cuboid")  # CoppeliaSim's default primitive name, for the first object
+# CoppeliaSim's default primitive name, for the first object
+BOX_ALIASES = ("Cuboid", "box", "Box", "cuboid")
 INT32 = (-(1 << 31), (1 << 31) - 1)
 
 CONSTANTS = {
-    "handle_world": HANDLE_WORLD, "handle_all": -2, "handle_self": -4, "handle_parent": -11,
-    "handle_scene": -12, "handle_app": -13,
-    "simulation_stopped": SIMULATION_STOPPED, "simulation_paused": SIMULATION_PAUSED,
-    "simulation_advancing": 0x10, "simulation_advancing_firstafterstop": 0x10,
-    "simulation_advancing_running": SIMULATION_ADVANCING_RUNNING, "simulation_advancing_lastbeforepause": 0x13,
-    "simulation_advancing_firstafterpause": 0x14, "simulation_advancing_abouttostop": 0x15,
+    "handle_world": HANDLE_WORLD,
+    "handle_all": -2,
+    "handle_self": -4,
+    "handle_parent": -11,
+    "handle_scene": -12,
+    "handle_app": -13,
+    "simulation_stopped": SIMULATION_STOPPED,
+    "simulation_paused": SIMULATION_PAUSED,
+    "simulation_advancing": 0x10,
+    "simulation_advancing_firstafterstop": 0x10,
+    "simulation_advancing_running": SIMULATION_ADVANCING_RUNNING,
+    "simulation_advancing_lastbeforepause": 0x13,
+    "simulation_advancing_firstafterpause": 0x14,
+    "simulation_advancing_abouttostop": 0x15,
     "simulation_advancing_lastbeforestop": 0x16,
-    "verbosity_none": 0, "verbosity_errors": 100, "verbosity_warnings": 200, "verbosity_loadinfos": 300,
-    "verbosity_questions": 350, "verbosity_scripterrors": 400, "verbosity_scriptwarnings": 500,
-    "verbosity_scriptinfos": 600, "verbosity_msgs": 600, "verbosity_infos": 700, "verbosity_debug": 800,
-    "verbosity_trace": 900, "verbosity_default": 300,
-    "object_joint_type": 1, "object_shape_type": 0, "object_dummy_type": 4,
+    "verbosity_none": 0,
+    "verbosity_errors": 100,
+    "verbosity_warnings": 200,
+    "verbosity_loadinfos": 300,
+    "verbosity_questions": 350,
+    "verbosity_scripterrors": 400,
+    "verbosity_scriptwarnings": 500,
+    "verbosity_scriptinfos": 600,
+    "verbosity_msgs": 600,
+    "verbosity_infos": 700,
+    "verbosity_debug": 800,
+    "verbosity_trace": 900,
+    "verbosity_default": 300,
+    "object_joint_type": 1,
+    "object_shape_type": 0,
+    "object_dummy_type": 4,
 }
-VERBOSITY_NAMES = {0: "none", 100: "error", 200: "warning", 300: "loadinfo", 350: "question", 400: "scripterror",
-                   500: "scriptwarning", 600: "info", 700: "info", 800: "debug", 900: "trace"}
+VERBOSITY_NAMES = {
+    0: "none",
+    100: "error",
+    200: "warning",
+    300: "loadinfo",
+    350: "question",
+    400: "scripterror",
+    500: "scriptwarning",
+    600: "info",
+    700: "info",
+    800: "debug",
+    900: "trace",
+}
 
 H = Param("handle", "int")
 REL = Param("relativeToObjectHandle", "int", HANDLE_WORLD)
 
 
 class SimApi:
-    """sim.* calls that act on the scene. The server handles step, setStepping and the protocol's own."""
+    """sim.* calls that act on the scene. The server handles step, setStepping and the protocol's
+    own."""
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
@@ -63,14 +95,21 @@ class SimApi:
         f("getObject", (Param("path", "str"), Param("options", "map?", {})), self.get_object)
         f("getObjectHandle", (Param("name", "str"),), self.get_object_handle)
         f("getObjectAlias", (H, Param("options", "int", -1)), self.get_object_alias)
-        f("setJointTargetPosition", (H, Param("targetPosition", "float"), Param("motionParams", "list?", ())),
-          self.set_joint_target_position)
+        f(
+            "setJointTargetPosition",
+            (H, Param("targetPosition", "float"), Param("motionParams", "list?", ())),
+            self.set_joint_target_position,
+        )
         f("setJointPosition", (H, Param("position", "float")), self.set_joint_position)
         f("getJointPosition", (H,), self.get_joint_position)
         f("getJointTargetPosition", (H,), self.get_joint_target_position)
         f("getJointVelocity", (H,), self.get_joint_velocity)
         for kind in ("Int32", "Integer"):  # CoppeliaSim >= 4.2 names, and the older ones
-            f(f"set{kind}Signal", (Param("signalName", "name"), Param("signalValue", "int")), self.set_int_signal)
+            f(
+                f"set{kind}Signal",
+                (Param("signalName", "name"), Param("signalValue", "int")),
+                self.set_int_signal,
+            )
             f(f"get{kind}Signal", (Param("signalName", "name"),), self.get_int_signal)
             f(f"clear{kind}Signal", (Param("signalName", "name"),), self.clear_int_signal)
         f("startSimulation", (), self.start_simulation)
@@ -80,7 +119,11 @@ class SimApi:
         f("getSimulationTime", (), lambda: self.scene.twin.t_s)
         f("getSimulationTimeStep", (), lambda: self.scene.config.dt_s)
         f("getObjectPosition", (H, REL), lambda h, rel: list(self._relative_pose(h, rel)[:3]))
-        f("getObjectOrientation", (H, REL), lambda h, rel: list(_euler_xyz(self._relative_pose(h, rel)[3:])))
+        f(
+            "getObjectOrientation",
+            (H, REL),
+            lambda h, rel: list(_euler_xyz(self._relative_pose(h, rel)[3:])),
+        )
         f("getObjectQuaternion", (H, REL), lambda h, rel: list(self._relative_pose(h, rel)[3:]))
         f("getObjectPose", (H, REL), lambda h, rel: list(self._relative_pose(h, rel)))
         f("addLog", (Param("verbosityLevel", "int"), Param("logMessage", "text")), self.add_log)
@@ -107,7 +150,9 @@ class SimApi:
             return HANDLE_JOINT0 + twin.profile.joint_index(name)
         except UnknownName:
             known = [ROBOT_ALIASES[0], *twin.profile.joint_names, PAD_ALIASES[0], *names]
-            raise UnknownName(f"object does not exist: {brief_value(path)}; this scene has {', '.join(known)}") from None
+            raise UnknownName(
+                f"object does not exist: {brief_value(path)}; this scene has {', '.join(known)}"
+            ) from None
 
     def name_of(self, handle: int) -> str:
         twin = self.scene.twin
@@ -119,18 +164,26 @@ class SimApi:
             return PAD_ALIASES[0]
         if HANDLE_OBJECT0 <= handle < HANDLE_OBJECT0 + len(twin.config.objects):
             return twin.config.objects[handle - HANDLE_OBJECT0].name
-        raise UnknownName(f"object handle {handle} does not exist; handles are {self._handle_list()}")
+        raise UnknownName(
+            f"object handle {handle} does not exist; handles are {self._handle_list()}"
+        )
 
     def _handle_list(self) -> str:
         n = len(self.scene.twin.config.objects)
         objs = f", objects {HANDLE_OBJECT0}..{HANDLE_OBJECT0 + n - 1}" if n else ""
-        return f"robot {HANDLE_ROBOT}, joints {HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}, pad {HANDLE_PAD}{objs}"
+        return (
+            f"robot {HANDLE_ROBOT}, joints {HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}, pad "
+            f"{HANDLE_PAD}{objs}"
+        )
 
     def _joint(self, handle: int) -> int:
         if HANDLE_JOINT0 <= handle < HANDLE_JOINT0 + 4:
             return handle - HANDLE_JOINT0
         name = self.name_of(handle)  # raises for an unknown handle
-        raise RequestError(f"object {handle} ({name}) is not a joint; joints are {HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}")
+        raise RequestError(
+            f"object {handle} ({name}) is not a joint; joints are "
+            f"{HANDLE_JOINT0}..{HANDLE_JOINT0 + 3}"
+        )
 
     # -- objects -----------------------------------------------------------------------------
     def get_object(self, path: str, options: dict) -> int:
@@ -164,8 +217,14 @@ class SimApi:
         if j == 0:
             return (0.0, 0.0, p.shoulder_height_m, *yaw_quat(q1))
         if j == 1:
-            # math, not numpy: numpy's cos/sin take SIMD paths that differ by CPU, and a client acts on this
-            return (p.link1_m * math.cos(q1), p.link1_m * math.sin(q1), p.elbow_height_m, *yaw_quat(q2))
+            # math, not numpy: numpy's cos/sin take SIMD paths that differ by CPU, and a client acts
+            # on this
+            return (
+                p.link1_m * math.cos(q1),
+                p.link1_m * math.sin(q1),
+                p.elbow_height_m,
+                *yaw_quat(q2),
+            )
         if j == 2:
             return (pad.x_m, pad.y_m, p.elbow_height_m, *yaw_quat(q2))
         return (pad.x_m, pad.y_m, pad.z_m + p.pad_length_m, *yaw_quat(pad.heading_rad))
@@ -184,8 +243,11 @@ class SimApi:
     # -- joints ------------------------------------------------------------------------------
     def set_joint_target_position(self, handle: int, q: float, motion: list) -> None:
         if motion:
-            raise RequestError(f"sim.setJointTargetPosition: motionParams ({brief_value(motion)}) are not supported; "
-                               "pass none (the joint moves at its maximum velocity)")
+            raise RequestError(
+                f"sim.setJointTargetPosition: motionParams ({brief_value(motion)}) are "
+                f"not supported; "
+                "pass none (the joint moves at its maximum velocity)"
+            )
         self.scene.twin.set_joint_target(self._joint(handle), q)
 
     def set_joint_position(self, handle: int, q: float) -> None:
@@ -208,12 +270,17 @@ class SimApi:
     # -- signals -----------------------------------------------------------------------------
     def set_int_signal(self, name: str, value: int) -> None:
         if not INT32[0] <= value <= INT32[1]:
-            raise RequestError(f"signal {brief_value(name)} value {brief_value(value)} is outside the int32 range "
-                               f"{INT32[0]}..{INT32[1]}")
+            raise RequestError(
+                f"signal {brief_value(name)} value {brief_value(value)} is outside the int32 range "
+                f"{INT32[0]}..{INT32[1]}"
+            )
         signals = self.scene.twin.signals
         if name not in signals and len(signals) >= MAX_SIGNALS:
-            raise RequestError(f"signal {brief_value(name)}: the scene already holds {MAX_SIGNALS} signals (the limit); "
-                               "clear one first")
+            raise RequestError(
+                f"signal {brief_value(name)}: the scene already holds {MAX_SIGNALS} "
+                f"signals (the limit); "
+                "clear one first"
+            )
         self.scene.twin.set_signal(name, value)
 
     def get_int_signal(self, name: str) -> int | None:

@@ -56,8 +56,8 @@ def heading(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> float:
 
 
 def elbow_and_wrist_xy(profile: RobotProfile, q) -> tuple[tuple, tuple]:
-    """Where the elbow and the wrist axis stand in the plane (m), for joint values q: a tuple, or numpy
-    columns (q[j] an array over frames), which give arrays."""
+    """Where the elbow and the wrist axis stand in the plane (m), for joint values q: a tuple, or
+    numpy columns (q[j] an array over frames), which give arrays."""
     t1, t12 = link_angles(profile, q)
     ex, ey = profile.link1_m * np.cos(t1), profile.link1_m * np.sin(t1)
     return (ex, ey), (ex + profile.link2_m * np.cos(t12), ey + profile.link2_m * np.sin(t12))
@@ -73,7 +73,8 @@ def fk(profile: RobotProfile, q: tuple[float, ...] | list[float]) -> PadPose:
 def pad_pose_function(profile: RobotProfile):
     """q -> the pad tip's pose (x, y, z, qx, qy, qz, qw) for joint values q, the pad pointing down
     about z by its heading (half of heading()'s angle in the quaternion): the one statement of the
-    arm's forward kinematics, with the profile's numbers bound once; the twin calls it every physics step."""
+    arm's forward kinematics, with the profile's numbers bound once; the twin calls it every physics
+    step."""
     l1, l2, z0 = profile.link1_m, profile.link2_m, profile.tip_z0_m
     zero, (s1, s2, s3, s4) = profile.shoulder_zero_rad, profile.axis_signs
     cos, sin = math.cos, math.sin
@@ -82,8 +83,15 @@ def pad_pose_function(profile: RobotProfile):
         t1 = zero + s1 * q[0]
         t12 = t1 + s2 * q[1]
         half = 0.5 * (t12 + s4 * q[3])
-        return (l1 * cos(t1) + l2 * cos(t12), l1 * sin(t1) + l2 * sin(t12), z0 - s3 * q[2],
-                0.0, 0.0, sin(half), cos(half))
+        return (
+            l1 * cos(t1) + l2 * cos(t12),
+            l1 * sin(t1) + l2 * sin(t12),
+            z0 - s3 * q[2],
+            0.0,
+            0.0,
+            sin(half),
+            cos(half),
+        )
 
     return pad_pose
 
@@ -95,8 +103,8 @@ def ik_branches(profile: RobotProfile, x_m: float, y_m: float) -> list[ArmSoluti
     s1, s2 = profile.axis_signs[0], profile.axis_signs[1]
     r = math.hypot(x_m, y_m)
     c2 = (r * r - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)  # cosine of the elbow's bend
-    # 1 + c2 and 1 - c2 as products, not from c2: near a folded or straight arm c2 rounds to -1 or 1 and
-    # its sine would vanish (a target 2 nm from the base of equal links came back 2 nm off)
+    # 1 + c2 and 1 - c2 as products, not from c2: near a folded or straight arm c2 rounds to -1 or 1
+    # and its sine would vanish (a target 2 nm from the base of equal links came back 2 nm off)
     one_plus = (r - abs(l1 - l2)) * (r + abs(l1 - l2)) / (2.0 * l1 * l2)
     one_minus = (l1 + l2 - r) * (l1 + l2 + r) / (2.0 * l1 * l2)
     if one_minus < -1e-12 or one_plus < -1e-12:
@@ -121,7 +129,8 @@ def _reach_text(profile: RobotProfile) -> str:
         return f"reach annulus {inner:.4f}..{outer:.4f} m (cyclic joints)"
     (s_lo, s_hi), (e_lo, e_hi) = profile.joint_limits()[:2]
     return (
-        f"reach annulus {inner:.4f}..{outer:.4f} m, shoulder {math.degrees(s_lo):.0f}..{math.degrees(s_hi):.0f} deg,"
+        f"reach annulus {inner:.4f}..{outer:.4f} m, shoulder "
+        f"{math.degrees(s_lo):.0f}..{math.degrees(s_hi):.0f} deg,"
         f" elbow {math.degrees(e_lo):.0f}..{math.degrees(e_hi):.0f} deg"
     )
 
@@ -136,9 +145,17 @@ def ik(profile: RobotProfile, x_m: float, y_m: float) -> list[ArmSolution]:
         inner = profile.reach_m[0]
         valid = branches if math.hypot(x_m, y_m) >= inner - 1e-12 else []
     else:
-        valid = [s for s in branches if _within(s.shoulder_rad, limits[0]) and _within(s.elbow_rad, limits[1])]
+        valid = [
+            s
+            for s in branches
+            if _within(s.shoulder_rad, limits[0]) and _within(s.elbow_rad, limits[1])
+        ]
     if not valid:
-        why = "outside the reach annulus" if not branches or profile.revolute_cyclic else "beyond the joint limits"
+        why = (
+            "outside the reach annulus"
+            if not branches or profile.revolute_cyclic
+            else "beyond the joint limits"
+        )
         raise OutOfReach(f"target ({x_m:.4f}, {y_m:.4f}) m is {why}: {_reach_text(profile)}")
     return valid
 
@@ -147,7 +164,10 @@ def choose(solutions: list[ArmSolution], current: tuple[float, float]) -> ArmSol
     """The solution nearest the current (shoulder, elbow); ties go to the +1 branch."""
     return min(
         solutions,
-        key=lambda s: (abs(s.shoulder_rad - current[0]) + abs(s.elbow_rad - current[1]), -s.elbow_sign),
+        key=lambda s: (
+            abs(s.shoulder_rad - current[0]) + abs(s.elbow_rad - current[1]),
+            -s.elbow_sign,
+        ),
     )
 
 
@@ -158,7 +178,8 @@ def wrist_for_heading(profile: RobotProfile, sol: ArmSolution, heading_rad: floa
     lo, hi = profile.joint_limits()[3]
     if not _within(q4, (lo, hi)):
         raise OutOfReach(
-            f"heading {heading_rad:.4f} rad needs wrist {q4:.4f} rad, outside {lo:.4f}..{hi:.4f} rad"
+            f"heading {heading_rad:.4f} rad needs wrist {q4:.4f} rad, outside "
+            f"{lo:.4f}..{hi:.4f} rad"
         )
     return q4
 
@@ -169,5 +190,7 @@ def z_joint_for_height(profile: RobotProfile, z_m: float) -> float:
     lo, hi = profile.joint_limits()[2]
     if not (math.isfinite(q3) and lo - 1e-12 <= q3 <= hi + 1e-12):
         heights = sorted(profile.tip_z0_m - profile.axis_signs[2] * v for v in (lo, hi))
-        raise OutOfReach(f"pad height {z_m} m is outside the Z stroke: {heights[0]:.4f}..{heights[1]:.4f} m")
+        raise OutOfReach(
+            f"pad height {z_m} m is outside the Z stroke: {heights[0]:.4f}..{heights[1]:.4f} m"
+        )
     return min(hi, max(lo, q3))

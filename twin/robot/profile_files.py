@@ -21,7 +21,8 @@ def get_profile(name_or_path: str) -> RobotProfile:
     if path.suffix in (".toml", ".json"):
         return load_profile_file(path)
     raise ConfigError(
-        f"unknown robot {name_or_path!r}; expected one of {', '.join(PROFILES)} or a profile file (.toml/.json)"
+        f"unknown robot {name_or_path!r}; expected one of {', '.join(PROFILES)} or a "
+        f"profile file (.toml/.json)"
     )
 
 
@@ -31,7 +32,9 @@ def _length_m(value: object, path: Path) -> float:
     except (TypeError, ValueError, OverflowError):
         length = math.nan
     if not 0.0 < length < 1.0:
-        raise ConfigError(f"robot profile {str(path)!r}: pad_length_m {value!r} is invalid; expected metres, 0..1")
+        raise ConfigError(
+            f"robot profile {str(path)!r}: pad_length_m {value!r} is invalid; expected metres, 0..1"
+        )
     return length
 
 
@@ -47,24 +50,37 @@ def load_profile_file(path: Path) -> RobotProfile:
     what = f"cannot read robot profile {str(path)!r}"  # malformed or nested too deep: one line
     data = load_toml_text(text, what) if path.suffix == ".toml" else load_json_text(text, what)
     if not isinstance(data, dict):
-        raise ConfigError(f"robot profile {str(path)!r} is not a table; expected urdf, joints, pad_link")
+        raise ConfigError(
+            f"robot profile {str(path)!r} is not a table; expected urdf, joints, pad_link"
+        )
     for key in ("urdf", "joints", "pad_link"):
         if key not in data:
-            raise ConfigError(f"robot profile {str(path)!r} lacks {key!r}; expected urdf, joints, pad_link")
+            raise ConfigError(
+                f"robot profile {str(path)!r} lacks {key!r}; expected urdf, joints, pad_link"
+            )
     for key in ("urdf", "pad_link", "name", "suction_signal"):
         if key in data and not isinstance(data[key], str):
-            raise ConfigError(f"robot profile {str(path)!r}: {key} = {data[key]!r:.60} is invalid; expected a string")
+            raise ConfigError(
+                f"robot profile {str(path)!r}: {key} = {data[key]!r:.60} is invalid; "
+                f"expected a string"
+            )
     joints = data["joints"]
     if not isinstance(joints, dict):
-        raise ConfigError(f"robot profile {str(path)!r}: joints = {joints!r:.60} is invalid; expected a table of "
-                          f"{', '.join(ROLES)} = URDF joint name")
+        raise ConfigError(
+            f"robot profile {str(path)!r}: joints = {joints!r:.60} is invalid; expected a table of "
+            f"{', '.join(ROLES)} = URDF joint name"
+        )
     missing = [r for r in ROLES if r not in joints]
     if missing:
-        raise ConfigError(f"robot profile {str(path)!r}: joints lacks {missing}; expected {list(ROLES)}")
+        raise ConfigError(
+            f"robot profile {str(path)!r}: joints lacks {missing}; expected {list(ROLES)}"
+        )
     bad = next((r for r in ROLES if not isinstance(joints[r], str)), None)
     if bad is not None:
-        raise ConfigError(f"robot profile {str(path)!r}: joints.{bad} = {joints[bad]!r:.60} is invalid; expected "
-                          "a URDF joint name")
+        raise ConfigError(
+            f"robot profile {str(path)!r}: joints.{bad} = {joints[bad]!r:.60} is invalid; expected "
+            "a URDF joint name"
+        )
     urdf_path = (path.parent / data["urdf"]).resolve()
     profile = profile_from_urdf(
         urdf_path,

@@ -24,7 +24,11 @@ BASE_RADIUS_M = 0.09
 
 
 def _box_inertia(m: float, sx: float, sy: float, sz: float) -> tuple[float, float, float]:
-    return (m * (sy * sy + sz * sz) / 12.0, m * (sx * sx + sz * sz) / 12.0, m * (sx * sx + sy * sy) / 12.0)
+    return (
+        m * (sy * sy + sz * sz) / 12.0,
+        m * (sx * sx + sz * sz) / 12.0,
+        m * (sx * sx + sy * sy) / 12.0,
+    )
 
 
 def _cyl_inertia(m: float, r: float, h: float) -> tuple[float, float, float]:
@@ -36,10 +40,17 @@ def _f(v: float) -> str:
     return repr(float(v))
 
 
-def _link(name: str, geom: str, origin_xyz: tuple[float, float, float], mass: float,
-          inertia: tuple[float, float, float], inertial_xyz: tuple[float, float, float], rgba: str,
-          extra_parts: tuple[tuple[str, tuple[float, float, float]], ...] = (),
-          inertial_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> str:
+def _link(
+    name: str,
+    geom: str,
+    origin_xyz: tuple[float, float, float],
+    mass: float,
+    inertia: tuple[float, float, float],
+    inertial_xyz: tuple[float, float, float],
+    rgba: str,
+    extra_parts: tuple[tuple[str, tuple[float, float, float]], ...] = (),
+    inertial_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> str:
     """A link: one or more (geometry, origin) parts drawn and colliding alike; principal moments
     of inertia (ixx, iyy, izz) about the inertial origin, whose axes are turned by inertial_rpy."""
     ix, iy, iz = (_f(v) for v in inertial_xyz)
@@ -48,9 +59,11 @@ def _link(name: str, geom: str, origin_xyz: tuple[float, float, float], mass: fl
     shapes = []
     for part_geom, (ox, oy, oz) in ((geom, origin_xyz), *extra_parts):
         o = f'<origin xyz="{_f(ox)} {_f(oy)} {_f(oz)}"/>'
-        shapes.append(f'    <visual>{o}<geometry>{part_geom}</geometry><material name="{name}_m">'
-                      f'<color rgba="{rgba}"/></material></visual>\n'
-                      f'    <collision>{o}<geometry>{part_geom}</geometry></collision>\n')
+        shapes.append(
+            f'    <visual>{o}<geometry>{part_geom}</geometry><material name="{name}_m">'
+            f'<color rgba="{rgba}"/></material></visual>\n'
+            f"    <collision>{o}<geometry>{part_geom}</geometry></collision>\n"
+        )
     return f"""  <link name="{name}">
     <inertial><origin xyz="{ix} {iy} {iz}" rpy="{rr} {rp} {ry}"/><mass value="{_f(mass)}"/>
       <inertia ixx="{xx}" ixy="0" ixz="0" iyy="{yy}" iyz="0" izz="{zz}"/></inertial>
@@ -58,12 +71,15 @@ def _link(name: str, geom: str, origin_xyz: tuple[float, float, float], mass: fl
 """
 
 
-def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, float, float]]]
-              ) -> tuple[float, tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]:
+def _combined(
+    parts: list[tuple[float, tuple[float, float, float], tuple[float, float, float]]],
+) -> tuple[
+    float, tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
+]:
     """Mass, centre of mass, principal moments and the rpy of the principal axes of rigid parts
-    given as (mass, centre, principal moments about that centre, axes along the link frame's).
-    Plain float arithmetic and Jacobi rotations, no BLAS or LAPACK (whose kernel numpy picks by CPU),
-    and moments and angles rounded to URDF_DIGITS: every x86-64 CPU writes the same URDF."""
+    given as (mass, centre, principal moments about that centre, axes along the link frame's). Plain
+    float arithmetic and Jacobi rotations, no BLAS or LAPACK (whose kernel numpy picks by CPU), and
+    moments and angles rounded to URDF_DIGITS: every x86-64 CPU writes the same URDF."""
     mass = sum(m for m, _c, _i in parts)
     com = [sum(m * c[k] for m, c, _i in parts) / mass for k in range(3)]
     tensor = [[0.0] * 3 for _ in range(3)]
@@ -75,7 +91,8 @@ def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, 
             for j in range(3):
                 tensor[i][j] -= m * d[i] * d[j]
     values, axes = _jacobi_eigen(tensor)
-    order = [max(range(3), key=lambda j, k=k: abs(axes[k][j])) for k in range(3)]  # keep each axis near the link's own
+    # keep each axis near the link's own
+    order = [max(range(3), key=lambda j, k=k: abs(axes[k][j])) for k in range(3)]
     values = [values[j] for j in order]
     axes = [[axes[i][j] for j in order] for i in range(3)]
     for j in range(3):
@@ -85,11 +102,17 @@ def _combined(parts: list[tuple[float, tuple[float, float, float], tuple[float, 
     roll = math.atan2(axes[2][1], axes[2][2])
     pitch = math.atan2(-axes[2][0], math.hypot(axes[0][0], axes[1][0]))
     yaw = math.atan2(axes[1][0], axes[0][0])
-    return (mass, (com[0], com[1], com[2]), tuple(_rounded(v) for v in values),  # type: ignore[return-value]
-            tuple(_rounded(a) for a in (roll, pitch, yaw)))  # type: ignore[return-value]
+    return (
+        mass,
+        (com[0], com[1], com[2]),
+        tuple(_rounded(v) for v in values),  # type: ignore[return-value]
+        tuple(_rounded(a) for a in (roll, pitch, yaw)),
+    )  # type: ignore[return-value]
 
 
-URDF_DIGITS = 12  # significant digits of computed inertias and inertial angles: far above the last bits a libm may change
+# significant digits of computed inertias and inertial angles: far above the last bits a libm may
+# change
+URDF_DIGITS = 12
 
 
 def _rounded(x: float) -> float:
@@ -126,14 +149,26 @@ def _jacobi_eigen(a: list[list[float]]) -> tuple[list[float], list[list[float]]]
     return [a[0][0], a[1][1], a[2][2]], v
 
 
-def _joint(name: str, kind: str, parent: str, child: str, xyz: tuple[float, float, float], axis: str,
-           lower: float, upper: float, effort: float, velocity: float, yaw_rad: float = 0.0) -> str:
+def _joint(
+    name: str,
+    kind: str,
+    parent: str,
+    child: str,
+    xyz: tuple[float, float, float],
+    axis: str,
+    lower: float,
+    upper: float,
+    effort: float,
+    velocity: float,
+    yaw_rad: float = 0.0,
+) -> str:
     """A joint; a "continuous" one (cyclic) has no position limits, only effort and velocity."""
     x, y, z = (_f(v) for v in xyz)
     rpy = f' rpy="0 0 {_f(yaw_rad)}"' if yaw_rad else ""
     bounds = "" if kind == "continuous" else f'lower="{_f(lower)}" upper="{_f(upper)}" '
     return f"""  <joint name="{name}" type="{kind}">
-    <parent link="{parent}"/><child link="{child}"/><origin xyz="{x} {y} {z}"{rpy}/><axis xyz="{axis}"/>
+    <parent link="{parent}"/><child link="{child}"/>\
+<origin xyz="{x} {y} {z}"{rpy}/><axis xyz="{axis}"/>
     <limit {bounds}effort="{_f(effort)}" velocity="{_f(velocity)}"/>
   </joint>
 """
@@ -161,49 +196,124 @@ def urdf_from_profile(profile: RobotProfile) -> str:
     limits = p.joint_limits()
     n1, n2, n3, n4 = p.joint_names
     m_base = 8.0
-    m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25  # hollow section: 25 % fill
+    # hollow section: 25 % fill
+    m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25
     m2 = ALUMINIUM_KG_M3 * (l2 + LINK_WIDTH_M) * LINK_WIDTH_M * h2 * 0.25
     hub_r = LINK_WIDTH_M / 2
     m_hub = ALUMINIUM_KG_M3 * math.pi * hub_r**2 * LINK2_RISE_M * 0.25
     arm2_centre = (l2 / 2, 0.0, LINK2_RISE_M + h2 / 2)
     hub_centre = (0.0, 0.0, LINK2_RISE_M / 2)
-    link2_mass, link2_com, link2_inertia, link2_rpy = _combined([
-        (m2, arm2_centre, _box_inertia(m2, l2 + LINK_WIDTH_M, LINK_WIDTH_M, h2)),
-        (m_hub, hub_centre, _cyl_inertia(m_hub, hub_r, LINK2_RISE_M)),
-    ])
+    link2_mass, link2_com, link2_inertia, link2_rpy = _combined(
+        [
+            (m2, arm2_centre, _box_inertia(m2, l2 + LINK_WIDTH_M, LINK_WIDTH_M, h2)),
+            (m_hub, hub_centre, _cyl_inertia(m_hub, hub_r, LINK2_RISE_M)),
+        ]
+    )
     m3 = ALUMINIUM_KG_M3 * math.pi * QUILL_RADIUS_M**2 * QUILL_LENGTH_M
     pad_offset = pad_root_height_m(p) - p.elbow_height_m  # axis4 above the Z joint's frame
     pad_h = p.pad_length_m
     pad_inertia = _cyl_inertia(PAD_MASS_KG, PAD_RADIUS_M, pad_h)
     parts = [
         f'<?xml version="1.0"?>\n<robot name="{p.name}">\n',
-        _link("MTB_base", f'<cylinder radius="{_f(BASE_RADIUS_M)}" length="{_f(p.shoulder_height_m)}"/>',
-              (0.0, 0.0, p.shoulder_height_m / 2), m_base, _cyl_inertia(m_base, BASE_RADIUS_M, p.shoulder_height_m),
-              (0.0, 0.0, p.shoulder_height_m / 2), "0.3 0.3 0.35 1"),
-        _joint(n1, revolute, "MTB_base", "MTB_link1", (0.0, 0.0, p.shoulder_height_m), _axis(s1),
-               *limits[0], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s, p.shoulder_zero_rad),
-        _link("MTB_link1", f'<box size="{_f(l1 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h1)}"/>',
-              (l1 / 2, 0.0, h1 / 2), m1, _box_inertia(m1, l1 + LINK_WIDTH_M, LINK_WIDTH_M, h1),
-              (l1 / 2, 0.0, h1 / 2), "0.9 0.5 0.1 1"),
-        _joint(n2, revolute, "MTB_link1", "MTB_link2", (l1, 0.0, h1), _axis(s2),
-               *limits[1], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
-        _link("MTB_link2", f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
-              arm2_centre, link2_mass, link2_inertia, link2_com, "0.9 0.6 0.2 1",
-              extra_parts=((f'<cylinder radius="{_f(hub_r)}" length="{_f(LINK2_RISE_M)}"/>', hub_centre),),
-              inertial_rpy=link2_rpy),
-        _joint(n3, "prismatic", "MTB_link2", "MTB_link3", (l2, 0.0, 0.0), _axis(-s3),
-               *limits[2], p.prismatic_max_force_n, p.prismatic_max_velocity_m_s),
-        _link("MTB_link3", f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',
-              (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2), m3, _cyl_inertia(m3, QUILL_RADIUS_M, QUILL_LENGTH_M),
-              (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2), "0.7 0.7 0.75 1"),
-        _joint(n4, revolute, "MTB_link3", "suctionPad", (0.0, 0.0, pad_offset), _axis(s4),
-               *limits[3], p.revolute_max_torque_nm, p.revolute_max_velocity_rad_s),
+        _link(
+            "MTB_base",
+            f'<cylinder radius="{_f(BASE_RADIUS_M)}" length="{_f(p.shoulder_height_m)}"/>',
+            (0.0, 0.0, p.shoulder_height_m / 2),
+            m_base,
+            _cyl_inertia(m_base, BASE_RADIUS_M, p.shoulder_height_m),
+            (0.0, 0.0, p.shoulder_height_m / 2),
+            "0.3 0.3 0.35 1",
+        ),
+        _joint(
+            n1,
+            revolute,
+            "MTB_base",
+            "MTB_link1",
+            (0.0, 0.0, p.shoulder_height_m),
+            _axis(s1),
+            *limits[0],
+            p.revolute_max_torque_nm,
+            p.revolute_max_velocity_rad_s,
+            p.shoulder_zero_rad,
+        ),
+        _link(
+            "MTB_link1",
+            f'<box size="{_f(l1 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h1)}"/>',
+            (l1 / 2, 0.0, h1 / 2),
+            m1,
+            _box_inertia(m1, l1 + LINK_WIDTH_M, LINK_WIDTH_M, h1),
+            (l1 / 2, 0.0, h1 / 2),
+            "0.9 0.5 0.1 1",
+        ),
+        _joint(
+            n2,
+            revolute,
+            "MTB_link1",
+            "MTB_link2",
+            (l1, 0.0, h1),
+            _axis(s2),
+            *limits[1],
+            p.revolute_max_torque_nm,
+            p.revolute_max_velocity_rad_s,
+        ),
+        _link(
+            "MTB_link2",
+            f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
+            arm2_centre,
+            link2_mass,
+            link2_inertia,
+            link2_com,
+            "0.9 0.6 0.2 1",
+            extra_parts=(
+                (f'<cylinder radius="{_f(hub_r)}" length="{_f(LINK2_RISE_M)}"/>', hub_centre),
+            ),
+            inertial_rpy=link2_rpy,
+        ),
+        _joint(
+            n3,
+            "prismatic",
+            "MTB_link2",
+            "MTB_link3",
+            (l2, 0.0, 0.0),
+            _axis(-s3),
+            *limits[2],
+            p.prismatic_max_force_n,
+            p.prismatic_max_velocity_m_s,
+        ),
+        _link(
+            "MTB_link3",
+            f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',
+            (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2),
+            m3,
+            _cyl_inertia(m3, QUILL_RADIUS_M, QUILL_LENGTH_M),
+            (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2),
+            "0.7 0.7 0.75 1",
+        ),
+        _joint(
+            n4,
+            revolute,
+            "MTB_link3",
+            "suctionPad",
+            (0.0, 0.0, pad_offset),
+            _axis(s4),
+            *limits[3],
+            p.revolute_max_torque_nm,
+            p.revolute_max_velocity_rad_s,
+        ),
         # The pad's inertial frame sits at its root so a held object's constraint frame is simple.
-        _link("suctionPad", f'<cylinder radius="{_f(PAD_RADIUS_M)}" length="{_f(pad_h)}"/>',
-              (0.0, 0.0, -pad_h / 2), PAD_MASS_KG,
-              (pad_inertia[0] + PAD_MASS_KG * (pad_h / 2) ** 2, pad_inertia[1] + PAD_MASS_KG * (pad_h / 2) ** 2,
-               pad_inertia[2]),
-              (0.0, 0.0, 0.0), "0.1 0.1 0.1 1"),
+        _link(
+            "suctionPad",
+            f'<cylinder radius="{_f(PAD_RADIUS_M)}" length="{_f(pad_h)}"/>',
+            (0.0, 0.0, -pad_h / 2),
+            PAD_MASS_KG,
+            (
+                pad_inertia[0] + PAD_MASS_KG * (pad_h / 2) ** 2,
+                pad_inertia[1] + PAD_MASS_KG * (pad_h / 2) ** 2,
+                pad_inertia[2],
+            ),
+            (0.0, 0.0, 0.0),
+            "0.1 0.1 0.1 1",
+        ),
         "</robot>\n",
     ]
     return "".join(parts)
@@ -220,7 +330,8 @@ def urdf_text(profile: RobotProfile) -> str:
 
 
 def mesh_paths(profile: RobotProfile) -> list[Path]:
-    """The mesh files a user URDF references (resolved next to the URDF), sorted; [] for built-ins."""
+    """The mesh files a user URDF references (resolved next to the URDF), sorted; [] for
+    built-ins."""
     if not profile.urdf_path:
         return []
     base = Path(profile.urdf_path).parent
@@ -229,8 +340,11 @@ def mesh_paths(profile: RobotProfile) -> list[Path]:
     return sorted((base / n.removeprefix("file://")).resolve() for n in names if n)
 
 
-def vector3(elem: ET.Element | None, attr: str = "xyz",
-            default: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[float, float, float]:
+def vector3(
+    elem: ET.Element | None,
+    attr: str = "xyz",
+    default: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> tuple[float, float, float]:
     """A URDF element's three-number attribute (xyz, rpy); the default when the element or attribute
     is absent; ConfigError when it is not three numbers."""
     if elem is None or elem.get(attr) is None:
@@ -253,7 +367,8 @@ class UrdfJoint:
     transforms (one value at a time) and the Rerun drawing (many at once) both turn into poses.
 
     The child frame sits at `xyz`, rotated by `rpy`, from the parent's; a revolute or continuous
-    joint then turns it about `axis` (a unit vector in the joint frame), a prismatic one slides it."""
+    joint then turns it about `axis` (a unit vector in the joint frame), a prismatic one slides
+    it."""
 
     name: str
     kind: str  # revolute | continuous | prismatic | fixed | ...
@@ -278,7 +393,8 @@ def parse_urdf(urdf: str) -> ET.Element:
 
 def urdf_joints(urdf: str | ET.Element) -> list[UrdfJoint]:
     """Every joint of a URDF (its text, or parse_urdf's root of it), in document order; ConfigError
-    when it does not parse or a joint lacks its parent or child, or a moving joint has no direction."""
+    when it does not parse or a joint lacks its parent or child, or a moving joint has no
+    direction."""
     root = parse_urdf(urdf) if isinstance(urdf, str) else urdf
     joints = []
     for elem in root.iter("joint"):
@@ -291,14 +407,26 @@ def urdf_joints(urdf: str | ET.Element) -> list[UrdfJoint]:
         norm = math.sqrt(sum(a * a for a in axis))
         kind = elem.get("type", "fixed")
         if kind in MOVING_TYPES and not norm > 0.0:
-            raise ConfigError(f"URDF joint {name!r} has a zero axis; expected a direction like '0 0 1'")
-        joints.append(UrdfJoint(name, kind, parent.get("link"), child.get("link"), vector3(origin, "xyz"),
-                                vector3(origin, "rpy"), tuple(a / (norm or 1.0) for a in axis)))
+            raise ConfigError(
+                f"URDF joint {name!r} has a zero axis; expected a direction like '0 0 1'"
+            )
+        joints.append(
+            UrdfJoint(
+                name,
+                kind,
+                parent.get("link"),
+                child.get("link"),
+                vector3(origin, "xyz"),
+                vector3(origin, "rpy"),
+                tuple(a / (norm or 1.0) for a in axis),
+            )
+        )
     return joints
 
 
-def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...], pad_link: str,
-                      pad_length_m: float) -> RobotProfile:
+def profile_from_urdf(
+    urdf_path: Path, *, name: str, joint_names: tuple[str, ...], pad_link: str, pad_length_m: float
+) -> RobotProfile:
     """Derive a SCARA profile from a user URDF: link lengths and heights from joint origins
     (translations only, vertical joint axes), limits from the joints' <limit> tags."""
     if not urdf_path.is_file():
@@ -308,7 +436,9 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
     except ET.ParseError as err:
         raise ConfigError(f"URDF {str(urdf_path)!r} is not valid XML: {err}") from err
     joints = {j.get("name"): j for j in root.findall("joint")}
-    by_child = {j.find("child").get("link"): j for j in root.findall("joint") if j.find("child") is not None}
+    by_child = {
+        j.find("child").get("link"): j for j in root.findall("joint") if j.find("child") is not None
+    }
 
     def world_origin(link: str) -> tuple[float, float, float]:
         x = y = z = 0.0
@@ -316,7 +446,9 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
             j = by_child[link]
             origin = j.find("origin")
             if origin is not None and any(abs(v) > 1e-12 for v in vector3(origin, "rpy")):
-                raise ConfigError(f"URDF joint {j.get('name')!r} has a rotated origin; expected rpy 0 0 0")
+                raise ConfigError(
+                    f"URDF joint {j.get('name')!r} has a rotated origin; expected rpy 0 0 0"
+                )
             dx, dy, dz = vector3(origin)
             x, y, z = x + dx, y + dy, z + dz
             link = j.find("parent").get("link")
@@ -324,12 +456,16 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
 
     missing = [n for n in joint_names if n not in joints]
     if missing:
-        raise ConfigError(f"URDF {str(urdf_path)!r} has no joint named {missing[0]!r}; it has {sorted(joints)}")
+        raise ConfigError(
+            f"URDF {str(urdf_path)!r} has no joint named {missing[0]!r}; it has {sorted(joints)}"
+        )
     if pad_link not in {lk.get("name") for lk in root.findall("link")}:
         raise ConfigError(f"URDF {str(urdf_path)!r} has no link named {pad_link!r}")
     shoulder, elbow, zj, _wrist = (joints[n] for n in joint_names)
     if vector3(zj.find("axis")) != (0.0, 0.0, -1.0):
-        raise ConfigError(f"URDF joint {zj.get('name')!r}: expected axis '0 0 -1' (positive lowers the pad)")
+        raise ConfigError(
+            f"URDF joint {zj.get('name')!r}: expected axis '0 0 -1' (positive lowers the pad)"
+        )
     s_world = world_origin(shoulder.find("child").get("link"))
     e_world = world_origin(elbow.find("child").get("link"))
     pad_world = world_origin(pad_link)
@@ -339,9 +475,14 @@ def profile_from_urdf(urdf_path: Path, *, name: str, joint_names: tuple[str, ...
         if lim is None:
             raise ConfigError(f"URDF joint {j.get('name')!r} has no <limit>")
         try:
-            return tuple(float(lim.get(k, d)) for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1)))
+            return tuple(
+                float(lim.get(k, d))
+                for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1))
+            )
         except ValueError as err:
-            raise ConfigError(f"URDF joint {j.get('name')!r} <limit> has a value that is not a number: {err}") from err
+            raise ConfigError(
+                f"URDF joint {j.get('name')!r} <limit> has a value that is not a number: {err}"
+            ) from err
 
     s_lim, e_lim, z_lim, w_lim = (limit(j) for j in (shoulder, elbow, zj, _wrist))
     return RobotProfile(

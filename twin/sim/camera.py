@@ -5,8 +5,8 @@ to its sinks (on_image).
 The pictures are drawn in a world of their own (a DIRECT client holding the robot and the scene's
 objects, never stepped), posed from the frame's joint positions and object poses: rendering never
 touches the physics of the run, so a run with cameras moves exactly as one without, and the same
-frames give the same pixels. The floor is left out of that world: it fills the picture and cost 12 of
-the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
+frames give the same pixels. The floor is left out of that world: it fills the picture and cost 12
+of the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
 """
 
 from __future__ import annotations
@@ -44,26 +44,51 @@ class RenderWorld(World):
         for body, pose in zip(self.object_ids, frame.object_poses, strict=True):
             pb.resetBasePositionAndOrientation(body, pose[:3], pose[3:7], physicsClientId=c)
 
-    def render(self, spec: CameraSpec, eye: tuple[float, ...], target: tuple[float, ...],
-               up: tuple[float, ...]) -> np.ndarray:
+    def render(
+        self,
+        spec: CameraSpec,
+        eye: tuple[float, ...],
+        target: tuple[float, ...],
+        up: tuple[float, ...],
+    ) -> np.ndarray:
         """The scene as this camera sees it: (height, width, 3) uint8."""
         view = pb.computeViewMatrix(eye, target, up)
-        projection = pb.computeProjectionMatrixFOV(spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m)
-        _, _, rgba, _, _ = pb.getCameraImage(spec.width_px, spec.height_px, view, projection,
-                                             renderer=pb.ER_TINY_RENDERER, flags=pb.ER_NO_SEGMENTATION_MASK,
-                                             physicsClientId=self.client)
-        return np.reshape(np.asarray(rgba, dtype=np.uint8), (spec.height_px, spec.width_px, 4))[:, :, :3]
+        projection = pb.computeProjectionMatrixFOV(
+            spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m
+        )
+        _, _, rgba, _, _ = pb.getCameraImage(
+            spec.width_px,
+            spec.height_px,
+            view,
+            projection,
+            renderer=pb.ER_TINY_RENDERER,
+            flags=pb.ER_NO_SEGMENTATION_MASK,
+            physicsClientId=self.client,
+        )
+        return np.reshape(np.asarray(rgba, dtype=np.uint8), (spec.height_px, spec.width_px, 4))[
+            :, :, :3
+        ]
 
 
-def render_frame(world: RenderWorld, cameras: tuple[CameraSpec, ...], frame: Frame) -> list[CameraImage]:
+def render_frame(
+    world: RenderWorld, cameras: tuple[CameraSpec, ...], frame: Frame
+) -> list[CameraImage]:
     """Pictures of one frame from each of these cameras, encoded."""
     world.pose(frame)
     out = []
     for spec in cameras:
         eye, target, up = camera_view(spec, frame.pad_pose)
         pixels = world.render(spec, eye, target, up)
-        out.append(CameraImage(spec.name, frame.step, frame.t_ns, spec.format, encode(pixels, spec.format),
-                               optical_pose(eye, target, up)))
+        out.append(
+            CameraImage(
+                spec.name,
+                frame.step,
+                frame.t_ns,
+                spec.format,
+                encode(pixels, spec.format),
+                optical_pose(eye, target, up),
+            )
+        )
     return out
 
 
@@ -72,13 +97,19 @@ class CameraRenderer:
     hand_on (the twin's fan-out to its sinks).
 
     background (the default, unless this process is a daemon, which may not fork: a worker of a
-    pool): the pictures are drawn in a render process of their own (forked, with its own render world),
-    so the stepping goes on while they are drawn. Either way a frame's pictures are handed on when the
-    pictures of LAG_PICTURES later camera frames have been asked for (or at flush and close): always at
-    the same point of the run, drawn here or there, so the files are byte-identical."""
+    pool): the pictures are drawn in a render process of their own (forked, with its own render
+    world), so the stepping goes on while they are drawn. Either way a frame's pictures are handed
+    on when the pictures of LAG_PICTURES later camera frames have been asked for (or at flush and
+    close): always at the same point of the run, drawn here or there, so the files are
+    byte-identical."""
 
-    def __init__(self, config: TwinConfig, hand_on: Callable[[CameraImage], None], *,
-                 background: bool | None = None) -> None:
+    def __init__(
+        self,
+        config: TwinConfig,
+        hand_on: Callable[[CameraImage], None],
+        *,
+        background: bool | None = None,
+    ) -> None:
         self.cameras = config.cameras
         self._hand_on = hand_on
         self._every = tuple(c.every_steps(config.dt_ns) for c in config.cameras)
@@ -86,7 +117,8 @@ class CameraRenderer:
             background = not multiprocessing.current_process().daemon
         self._world: RenderWorld | None = None
         self._process: _RenderProcess | None = None
-        self._drawn: collections.deque[list[CameraImage]] = collections.deque()  # drawn here, not yet handed on
+        # drawn here, not yet handed on
+        self._drawn: collections.deque[list[CameraImage]] = collections.deque()
         if background:
             self._process = _RenderProcess(config)
         else:
@@ -98,7 +130,9 @@ class CameraRenderer:
         return self._process.pending if self._process is not None else len(self._drawn)
 
     def on_frame(self, frame: Frame) -> None:
-        due = tuple(c for c, every in zip(self.cameras, self._every, strict=True) if frame.step % every == 0)
+        due = tuple(
+            c for c, every in zip(self.cameras, self._every, strict=True) if frame.step % every == 0
+        )
         if not due:
             return
         if self._process is not None:
@@ -114,7 +148,8 @@ class CameraRenderer:
             self._hand_on(image)
 
     def flush(self) -> None:
-        """Hand on the pictures not handed on yet (before the recorders close: a run's last pictures)."""
+        """Hand on the pictures not handed on yet (before the recorders close: a run's last
+        pictures)."""
         while self.pending:
             self._emit_next()
 
@@ -131,13 +166,15 @@ class CameraRenderer:
                 self._world = None
 
 
-LAG_PICTURES = 4  # camera frames in flight: enough to keep the render process busy while the twin steps
+# camera frames in flight: enough to keep the render process busy while the twin steps
+LAG_PICTURES = 4
 _CLOSE = b"C"
 _FAILED = b"!"
 
 
 class _RenderProcess:
-    """A forked child with its own render world: gets (cameras, frame), answers with the pictures."""
+    """A forked child with its own render world: gets (cameras, frame), answers with the
+    pictures."""
 
     def __init__(self, config: TwinConfig) -> None:
         self.pending = 0
@@ -154,7 +191,9 @@ class _RenderProcess:
         try:
             reply = self._conn.recv_bytes()
         except (EOFError, OSError) as err:
-            raise HelperError(f"the camera render process stopped (exit code {self._process.exitcode})") from err
+            raise HelperError(
+                f"the camera render process stopped (exit code {self._process.exitcode})"
+            ) from err
         self.pending -= 1
         if reply.startswith(_FAILED):
             raise HelperError(f"rendering a camera failed: {reply[1:].decode(errors='replace')}")
@@ -170,8 +209,8 @@ class _RenderProcess:
 
 
 def _render_loop(conn, config: TwinConfig) -> None:
-    """The render process (twin.helpers): draw each frame it is sent with the cameras named, until told
-    to close or the twin's end of the pipe closes."""
+    """The render process (twin.helpers): draw each frame it is sent with the cameras named, until
+    told to close or the twin's end of the pipe closes."""
     specs = {c.name: c for c in config.cameras}
     world = RenderWorld(config)
     while True:

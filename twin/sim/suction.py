@@ -40,12 +40,16 @@ class Suction:
         self._broken_this_period = False  # a broken hold stays broken until the pad is switched off
         self.idle_on: bool | None = False  # the `on` for which update() changes nothing (_idle_on)
 
-    def update(self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]) -> list[SuctionEvent]:
+    def update(
+        self, on: bool, frame: Frame, heading_of: Callable[[Frame], float]
+    ) -> list[SuctionEvent]:
         """Advance the pad's state for the coming step from the latest Frame; returns what happened.
-        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot matter).
-        heading_of(frame): the pad's heading (rad), asked for only when an object is attached."""
+        The sensor ray is cast only while the pad is on and empty (what it sees otherwise cannot
+        matter). heading_of(frame): the pad's heading (rad), asked for only when an object is
+        attached."""
         p = self.params
-        if on and self.on and self.held != NO_BODY and p.infinite_strength:  # holding on: nothing changes
+        # holding on: nothing changes
+        if on and self.on and self.held != NO_BODY and p.infinite_strength:
             self.sensed = self.held
             return []
         if not on and not self.on:
@@ -82,9 +86,9 @@ class Suction:
         return events
 
     def _idle_on(self) -> bool | None:
-        """The one `on` that leaves the pad as it is: False while it is off, True while it holds on with
-        infinite strength (sensed stays held), else None. The twin calls update() only for another `on`
-        (pick_place: 198 calls instead of 1495 in 2517 steps)."""
+        """The one `on` that leaves the pad as it is: False while it is off, True while it holds on
+        with infinite strength (sensed stays held), else None. The twin calls update() only for
+        another `on` (pick_place: 198 calls instead of 1495 in 2517 steps)."""
         if not self.on:
             return False
         return True if self.held != NO_BODY and self.params.infinite_strength else None
@@ -111,7 +115,8 @@ class Suction:
         from the cup (the pad's upward force on it; pressing the object down is not pull), shear the
         sideways force, peel the torque about x and y taken at the cup's face (the pad tip)."""
         p = self.params
-        (fx, fy, fz), (tx, ty, _tz) = frame.hold_force_n, frame.hold_torque_nm  # nothing stepped since
+        # nothing stepped since
+        (fx, fy, fz), (tx, ty, _tz) = frame.hold_force_n, frame.hold_torque_nm
         cx, cy, cz = frame.object_poses[self.held][:3]
         tip = frame.pad_pose
         rx, ry, rz = cx - tip[0], cy - tip[1], cz - tip[2]  # tip -> object's centre of mass

@@ -32,19 +32,31 @@ _new_frame = tuple.__new__
 class Twin:
     """A headless (or windowed) PyBullet twin of a SCARA robot, advanced in simulated time."""
 
-    def __init__(self, config: TwinConfig | None = None, *, gui: bool = False, sinks: list[Sink] = (),
-                 camera_background: bool | None = None) -> None:
-        """camera_background: draw the cameras' pictures in a render process (None: unless this process
-        is a daemon, which may not fork), or False in the stepping thread (twin.sim.camera)."""
+    def __init__(
+        self,
+        config: TwinConfig | None = None,
+        *,
+        gui: bool = False,
+        sinks: list[Sink] = (),
+        camera_background: bool | None = None,
+    ) -> None:
+        """camera_background: draw the cameras' pictures in a render process (None: unless this
+        process is a daemon, which may not fork), or False in the stepping thread
+        (twin.sim.camera)."""
         self.config = config or TwinConfig()
         self.profile = self.config.profile
         self._world = World(self.config, gui=gui)
-        self.suction_pad = Suction(self.config.suction, self.profile.pad_length_m, self._world,
-                                   tuple(o.size_m for o in self.config.objects))
+        self.suction_pad = Suction(
+            self.config.suction,
+            self.profile.pad_length_m,
+            self._world,
+            tuple(o.size_m for o in self.config.objects),
+        )
         self.sinks: list[Sink] = list(sinks)
         self.step_index = 0
         self._signals: dict[str, int] = {}
-        self._targets = (0.0, 0.0, 0.0, 0.0)  # a tuple, replaced on a command: every Frame shares it
+        # a tuple, replaced on a command: every Frame shares it
+        self._targets = (0.0, 0.0, 0.0, 0.0)
         self._max_velocities = list(self._world.max_velocities())
         self._limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
@@ -56,7 +68,8 @@ class Twin:
         self.frame = self._read_frame()
         self._emit_frame(self.frame)
 
-    # -- read-only views: the twin changes only through Commands (apply), so every input is recorded --
+    # -- read-only views: the twin changes only through Commands (apply), so every input is recorded
+    # --
     @property
     def targets(self) -> tuple[float, ...]:
         """Each joint's motor target (rad | m), in profile joint order."""
@@ -98,10 +111,16 @@ class Twin:
 
     def step(self, n: int = 1) -> Frame:
         """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
-        sinks, pad_model, world_step, read_frame = self.sinks, self.suction_pad, self._world.step, self._read_frame
+        sinks, pad_model, world_step, read_frame = (
+            self.sinks,
+            self.suction_pad,
+            self._world.step,
+            self._read_frame,
+        )
         renderer = self._camera_renderer
         for _ in range(n):
-            if self._suction_wanted is not pad_model.idle_on:  # an idle pad, or one holding on, has nothing to do
+            # an idle pad, or one holding on, has nothing to do
+            if self._suction_wanted is not pad_model.idle_on:
                 for ev in pad_model.update(self._suction_wanted, self.frame, self._heading):
                     self._emit(ev.kind, self._body_name(ev.body), ev.message)
             world_step()
@@ -109,7 +128,8 @@ class Twin:
             f = self.frame = read_frame()
             for s in sinks:
                 s.on_frame(f)
-            if renderer is not None:  # after every sink: a picture reaches them after the frame it shows
+            # after every sink: a picture reaches them after the frame it shows
+            if renderer is not None:
                 renderer.on_frame(f)
         return self.frame
 
@@ -124,9 +144,26 @@ class Twin:
         q, qd, effort, poses, force, torque = self._world.state()
         sp = self.suction_pad
         step = self.step_index
-        # tuple.__new__, not Frame(...): a NamedTuple's __new__ is a Python function (0.2 us more a step)
-        return _new_frame(Frame, (step, step * self.config.dt_ns, q, qd, effort, self._targets,
-                                  sp.on, sp.sensed, sp.held, force, torque, self._pad_pose(q), poses))
+        # tuple.__new__, not Frame(...): a NamedTuple's __new__ is a Python function (0.2 us more a
+        # step)
+        return _new_frame(
+            Frame,
+            (
+                step,
+                step * self.config.dt_ns,
+                q,
+                qd,
+                effort,
+                self._targets,
+                sp.on,
+                sp.sensed,
+                sp.held,
+                force,
+                torque,
+                self._pad_pose(q),
+                poses,
+            ),
+        )
 
     def _heading(self, f: Frame) -> float:
         return kinematics.heading(self.profile, f.joint_q)
@@ -150,7 +187,9 @@ class Twin:
         for i, o in enumerate(self.config.objects):
             if o.name == bare:
                 return i
-        raise UnknownName(f"unknown object {name!r}; expected one of {[o.name for o in self.config.objects]}")
+        raise UnknownName(
+            f"unknown object {name!r}; expected one of {[o.name for o in self.config.objects]}"
+        )
 
     def joint_position(self, joint: str | int) -> float:
         return self.frame.joint_q[self._joint(joint)]
@@ -168,18 +207,27 @@ class Twin:
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
         """Say something now (a task's phase, a placement report, a client's log line): an `event`
-        Command, so a replay says it again at the same step. Data must be JSON data (numpy values are
-        turned into numbers and lists)."""
+        Command, so a replay says it again at the same step. Data must be JSON data (numpy values
+        are turned into numbers and lists)."""
         if not isinstance(kind, str) or not kind:
             raise ConfigError(f"event kind {kind!r:.40} is invalid; expected a non-empty string")
-        args = {"kind": kind, "body": str(body), "message": str(message), "data": _json_data(kind, data)}
+        args = {
+            "kind": kind,
+            "body": str(body),
+            "message": str(message),
+            "data": _json_data(kind, data),
+        }
         self.apply(Command(self.step_index, "event", args))
         return self._said
 
-    def _emit(self, kind: str, body: str = "", message: str = "", data: dict | None = None) -> Event:
+    def _emit(
+        self, kind: str, body: str = "", message: str = "", data: dict | None = None
+    ) -> Event:
         """An Event the twin itself raises while stepping or applying a Command (attach, release,
         joint_limit, ...): replay regenerates these, so they are not Commands."""
-        return self._send(Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {})))
+        return self._send(
+            Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {}))
+        )
 
     def _send(self, ev: Event) -> Event:
         for s in self.sinks:
@@ -197,17 +245,24 @@ class Twin:
             raise ConfigError(f"command for step {command.step} applied at step {self.step_index}")
         handler = self._COMMANDS.get(command.kind)
         if handler is None:
-            raise ConfigError(f"unknown command kind {command.kind!r}; expected one of {sorted(self._COMMANDS)}")
+            raise ConfigError(
+                f"unknown command kind {command.kind!r}; expected one of {sorted(self._COMMANDS)}"
+            )
         expected = COMMAND_ARGS[command.kind]
         if not isinstance(command.args, dict) or sorted(command.args) != sorted(expected):
-            raise ConfigError(f"{command.kind} command at step {command.step} has arguments {command.args!r:.80}; "
-                              f"expected {', '.join(expected)}")
+            raise ConfigError(
+                f"{command.kind} command at step {command.step} has arguments "
+                f"{command.args!r:.80}; "
+                f"expected {', '.join(expected)}"
+            )
         for s in self.sinks:
             s.on_command(command)
         try:
             handler(self, command.args)
         except (TypeError, ValueError, OverflowError) as err:  # a hand-edited or corrupt recording
-            raise ConfigError(f"{command.kind} command at step {command.step} is malformed: {err}") from err
+            raise ConfigError(
+                f"{command.kind} command at step {command.step} is malformed: {err}"
+            ) from err
 
     def _command(self, kind: str, **args: Any) -> None:
         self.apply(Command(self.step_index, kind, args))
@@ -223,7 +278,11 @@ class Twin:
 
     def set_joint_target(self, joint: str | int, q: float) -> None:
         """Drive a joint's motor toward q (rad | m) at its maximum velocity and force."""
-        self._command("joint_target", joint=self.profile.joint_names[self._joint(joint)], q=_number(q, "joint target"))
+        self._command(
+            "joint_target",
+            joint=self.profile.joint_names[self._joint(joint)],
+            q=_number(q, "joint target"),
+        )
 
     def set_joint_targets(self, targets: dict[str, float]) -> None:
         for joint, q in targets.items():
@@ -231,7 +290,11 @@ class Twin:
 
     def set_joint_position(self, joint: str | int, q: float) -> None:
         """Set a joint's position at once (kinematic), as simxSetJointPosition does."""
-        self._command("joint_position", joint=self.profile.joint_names[self._joint(joint)], q=_number(q, "joint position"))
+        self._command(
+            "joint_position",
+            joint=self.profile.joint_names[self._joint(joint)],
+            q=_number(q, "joint position"),
+        )
 
     def set_joint_max_velocity(self, joint: str | int, v: float) -> None:
         v = _number(v, "maximum velocity")
@@ -255,7 +318,9 @@ class Twin:
         self._command("key", key=str(key))
 
     # -- motion helpers (tasks) ---------------------------------------------------------------
-    def move_to(self, x_m: float, y_m: float, heading_rad: float | None = None, *, settle: bool = True) -> None:
+    def move_to(
+        self, x_m: float, y_m: float, heading_rad: float | None = None, *, settle: bool = True
+    ) -> None:
         """Move the pad over (x, y), keeping its heading unless one is given; raises OutOfReach."""
         q = self.frame.joint_q
         heading = self._heading(self.frame) if heading_rad is None else heading_rad
@@ -283,7 +348,8 @@ class Twin:
             self.settle()
 
     def lower(self) -> None:
-        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z stroke)."""
+        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z
+        stroke)."""
         self.set_joint_target(Z, self.profile.z_down())
         self.settle()
 
@@ -295,16 +361,24 @@ class Twin:
     def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
         """Step until every joint is at its target and still; an Event if it times out."""
         max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
-        # the four joints' checks written out, on locals, with no tuple built per call: settle runs most of
-        # a task's steps (1601 of pick_place's 2517)
+        # the four joints' checks written out, on locals, with no tuple built per call: settle runs
+        # most of a task's steps (1601 of pick_place's 2517)
         t0, t1, t2, t3 = self._targets
         e0, e1, e2, e3 = SETTLE_TOL
         v0, v1, v2, v3 = SETTLE_SPEED_TOL
         step, f = self.step, self.frame
         for _ in range(max_steps):
             q, qd = f.joint_q, f.joint_qd
-            if not (abs(q[0] - t0) > e0 or abs(qd[0]) > v0 or abs(q[1] - t1) > e1 or abs(qd[1]) > v1
-                    or abs(q[2] - t2) > e2 or abs(qd[2]) > v2 or abs(q[3] - t3) > e3 or abs(qd[3]) > v3):
+            if not (
+                abs(q[0] - t0) > e0
+                or abs(qd[0]) > v0
+                or abs(q[1] - t1) > e1
+                or abs(qd[1]) > v1
+                or abs(q[2] - t2) > e2
+                or abs(qd[2]) > v2
+                or abs(q[3] - t3) > e3
+                or abs(qd[3]) > v3
+            ):
                 return True
             f = step()
         self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
@@ -312,7 +386,8 @@ class Twin:
 
     # -- what each Command kind does: apply() looks the handler up in _COMMANDS -----------------
     def _clamped(self, joint: int, q: float) -> float:
-        if self.profile.revolute_cyclic and joint != Z:  # CoppeliaSim's cyclic joint: the short way round
+        # CoppeliaSim's cyclic joint: the short way round
+        if self.profile.revolute_cyclic and joint != Z:
             now = self.frame.joint_q[joint]
             return now + kinematics.wrap_rad(q - now)
         lo, hi = self._limits[joint]
@@ -320,8 +395,11 @@ class Twin:
             return q
         clamped = min(hi, max(lo, q))
         name = self.profile.joint_names[joint]
-        self._emit("joint_limit", message=f"{name} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; stopped at {clamped:.6g}",
-                   data={"joint": name, "requested": q, "limit": clamped})
+        self._emit(
+            "joint_limit",
+            message=f"{name} target {q:.6g} beyond {lo:.6g}..{hi:.6g}; stopped at {clamped:.6g}",
+            data={"joint": name, "requested": q, "limit": clamped},
+        )
         return clamped
 
     def _do_joint_target(self, args: dict) -> None:
@@ -353,7 +431,12 @@ class Twin:
     def _do_event(self, args: dict) -> None:
         """What a task or client said (an `event` Command): emitted as the Event it describes."""
         kind, body, message, data = args["kind"], args["body"], args["message"], args["data"]
-        if not isinstance(kind, str) or not kind or not isinstance(body, str) or not isinstance(message, str):
+        if (
+            not isinstance(kind, str)
+            or not kind
+            or not isinstance(body, str)
+            or not isinstance(message, str)
+        ):
             raise TypeError("kind, body and message must be strings (kind non-empty)")
         if not isinstance(data, dict):
             raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
@@ -364,20 +447,26 @@ class Twin:
         """A key, played through the configured key map (model.keymaps.KeyPlayer)."""
         key = args["key"]
         if not self._keys.press(key, self._key_hands):
-            self._emit("key_unknown", message=f"key {key!r} is not in the key map; ignored", data={"key": key})
+            self._emit(
+                "key_unknown",
+                message=f"key {key!r} is not in the key map; ignored",
+                data={"key": key},
+            )
 
-    _COMMANDS = MappingProxyType({  # one per COMMAND_ARGS kind
-        "joint_target": _do_joint_target,
-        "joint_position": _do_joint_position,
-        "joint_max_velocity": _do_joint_max_velocity,
-        "signal": _do_signal,
-        "key": _do_key,
-        "event": _do_event,
-    })
+    _COMMANDS = MappingProxyType(
+        {  # one per COMMAND_ARGS kind
+            "joint_target": _do_joint_target,
+            "joint_position": _do_joint_position,
+            "joint_max_velocity": _do_joint_max_velocity,
+            "signal": _do_signal,
+            "key": _do_key,
+            "event": _do_event,
+        }
+    )
 
     def _add_cameras(self, background: bool | None):
-        """The configuration's cameras' renderer (twin.sim.camera), or None: it sees each frame after
-        every sink, and the twin hands its pictures to the sinks (_send_image)."""
+        """The configuration's cameras' renderer (twin.sim.camera), or None: it sees each frame
+        after every sink, and the twin hands its pictures to the sinks (_send_image)."""
         if not self.config.cameras:
             return None
         from twin.sim.camera import CameraRenderer
@@ -385,8 +474,8 @@ class Twin:
         return CameraRenderer(self.config, self._send_image, background=background)
 
     def finish_pictures(self) -> None:
-        """Hand the cameras' pictures still being drawn to the sinks now (close does it too): for a caller
-        that closes its recorders before the twin."""
+        """Hand the cameras' pictures still being drawn to the sinks now (close does it too): for a
+        caller that closes its recorders before the twin."""
         if self._camera_renderer is not None:
             self._camera_renderer.flush()
 
@@ -410,10 +499,14 @@ def _json_data(kind: str, data: dict) -> dict:
 
     try:
         # NaN and infinities become null, as the recording writes them: memory and file agree
-        return json.loads(json.dumps(data, sort_keys=True, default=plain), parse_constant=lambda _: None)
+        return json.loads(
+            json.dumps(data, sort_keys=True, default=plain), parse_constant=lambda _: None
+        )
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
-                          "expected numbers, strings, booleans, None, lists and dicts") from err
+        raise ConfigError(
+            f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
+            "expected numbers, strings, booleans, None, lists and dicts"
+        ) from err
 
 
 def _number(value: Any, what: str) -> float:
@@ -424,7 +517,7 @@ def _number(value: Any, what: str) -> float:
 
 
 def _replaced(values: tuple, i: int, value) -> tuple:
-    return values[:i] + (value,) + values[i + 1:]
+    return values[:i] + (value,) + values[i + 1 :]
 
 
 class _KeyHands:
@@ -454,4 +547,6 @@ class _KeyHands:
 
 
 if set(Twin._COMMANDS) != set(COMMAND_ARGS):
-    raise ImportError("twin.sim.twin: a Command kind without a handler, or a handler without a kind")
+    raise ImportError(
+        "twin.sim.twin: a Command kind without a handler, or a handler without a kind"
+    )

@@ -49,7 +49,11 @@ def _import_pybullet_quietly():
 
 pb = _import_pybullet_quietly()
 # the calls made every step, bound once (a module attribute lookup less each)
-_step_simulation, _joint_states, _base_pose = pb.stepSimulation, pb.getJointStates, pb.getBasePositionAndOrientation
+_step_simulation, _joint_states, _base_pose = (
+    pb.stepSimulation,
+    pb.getJointStates,
+    pb.getBasePositionAndOrientation,
+)
 
 
 class World:
@@ -64,7 +68,9 @@ class World:
         if self.client < 0:
             raise ConfigError("cannot open a PyBullet window; run without --gui or under a display")
         if gui:
-            pb.configureDebugVisualizer(pb.COV_ENABLE_KEYBOARD_SHORTCUTS, 0, physicsClientId=self.client)
+            pb.configureDebugVisualizer(
+                pb.COV_ENABLE_KEYBOARD_SHORTCUTS, 0, physicsClientId=self.client
+            )
         self.urdf_text = ""
         self.robot = -1
         self.joints: tuple[int, ...] = ()
@@ -85,7 +91,8 @@ class World:
 
     # -- building ---------------------------------------------------------------------------
     def build(self) -> None:
-        """Build the scene in its fixed order: reset, engine parameters, floor, robot, objects (once, at start)."""
+        """Build the scene in its fixed order: reset, engine parameters, floor, robot, objects
+        (once, at start)."""
         c = self.client
         pb.resetSimulation(physicsClientId=c)
         self._constraint = NO_CONSTRAINT
@@ -101,8 +108,11 @@ class World:
         )
         pb.setGravity(*e.gravity_m_s2, physicsClientId=c)
         pb.setRealTimeSimulation(0, physicsClientId=c)
-        floor = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=FLOOR_HALF_EXTENTS_M, physicsClientId=c)
-        pb.createMultiBody(0, floor, -1, (0.0, 0.0, -FLOOR_HALF_EXTENTS_M[2]), physicsClientId=c)  # top at z = 0
+        floor = pb.createCollisionShape(
+            pb.GEOM_BOX, halfExtents=FLOOR_HALF_EXTENTS_M, physicsClientId=c
+        )
+        # top at z = 0
+        pb.createMultiBody(0, floor, -1, (0.0, 0.0, -FLOOR_HALF_EXTENTS_M[2]), physicsClientId=c)
         self._load_robot()
         self.object_ids = tuple(self._create_object(o) for o in self.config.objects)
 
@@ -112,17 +122,22 @@ class World:
         self.urdf_text = urdf_text(profile)
         if profile.urdf_path:
             try:
-                self.robot = pb.loadURDF(profile.urdf_path, useFixedBase=True, flags=flags,
-                                         physicsClientId=self.client)
+                self.robot = pb.loadURDF(
+                    profile.urdf_path, useFixedBase=True, flags=flags, physicsClientId=self.client
+                )
             except pb.error as err:
-                raise ConfigError(f"PyBullet cannot load the URDF {profile.urdf_path!r} of robot "
-                                  f"{profile.name!r} (a mesh missing or unreadable?): {err}") from err
+                raise ConfigError(
+                    f"PyBullet cannot load the URDF {profile.urdf_path!r} of robot "
+                    f"{profile.name!r} (a mesh missing or unreadable?): {err}"
+                ) from err
         else:
             fd, path = tempfile.mkstemp(suffix=".urdf", prefix=f"twin_{profile.name}_")
             try:
                 with os.fdopen(fd, "w") as f:
                     f.write(self.urdf_text)
-                self.robot = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=self.client)
+                self.robot = pb.loadURDF(
+                    path, useFixedBase=True, flags=flags, physicsClientId=self.client
+                )
             finally:
                 os.unlink(path)
         by_name: dict[str, int] = {}
@@ -137,17 +152,31 @@ class World:
             raise ConfigError(f"robot {profile.name!r} URDF lacks joint {err.args[0]!r}") from err
         self.pad_link = link_by_name.get(profile.pad_link or "suctionPad", self.joints[3])
         e = self.config.engine
-        for j, v_max, f_max in zip(self.joints, self.max_velocities(), self.max_forces(), strict=True):
-            pb.changeDynamics(self.robot, j, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client)
+        for j, v_max, f_max in zip(
+            self.joints, self.max_velocities(), self.max_forces(), strict=True
+        ):
+            pb.changeDynamics(
+                self.robot, j, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client
+            )
             pb.setJointMotorControl2(
-                self.robot, j, pb.POSITION_CONTROL, targetPosition=0.0, force=f_max, maxVelocity=v_max,
-                positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
+                self.robot,
+                j,
+                pb.POSITION_CONTROL,
+                targetPosition=0.0,
+                force=f_max,
+                maxVelocity=v_max,
+                positionGain=e.position_gain,
+                velocityGain=e.velocity_gain,
+                physicsClientId=self.client,
             )
 
     def max_velocities(self) -> tuple[float, ...]:
         """Each joint's motor speed limit from the profile: rad/s, rad/s, m/s, rad/s."""
         p = self.config.profile
-        return (p.revolute_max_velocity_rad_s,) * 2 + (p.prismatic_max_velocity_m_s, p.revolute_max_velocity_rad_s)
+        return (p.revolute_max_velocity_rad_s,) * 2 + (
+            p.prismatic_max_velocity_m_s,
+            p.revolute_max_velocity_rad_s,
+        )
 
     def max_forces(self) -> tuple[float, ...]:
         """Each joint's motor force limit from the profile: N·m, N·m, N, N·m."""
@@ -158,7 +187,9 @@ class World:
         c = self.client
         half = [s / 2 for s in o.size_m]
         col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
-        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=list(o.rgba), physicsClientId=c)
+        vis = pb.createVisualShape(
+            pb.GEOM_BOX, halfExtents=half, rgbaColor=list(o.rgba), physicsClientId=c
+        )
         orn = pb.getQuaternionFromEuler((0.0, 0.0, o.yaw_rad))
         body = pb.createMultiBody(o.mass_kg, col, vis, list(o.pos_m), orn, physicsClientId=c)
         pb.changeDynamics(body, -1, lateralFriction=o.friction, physicsClientId=c)
@@ -168,9 +199,15 @@ class World:
     def set_motor(self, joint: int, target: float, max_velocity: float) -> None:
         e = self.config.engine
         pb.setJointMotorControl2(
-            self.robot, self.joints[joint], pb.POSITION_CONTROL, targetPosition=target,
-            force=self.max_forces()[joint], maxVelocity=max_velocity,
-            positionGain=e.position_gain, velocityGain=e.velocity_gain, physicsClientId=self.client,
+            self.robot,
+            self.joints[joint],
+            pb.POSITION_CONTROL,
+            targetPosition=target,
+            force=self.max_forces()[joint],
+            maxVelocity=max_velocity,
+            positionGain=e.position_gain,
+            velocityGain=e.velocity_gain,
+            physicsClientId=self.client,
         )
 
     def reset_joint(self, joint: int, q: float) -> None:
@@ -178,7 +215,8 @@ class World:
         pb.resetJointState(self.robot, self.joints[joint], q, 0.0, physicsClientId=self.client)
 
     # The calls made every step pass the client positionally: pybullet then skips matching keyword
-    # names (measured: getJointStates 1.43 -> 1.28 us, getBasePositionAndOrientation 0.69 -> 0.56 us).
+    # names (measured: getJointStates 1.43 -> 1.28 us, getBasePositionAndOrientation 0.69 -> 0.56
+    # us).
     def step(self) -> None:
         _step_simulation(self.client)
         if self._overlapping:
@@ -190,36 +228,58 @@ class World:
         the four joints' positions, velocities and applied motor efforts (float64), each object's
         pose, and the hold's force and torque (_hold_wrench)."""
         c = self.client
-        (q0, v0, _, e0), (q1, v1, _, e1), (q2, v2, _, e2), (q3, v3, _, e3) = _joint_states(self.robot, self.joints, c)
-        if len(self.object_ids) == 1:  # the usual scene, one box: 4.3k CPU instructions a step fewer (callgrind)
+        (q0, v0, _, e0), (q1, v1, _, e1), (q2, v2, _, e2), (q3, v3, _, e3) = _joint_states(
+            self.robot, self.joints, c
+        )
+        # the usual scene, one box: 4.3k CPU instructions a step fewer (callgrind)
+        if len(self.object_ids) == 1:
             p, o = _base_pose(self.object_ids[0], c)
             poses = (p + o,)
         else:
             poses = tuple([p + o for p, o in [_base_pose(body, c) for body in self.object_ids]])
-        force, torque = _NO_WRENCH if self._constraint == NO_CONSTRAINT else self._hold_wrench(poses)
+        force, torque = (
+            _NO_WRENCH if self._constraint == NO_CONSTRAINT else self._hold_wrench(poses)
+        )
         return (q0, q1, q2, q3), (v0, v1, v2, v3), (e0, e1, e2, e3), poses, force, torque
 
     def ray_down(self, x_m: float, y_m: float, z_from_m: float, length_m: float) -> int:
-        """The scene object (index) a vertical ray going down from z_from_m hits first, or NO_BODY."""
-        body = pb.rayTest((x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client)[0][0]
+        """The scene object (index) a vertical ray going down from z_from_m hits first, or
+        NO_BODY."""
+        body = pb.rayTest(
+            (x_m, y_m, z_from_m), (x_m, y_m, z_from_m - length_m), physicsClientId=self.client
+        )[0][0]
         return self.object_ids.index(body) if body in self.object_ids else NO_BODY
 
     # -- holding ----------------------------------------------------------------------------
-    def attach(self, obj: int, pad_root_pos_m: tuple[float, float, float], pad_yaw_rad: float) -> None:
+    def attach(
+        self, obj: int, pad_root_pos_m: tuple[float, float, float], pad_yaw_rad: float
+    ) -> None:
         """Fix object `obj` rigidly to the pad where it is now. The pad root's pose comes from the
         joint angles (exact), not from getLinkState (float32 and one step old)."""
         c = self.client
         body = self.object_ids[obj]
         link_orn = pb.getQuaternionFromEuler((0.0, 0.0, pad_yaw_rad))
-        com_local_pos, com_local_orn = pb.getDynamicsInfo(self.robot, self.pad_link, physicsClientId=c)[3:5]
-        com_pos, com_orn = pb.multiplyTransforms(pad_root_pos_m, link_orn, com_local_pos, com_local_orn)
+        com_local_pos, com_local_orn = pb.getDynamicsInfo(
+            self.robot, self.pad_link, physicsClientId=c
+        )[3:5]
+        com_pos, com_orn = pb.multiplyTransforms(
+            pad_root_pos_m, link_orn, com_local_pos, com_local_orn
+        )
         obj_pos, obj_orn = pb.getBasePositionAndOrientation(body, physicsClientId=c)
         inv_pos, inv_orn = pb.invertTransform(com_pos, com_orn)
         rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
         self._constraint = pb.createConstraint(
-            self.robot, self.pad_link, body, -1, pb.JOINT_FIXED, (0, 0, 0),
-            parentFramePosition=rel_pos, childFramePosition=(0, 0, 0),
-            parentFrameOrientation=rel_orn, childFrameOrientation=(0, 0, 0, 1), physicsClientId=c,
+            self.robot,
+            self.pad_link,
+            body,
+            -1,
+            pb.JOINT_FIXED,
+            (0, 0, 0),
+            parentFramePosition=rel_pos,
+            childFramePosition=(0, 0, 0),
+            parentFrameOrientation=rel_orn,
+            childFrameOrientation=(0, 0, 0, 1),
+            physicsClientId=c,
         )
         pb.changeConstraint(self._constraint, maxForce=1e4, physicsClientId=c)
         self._held_body = body
@@ -253,45 +313,66 @@ class World:
 
     def _robot_collides_with(self, body: int, enable: bool) -> None:
         for link in range(-1, pb.getNumJoints(self.robot, physicsClientId=self.client)):
-            pb.setCollisionFilterPair(self.robot, body, link, -1, int(enable), physicsClientId=self.client)
+            pb.setCollisionFilterPair(
+                self.robot, body, link, -1, int(enable), physicsClientId=self.client
+            )
 
-    def _hold_wrench(self, object_poses: tuple[tuple[float, ...], ...]
-                    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    def _hold_wrench(
+        self, object_poses: tuple[tuple[float, ...], ...]
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Force (N) and torque (N·m, about the object's centre of mass) the pad applied to the held
-        object in the last step, world frame (state() asks only while something is held). A box hanging
-        still gets +m·g in z.
-        object_poses: this step's object poses (the held object's orientation turns the torque).
+        object in the last step, world frame (state() asks only while something is held). A box
+        hanging still gets +m·g in z. object_poses: this step's object poses (the held object's
+        orientation turns the torque).
 
         getConstraintState gives the reaction on the pad (minus the wrench on the object): the force
-        along world axes, the torque along the constraint frame's axes, which are rigid with the object.
+        along world axes, the torque along the constraint frame's axes, which are rigid with the
+        object.
         """
         s = pb.getConstraintState(self._constraint, self.client)
         orn = object_poses[self._held_index][3:7]
         r = pb.getMatrixFromQuaternion(orn)  # row-major: world = r @ constraint frame
         tx, ty, tz = -s[3], -s[4], -s[5]
-        torque = (r[0] * tx + r[1] * ty + r[2] * tz, r[3] * tx + r[4] * ty + r[5] * tz,
-                  r[6] * tx + r[7] * ty + r[8] * tz)
+        torque = (
+            r[0] * tx + r[1] * ty + r[2] * tz,
+            r[3] * tx + r[4] * ty + r[5] * tz,
+            r[6] * tx + r[7] * ty + r[8] * tz,
+        )
         return (-s[0], -s[1], -s[2]), torque
 
     def _frame_workspace(self) -> None:
-        """Open the window on the arm's reach with PyBullet's side panels and camera previews hidden:
-        by default it shows the whole floor, the robot small in its middle, between debug panels."""
+        """Open the window on the arm's reach with PyBullet's side panels and camera previews
+        hidden: by default it shows the whole floor, the robot small in its middle, between debug
+        panels."""
         c = self.client
-        for flag in (pb.COV_ENABLE_GUI, pb.COV_ENABLE_RGB_BUFFER_PREVIEW, pb.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
-                     pb.COV_ENABLE_SEGMENTATION_MARK_PREVIEW):
+        for flag in (
+            pb.COV_ENABLE_GUI,
+            pb.COV_ENABLE_RGB_BUFFER_PREVIEW,
+            pb.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
+            pb.COV_ENABLE_SEGMENTATION_MARK_PREVIEW,
+        ):
             pb.configureDebugVisualizer(flag, 0, physicsClientId=c)
         p = self.config.profile
         reach_m = p.link1_m + p.link2_m
-        pb.resetDebugVisualizerCamera(cameraDistance=1.8 * reach_m, cameraYaw=45.0, cameraPitch=-40.0,
-                                      cameraTargetPosition=(0.0, 0.0, 0.5 * p.elbow_height_m),
-                                      physicsClientId=c)
+        pb.resetDebugVisualizerCamera(
+            cameraDistance=1.8 * reach_m,
+            cameraYaw=45.0,
+            cameraPitch=-40.0,
+            cameraTargetPosition=(0.0, 0.0, 0.5 * p.elbow_height_m),
+            physicsClientId=c,
+        )
 
     def window_camera(self) -> dict:
         """The window's camera: distance_m, yaw_deg, pitch_deg, target_m (headless: {})."""
         if not self.gui:
             return {}
         info = pb.getDebugVisualizerCamera(physicsClientId=self.client)
-        return {"distance_m": info[10], "yaw_deg": info[8], "pitch_deg": info[9], "target_m": tuple(info[11])}
+        return {
+            "distance_m": info[10],
+            "yaw_deg": info[8],
+            "pitch_deg": info[9],
+            "target_m": tuple(info[11]),
+        }
 
     # -- the window's keyboard (teleop) -------------------------------------------------------
     def keyboard_events(self) -> list[str]:
@@ -315,33 +396,51 @@ def _require_display() -> None:
         return
     display = os.environ.get("DISPLAY", "")
     if not display:
-        raise ConfigError("--gui needs a display but DISPLAY is not set; run without --gui or under Xvfb")
+        raise ConfigError(
+            "--gui needs a display but DISPLAY is not set; run without --gui or under Xvfb"
+        )
     try:
         xlib = ctypes.CDLL("libX11.so.6")
     except OSError as err:
-        raise ConfigError(f"--gui needs libX11 (X11 client library), which cannot be loaded: {err}") from err
+        raise ConfigError(
+            f"--gui needs libX11 (X11 client library), which cannot be loaded: {err}"
+        ) from err
     xlib.XOpenDisplay.restype = ctypes.c_void_p
     xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
     xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
     handle = xlib.XOpenDisplay(display.encode())
     if not handle:
-        raise ConfigError(f"--gui cannot connect to the X display DISPLAY={display!r}; run without --gui or under Xvfb")
+        raise ConfigError(
+            f"--gui cannot connect to the X display DISPLAY={display!r}; run without "
+            f"--gui or under Xvfb"
+        )
     xlib.XCloseDisplay(handle)
 
 
 _KEY_NAMES = {
-    pb.B3G_UP_ARROW: "up", pb.B3G_DOWN_ARROW: "down", pb.B3G_LEFT_ARROW: "left", pb.B3G_RIGHT_ARROW: "right",
-    pb.B3G_SPACE: "space", pb.B3G_RETURN: "enter", 9: "tab", pb.B3G_BACKSPACE: "backspace",
-    pb.B3G_DELETE: "delete", pb.B3G_INSERT: "insert", pb.B3G_HOME: "home", pb.B3G_END: "end",
-    pb.B3G_PAGE_UP: "pageup", pb.B3G_PAGE_DOWN: "pagedown", 27: "esc",
+    pb.B3G_UP_ARROW: "up",
+    pb.B3G_DOWN_ARROW: "down",
+    pb.B3G_LEFT_ARROW: "left",
+    pb.B3G_RIGHT_ARROW: "right",
+    pb.B3G_SPACE: "space",
+    pb.B3G_RETURN: "enter",
+    9: "tab",
+    pb.B3G_BACKSPACE: "backspace",
+    pb.B3G_DELETE: "delete",
+    pb.B3G_INSERT: "insert",
+    pb.B3G_HOME: "home",
+    pb.B3G_END: "end",
+    pb.B3G_PAGE_UP: "pageup",
+    pb.B3G_PAGE_DOWN: "pagedown",
+    27: "esc",
     **{pb.B3G_F1 + i: f"f{i + 1}" for i in range(12)},
 }
 
 
 def decode_key_events(events: dict[int, int], keys_down: set[int]) -> list[str]:
-    """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or when
-    only its release arrives (a quick tap may show up only as released). Shift+letter gives the capital
-    when Shift is down, or was pressed, in the same poll."""
+    """Key names from one getKeyboardEvents() dict. A press counts once: when it is triggered, or
+    when only its release arrives (a quick tap may show up only as released). Shift+letter gives the
+    capital when Shift is down, or was pressed, in the same poll."""
     shift = bool(events.get(pb.B3G_SHIFT, 0) & (pb.KEY_IS_DOWN | pb.KEY_WAS_TRIGGERED))
     names = []
     for code, state in sorted(events.items()):

@@ -17,20 +17,22 @@ from twin.model.json_values import MAX_DEPTH, nesting_depth
 _CALL = re.compile(r"^\s*([a-z_]+)\s*\((.*)\)\s*$", re.DOTALL)
 MAX_CHOICES = 1000
 INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1  # a Parquet int64 column, as every integer a value meets
-NORMAL_REACH = 40  # normal(mu,sigma) needs mu +- 40 sigma finite: numpy's standard normal stays within +-13.8
+# normal(mu,sigma) needs mu +- 40 sigma finite: numpy's standard normal stays within +-13.8
+NORMAL_REACH = 40
 FINITE = "a finite number (at most +-1.8e308)"
 WHOLE = "a whole number -2**63..2**63-1 (int64)"
 
 
 class BadValue(ValueError):
-    """A number a value cannot carry (an integer outside int64, NaN, an infinity, 1e400); the message
-    names the number and what was expected."""
+    """A number a value cannot carry (an integer outside int64, NaN, an infinity, 1e400); the
+    message names the number and what was expected."""
 
 
 @dataclass(frozen=True)
 class Dist:
     """One distribution: kind "uniform" (args a, b), "normal" (mu, sigma), "choice" (the values) or
-    "constant" (one value). `text` is how the user wrote it (kept for the results and the summary)."""
+    "constant" (one value). `text` is how the user wrote it (kept for the results and the
+    summary)."""
 
     kind: str
     args: tuple
@@ -60,11 +62,15 @@ class Dist:
 
 
 def parse_dist(text: str, key: str = "") -> Dist:
-    """A distribution from its text; ConfigError (one line, naming the key and what was expected)."""
+    """A distribution from its text; ConfigError (one line, naming the key and what was
+    expected)."""
     shown = _short(text, 80) if isinstance(text, str) else text
     where = f"--vary {key}={shown}" if key else f"distribution {shown!r}"
     if not isinstance(text, str) or not text.strip():
-        raise ConfigError(f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), choice(v1,v2,...) or a value")
+        raise ConfigError(
+            f"{where} is invalid; expected uniform(a,b), normal(mu,sigma), "
+            f"choice(v1,v2,...) or a value"
+        )
     m = _CALL.match(text)
     if m is None:
         return Dist("constant", (_value(text.strip(), where),), text.strip())
@@ -77,16 +83,23 @@ def parse_dist(text: str, key: str = "") -> Dist:
         if kind == "uniform" and not a < b:
             raise ConfigError(f"{where} is invalid; expected uniform(a,b) with a < b")
         if kind == "uniform" and not math.isfinite(b - a):  # numpy draws a + (b - a) * u
-            raise ConfigError(f"{where} is invalid; expected uniform(a,b) with b - a finite (at most +-1.8e308)")
+            raise ConfigError(
+                f"{where} is invalid; expected uniform(a,b) with b - a finite (at most +-1.8e308)"
+            )
         if kind == "normal" and not b > 0:
             raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with sigma > 0")
-        if kind == "normal" and not math.isfinite(abs(a) + NORMAL_REACH * b):  # numpy draws mu + sigma * z
-            raise ConfigError(f"{where} is invalid; expected normal(mu,sigma) with mu +- {NORMAL_REACH}*sigma "
-                              "finite (at most +-1.8e308)")
+        # numpy draws mu + sigma * z
+        if kind == "normal" and not math.isfinite(abs(a) + NORMAL_REACH * b):
+            raise ConfigError(
+                f"{where} is invalid; expected normal(mu,sigma) with mu +- {NORMAL_REACH}*sigma "
+                "finite (at most +-1.8e308)"
+            )
         return Dist(kind, (a, b), text.strip())
     if kind == "choice":
         if not values or len(values) > MAX_CHOICES:
-            raise ConfigError(f"{where} is invalid; expected choice(v1,v2,...) with 1 to {MAX_CHOICES} values")
+            raise ConfigError(
+                f"{where} is invalid; expected choice(v1,v2,...) with 1 to {MAX_CHOICES} values"
+            )
         return Dist("choice", values, text.strip())
     raise ConfigError(f"{where}: unknown distribution {kind!r}; expected uniform, normal or choice")
 
@@ -142,8 +155,10 @@ def read_value(text: str) -> object:
             return value
         too_deep = True
     if too_deep:
-        raise BadValue(f"{_short(text)}: arrays or tables nest more than {MAX_DEPTH} levels deep; "
-                       f"expected at most {MAX_DEPTH}")
+        raise BadValue(
+            f"{_short(text)}: arrays or tables nest more than {MAX_DEPTH} levels deep; "
+            f"expected at most {MAX_DEPTH}"
+        )
     try:
         number = float(text)
     except ValueError:
@@ -175,7 +190,7 @@ def _not_finite(text: str) -> NoReturn:
 
 def _short(text: str, most: int = 40) -> str:
     """A value as written, cut to fit one line of an error."""
-    return text if len(text) <= most else f"{text[:most - 16]}...({len(text)} characters)"
+    return text if len(text) <= most else f"{text[: most - 16]}...({len(text)} characters)"
 
 
 def _is_number(v: object) -> bool:

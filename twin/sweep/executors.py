@@ -22,9 +22,12 @@ from twin.sweep.guard import GuardedPool, run_batch_guarded
 from twin.sweep.worker import failed_row
 
 EXECUTORS = ("local", "dask")
-POOL_RESTARTS = 3  # a local worker that dies (killed, out of memory): its work is sent again, this often
-DASK_RETRIES = 2  # a task that raised is tried again this often; a worker that dies is handled by Dask itself
-DASK_WINDOW_PER_JOB = 4  # batches in flight per Dask worker: enough to keep it busy, few enough to stay small
+# a local worker that dies (killed, out of memory): its work is sent again, this often
+POOL_RESTARTS = 3
+# a task that raised is tried again this often; a worker that dies is handled by Dask itself
+DASK_RETRIES = 2
+# batches in flight per Dask worker: enough to keep it busy, few enough to stay small
+DASK_WINDOW_PER_JOB = 4
 
 
 class WorkerLost(TwinError):
@@ -68,7 +71,9 @@ class LocalExecutor:
             return
         todo = dict(enumerate(items))
         for attempt in itertools.count():
-            self._pool = ProcessPoolExecutor(max_workers=min(self.jobs, max(1, len(todo))), initializer=_worker_signals)
+            self._pool = ProcessPoolExecutor(
+                max_workers=min(self.jobs, max(1, len(todo))), initializer=_worker_signals
+            )
             futures = {self._pool.submit(fn, *item): i for i, item in todo.items()}
             try:
                 while futures:
@@ -83,8 +88,10 @@ class LocalExecutor:
             except BrokenProcessPool as err:
                 self.close()
                 if attempt >= POOL_RESTARTS:
-                    raise WorkerLost(f"a local worker process died {attempt + 1} times; "
-                                     f"{len(todo)} batches not done") from err
+                    raise WorkerLost(
+                        f"a local worker process died {attempt + 1} times; "
+                        f"{len(todo)} batches not done"
+                    ) from err
 
     def close(self) -> None:
         """Stop the workers now (also part-way: Ctrl-C), dropping queued work."""
@@ -93,7 +100,8 @@ class LocalExecutor:
             guarded.close()
         if self._pool is not None:
             pool, self._pool = self._pool, None
-            for proc in list(getattr(pool, "_processes", {}).values()):  # queued work is dropped, not finished
+            # queued work is dropped, not finished
+            for proc in list(getattr(pool, "_processes", {}).values()):
                 if proc.is_alive():
                     proc.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
@@ -101,14 +109,15 @@ class LocalExecutor:
 
 class DaskExecutor:
     """Dask distributed: `cluster.connect(scheduler)` for a running cluster (workers there need twin
-    installed), else `cluster.start_local`: `jobs` single-threaded worker processes on 127.0.0.1 that
-    speak TLS with a certificate made for the run, and no HTTP server unless `dashboard`. Batches
-    are submitted as tasks from a bounded window and streamed back as they finish; a worker that
-    dies has its tasks rescheduled on the others by Dask (the results stay the same: a scenario's
-    run depends on its inputs alone)."""
+    installed), else `cluster.start_local`: `jobs` single-threaded worker processes on 127.0.0.1
+    that speak TLS with a certificate made for the run, and no HTTP server unless `dashboard`.
+    Batches are submitted as tasks from a bounded window and streamed back as they finish; a worker
+    that dies has its tasks rescheduled on the others by Dask (the results stay the same: a
+    scenario's run depends on its inputs alone)."""
 
     name = "dask"
-    batches_per_job = 2  # a task costs Dask a few round trips: fewer, longer ones (measured: 2 per worker kept
+    # a task costs Dask a few round trips: fewer, longer ones (measured: 2 per worker kept
+    batches_per_job = 2
     #                      pace with the local pool where 4 lost 10-25 %)
 
     def __init__(self, jobs: int, scheduler: str | None = None, *, dashboard: bool = False) -> None:
@@ -126,12 +135,13 @@ class DaskExecutor:
     def worker_count(self) -> int:
         return len(self._client.scheduler_info().get("workers", {}))
 
-    def run_scenarios(self, job, batches: Iterator[list[int]],
-                      scenario_timeout_s: float | None = None) -> Iterator[dict]:
-        """A sweep's rows, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker in flight.
-        Each task runs its batch in a guarded child of the Dask worker; a batch whose Dask worker was
-        lost anyway (Dask gave up: KilledWorker) is sent again one scenario per task, and a scenario
-        that loses its worker alone is a failed row."""
+    def run_scenarios(
+        self, job, batches: Iterator[list[int]], scenario_timeout_s: float | None = None
+    ) -> Iterator[dict]:
+        """A sweep's rows, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker in
+        flight. Each task runs its batch in a guarded child of the Dask worker; a batch whose Dask
+        worker was lost anyway (Dask gave up: KilledWorker) is sent again one scenario per task, and
+        a scenario that loses its worker alone is a failed row."""
         from distributed import as_completed
 
         token = os.urandom(6).hex()
@@ -141,8 +151,15 @@ class DaskExecutor:
         def submit(batch: list[int]):
             key = f"twin-{token}-{next(counter)}"
             pending[key] = batch
-            return self._client.submit(run_batch_guarded, job, batch, scenario_timeout_s, key=key, pure=False,
-                                       retries=DASK_RETRIES)
+            return self._client.submit(
+                run_batch_guarded,
+                job,
+                batch,
+                scenario_timeout_s,
+                key=key,
+                pure=False,
+                retries=DASK_RETRIES,
+            )
 
         window = max(1, self.jobs * DASK_WINDOW_PER_JOB)
         source = iter(batches)
@@ -160,7 +177,8 @@ class DaskExecutor:
                         for i in batch:
                             done.add(submit([i]))
                         continue
-                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})".splitlines()[0]
+                    why = f"worker died: Dask gave up on it ({type(err).__name__}: {err})"
+                    why = why.splitlines()[0]
                     result = [failed_row(job, batch[0], why, 0.0)]
                 nxt = next(source, None)
                 if nxt is not None:
@@ -178,11 +196,17 @@ class DaskExecutor:
         from distributed import as_completed
 
         token = os.urandom(6).hex()
-        futures = [self._client.submit(fn, *item, key=f"twin-{token}-{i}", pure=False, retries=DASK_RETRIES)
-                   for i, item in enumerate(items)]
+        futures = [
+            self._client.submit(
+                fn, *item, key=f"twin-{token}-{i}", pure=False, retries=DASK_RETRIES
+            )
+            for i, item in enumerate(items)
+        ]
         index = {fut.key: i for i, fut in enumerate(futures)}
         try:
-            done = as_completed(futures, loop=self._client.loop, with_results=True, raise_errors=False)
+            done = as_completed(
+                futures, loop=self._client.loop, with_results=True, raise_errors=False
+            )
             for fut, result in done:  # results gathered as they finish, not one round trip each
                 if fut.status == "error":
                     err = fut.exception()
@@ -212,8 +236,17 @@ def make_executor(name: str, jobs: int, scheduler: str | None = None, *, dashboa
     if scheduler and name != "dask":
         raise ConfigError("--scheduler needs --executor dask")
     if dashboard and (name != "dask" or scheduler):
-        raise ConfigError("--dashboard needs --executor dask without --scheduler (a cluster of your own has its own)")
+        raise ConfigError(
+            "--dashboard needs --executor dask without --scheduler (a cluster of your "
+            "own has its own)"
+        )
     if scheduler and not scheduler.startswith(("tcp://", "tls://")):
-        raise ConfigError(f"--scheduler {scheduler!r} is invalid; expected an address such as tcp://HOST:8786 "
-                          "or tls://HOST:8786")
-    return DaskExecutor(jobs, scheduler, dashboard=dashboard) if name == "dask" else LocalExecutor(jobs)
+        raise ConfigError(
+            f"--scheduler {scheduler!r} is invalid; expected an address such as tcp://HOST:8786 "
+            "or tls://HOST:8786"
+        )
+    return (
+        DaskExecutor(jobs, scheduler, dashboard=dashboard)
+        if name == "dask"
+        else LocalExecutor(jobs)
+    )

@@ -37,8 +37,13 @@ from twin.sweep.spec import SweepSpec, load_spec, prepare
 from twin.sweep.worker import Job
 from twin.verify.check import Outcome
 
-PERCENTILES = (("p50", "placement_p50_mm"), ("p95", "placement_p95_mm"), ("max", "placement_max_mm"))
-DEFINITION_KEYS = ("task", "scenarios", "seed")  # what makes a .toml a sweep definition (a robot profile has none)
+PERCENTILES = (
+    ("p50", "placement_p50_mm"),
+    ("p95", "placement_p95_mm"),
+    ("max", "placement_max_mm"),
+)
+# what makes a .toml a sweep definition (a robot profile has none)
+DEFINITION_KEYS = ("task", "scenarios", "seed")
 MAX_BYTES = 4 * 2**20  # the largest definition or summary read: a golden is a few kB
 
 
@@ -78,8 +83,10 @@ def _read_results(path: Path) -> tuple[paired.Side, dict]:
     except (ValueError, OSError, pa.ArrowException):
         meta = None
     if not isinstance(meta, dict) or not isinstance(meta.get("seed"), int):
-        raise ConfigError(f"sweep golden results {str(path)!r} lack their seed (schema metadata "
-                          f"{META_KEY.decode()!r}); expected a file `twin check --update` wrote")
+        raise ConfigError(
+            f"sweep golden results {str(path)!r} lack their seed (schema metadata "
+            f"{META_KEY.decode()!r}); expected a file `twin check --update` wrote"
+        )
     return side, meta
 
 
@@ -105,7 +112,9 @@ def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
                 if problem is None:
                     found.append(str(t))
                 elif summary_path(t).exists():
-                    raise ConfigError(f"sweep golden {str(t)!r} (beside {summary_path(t).name}) {problem}")
+                    raise ConfigError(
+                        f"sweep golden {str(t)!r} (beside {summary_path(t).name}) {problem}"
+                    )
             sweeps += found
             if not found or any(path.glob("*.mcap")):
                 recordings.append(p)
@@ -115,30 +124,38 @@ def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
 
 
 def _not_a_definition(path: Path) -> str | None:
-    """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why not."""
+    """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why
+    not."""
     try:
         data = load_toml_text(_regular_text(path), "is not valid TOML")  # also too deep: one line
     except (ConfigError, ValueError) as err:
         return str(err)
     missing = [k for k in DEFINITION_KEYS if k not in data]
     if missing:
-        return f"lacks {', '.join(missing)}; expected a sweep definition with {', '.join(DEFINITION_KEYS)}"
+        return (
+            f"lacks {', '.join(missing)}; expected a sweep definition with "
+            f"{', '.join(DEFINITION_KEYS)}"
+        )
     return None
 
 
 def _regular_text(path: Path) -> str:
-    """path's text when it is a regular file of at most MAX_BYTES, else ValueError saying why. A FIFO,
-    device or folder is refused before it is opened (reading a FIFO waits for a writer for ever)."""
+    """path's text when it is a regular file of at most MAX_BYTES, else ValueError saying why. A
+    FIFO, device or folder is refused before it is opened (reading a FIFO waits for a writer for
+    ever)."""
     try:
         st = os.stat(path)
         if not S_ISREG(st.st_mode):
             raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
         if st.st_size > MAX_BYTES:
             raise ValueError(f"holds {st.st_size} bytes; expected at most {MAX_BYTES}")
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # never blocks, even if swapped for a FIFO
+        # never blocks, even if swapped for a FIFO
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         with os.fdopen(fd, "rb") as f:
             if not S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
+                raise ValueError(
+                    "is not a regular file (a FIFO, device or folder); expected a file"
+                )
             data = f.read(MAX_BYTES + 1)
     except FileNotFoundError:
         raise ValueError("does not exist") from None
@@ -156,20 +173,28 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
     """What moved beyond its tolerance, one line each naming the statistic and by how much."""
     problems = []
     if new["scenarios"] != golden.get("scenarios"):
-        problems.append(f"scenarios {new['scenarios']} differ from the golden's {golden.get('scenarios')}")
+        problems.append(
+            f"scenarios {new['scenarios']} differ from the golden's {golden.get('scenarios')}"
+        )
     rate, g_rate = new["success_rate"], golden.get("success_rate", 0.0)
     lo, hi = golden.get("wilson95", [0.0, 1.0])
     if not lo <= rate <= hi:
-        problems.append(f"success_rate {rate:.4f} is outside the golden's Wilson 95 % interval [{lo:.4f}, {hi:.4f}] "
-                        f"(golden {g_rate:.4f}, moved {rate - g_rate:+.4f})")
+        problems.append(
+            f"success_rate {rate:.4f} is outside the golden's Wilson 95 % interval "
+            f"[{lo:.4f}, {hi:.4f}] "
+            f"(golden {g_rate:.4f}, moved {rate - g_rate:+.4f})"
+        )
     g_pe, pe = golden.get("placement_error_mm", {}), new["placement_error_mm"]
     for stat, tol_name in PERCENTILES:
         before, now = g_pe.get(stat), pe[stat]
         if (before is None) != (now is None):
             problems.append(f"placement_error_mm.{stat} was {before} and is {now} now")
-        elif before is not None and not abs(now - before) <= tolerances[tol_name]:  # a NaN moved too
-            problems.append(f"placement_error_mm.{stat} moved {now - before:+.3f} mm (golden {before:.3f}, now "
-                            f"{now:.3f}; tolerance {tolerances[tol_name]:g} mm)")
+        elif before is not None and not abs(now - before) <= tolerances[tol_name]:
+            # a NaN moved too
+            problems.append(
+                f"placement_error_mm.{stat} moved {now - before:+.3f} mm (golden {before:.3f}, now "
+                f"{now:.3f}; tolerance {tolerances[tol_name]:g} mm)"
+            )
     return problems
 
 
@@ -183,8 +208,10 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
         prepare(spec)
         golden = _read(expected_path) if expected_path.exists() else None
         if golden is None and not update:
-            raise ConfigError(f"sweep golden {definition!r} has no {expected_path.name} beside it; "
-                              f"`twin check --update {definition}` writes it")
+            raise ConfigError(
+                f"sweep golden {definition!r} has no {expected_path.name} beside it; "
+                f"`twin check --update {definition}` writes it"
+            )
         reference = _read_results(scenarios_path) if scenarios_path.exists() else None
         done = run_sweep(Job(spec, None, "none"), range(spec.scenarios), executor)
         if done.stopped_by is not None:
@@ -205,40 +232,60 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
             if new != golden:
                 _write_atomically(expected_path, new)
                 wrote.append(expected_path.name)
-            if reference is None or reference[1] != _meta(spec) or not reference[0].table.equals(
-                    paired.side_from_table(new_table, "now").table):
+            if (
+                reference is None
+                or reference[1] != _meta(spec)
+                or not reference[0].table.equals(paired.side_from_table(new_table, "now").table)
+            ):
                 _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
                 wrote.append(scenarios_path.name)
             if wrote:
                 was = "; ".join(problems) or "within tolerance"
-                return Outcome(definition, "updated", 0, f"rewrote {', '.join(wrote)}; was: {was}",
-                               report, spec.scenarios, seconds)
+                return Outcome(
+                    definition,
+                    "updated",
+                    0,
+                    f"rewrote {', '.join(wrote)}; was: {was}",
+                    report,
+                    spec.scenarios,
+                    seconds,
+                )
         if problems:
-            return Outcome(definition, "differ", 1, "; ".join(problems), report, spec.scenarios,
-                           seconds)
+            return Outcome(
+                definition, "differ", 1, "; ".join(problems), report, spec.scenarios, seconds
+            )
         return Outcome(definition, "match", 0, within or "matches", report, spec.scenarios, seconds)
     except TwinError as err:
-        return Outcome(definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+        return Outcome(
+            definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
+        )
 
 
-def _judge_paired(definition: str, spec: SweepSpec, reference: tuple[paired.Side, dict],
-                  new_table: pa.Table) -> tuple[list[str], str, str]:
+def _judge_paired(
+    definition: str, spec: SweepSpec, reference: tuple[paired.Side, dict], new_table: pa.Table
+) -> tuple[list[str], str, str]:
     """Problems, the report and a within-tolerance note ("" when nothing moved) of the new run
     paired with the golden's results. Another seed or set of scenarios is a problem of its own:
     those scenarios are not the same ones."""
     side, meta = reference
     problems = []
     if meta["seed"] != spec.seed:
-        problems.append(f"the definition's seed {spec.seed} is not the one of {side.label} "
-                        f"({meta['seed']}): its scenarios are others; `twin check --update "
-                        f"{definition}` after an intended change")
+        problems.append(
+            f"the definition's seed {spec.seed} is not the one of {side.label} "
+            f"({meta['seed']}): its scenarios are others; `twin check --update "
+            f"{definition}` after an intended change"
+        )
     p = paired.pair(side, paired.side_from_table(new_table, "now"))
     if p.only_reference or p.only_new:
-        problems.append(f"the golden's results hold {side.n} scenarios and the run "
-                        f"{spec.scenarios} ({p.n} in both)")
+        problems.append(
+            f"the golden's results hold {side.n} scenarios and the run "
+            f"{spec.scenarios} ({p.n} in both)"
+        )
     if p.values_moved:
-        problems.append("varied values differ from the golden's: " + ", ".join(
-            f"{k} in {c} scenarios" for k, c in p.values_moved.items()))
+        problems.append(
+            "varied values differ from the golden's: "
+            + ", ".join(f"{k} in {c} scenarios" for k, c in p.values_moved.items())
+        )
     rule = spec.tolerance.get("paired", "significant")
     problems += paired.problems(p, rule, spec.tolerances()["placement_shift_mm"])
     if problems and (p.worse or p.better):
@@ -257,7 +304,8 @@ def _read(path: Path) -> dict:
         text = _regular_text(path)
     except ValueError as err:
         raise ConfigError(f"sweep golden summary {str(path)!r} {err}") from err
-    data = load_json_text(text, f"sweep golden summary {str(path)!r} is not valid JSON")  # also too deep: one line
+    # also too deep: one line
+    data = load_json_text(text, f"sweep golden summary {str(path)!r} is not valid JSON")
     return check_summary(data, str(path))
 
 
@@ -266,9 +314,12 @@ def check_summary(data: object, where: str) -> dict:
     success_rate in [0, 1] inside its finite wilson95 interval, finite ordered placement-error
     percentiles (all null when count is 0) and failures_by_reason counting the failures. Else a
     one-line ConfigError naming where, the field, its value and what was expected."""
+
     def bad(name: str, value: object, expected: str) -> ConfigError:
         shown = json.dumps(value) if not isinstance(value, str) else repr(value)
-        return ConfigError(f"sweep golden summary {where!r}: {name} {shown[:80]} is invalid; expected {expected}")
+        return ConfigError(
+            f"sweep golden summary {where!r}: {name} {shown[:80]} is invalid; expected {expected}"
+        )
 
     if not isinstance(data, dict):
         raise bad("the summary", type(data).__name__, "a JSON object (a sweep's summary.json)")
@@ -299,7 +350,11 @@ def check_summary(data: object, where: str) -> dict:
         if count == 0 and value is not None:
             raise bad(f"placement_error_mm.{stat_name}", value, "null (count is 0)")
         if count > 0 and not _finite(value):
-            raise bad(f"placement_error_mm.{stat_name}", value, f"a finite number of mm (count is {count})")
+            raise bad(
+                f"placement_error_mm.{stat_name}",
+                value,
+                f"a finite number of mm (count is {count})",
+            )
     if count > 0 and not pe["p50"] <= pe["p95"] <= pe["max"]:
         raise bad("placement_error_mm", {s: pe[s] for s, _ in PERCENTILES}, "p50 <= p95 <= max")
     reasons = data.get("failures_by_reason")
@@ -324,10 +379,15 @@ def _write_atomically(path: Path, data: dict) -> None:
     try:
         text = summary_text(data)
     except ValueError as err:  # a NaN or infinity from the task's placements
-        raise ConfigError(f"the new summary of {path.name} holds a non-finite number ({err}); not written") from err
+        raise ConfigError(
+            f"the new summary of {path.name} holds a non-finite number ({err}); not written"
+        ) from err
     if len(text.encode()) > MAX_BYTES:
-        raise ConfigError(f"the new summary of {path.name} would hold {len(text.encode())} bytes; expected at most "
-                          f"{MAX_BYTES}; not written")
+        raise ConfigError(
+            f"the new summary of {path.name} would hold {len(text.encode())} bytes; "
+            f"expected at most "
+            f"{MAX_BYTES}; not written"
+        )
     _publish_atomically(path, lambda p: Path(p).write_text(text))
 
 
@@ -354,22 +414,34 @@ def _publish_atomically(path: Path, write) -> None:
 def _moves(golden: dict, new: dict) -> str:
     pe, g_pe = new["placement_error_mm"], golden["placement_error_mm"]
     parts = [f"success_rate {new['success_rate'] - golden['success_rate']:+.4f}"]
-    parts += [f"{stat} {pe[stat] - g_pe[stat]:+.3f} mm" for stat, _ in PERCENTILES
-              if pe[stat] is not None and g_pe.get(stat) is not None]
+    parts += [
+        f"{stat} {pe[stat] - g_pe[stat]:+.3f} mm"
+        for stat, _ in PERCENTILES
+        if pe[stat] is not None and g_pe.get(stat) is not None
+    ]
     return ", ".join(parts)
 
 
 def _report(golden: dict | None, new: dict) -> str:
     """Golden and new statistics side by side (`twin check -v`)."""
+
     def row(name: str, g: object, n: object) -> str:
         return f"  {name:<26} {g!s:>22} {n!s:>22}"
 
     g = golden or {}
     g_pe, pe = g.get("placement_error_mm", {}), new["placement_error_mm"]
-    lines = [row("statistic", "golden", "now"), row("scenarios", g.get("scenarios"), new["scenarios"]),
-             row("success_rate", g.get("success_rate"), new["success_rate"]),
-             row("wilson95", g.get("wilson95"), [round(v, 4) for v in new["wilson95"]])]
+    lines = [
+        row("statistic", "golden", "now"),
+        row("scenarios", g.get("scenarios"), new["scenarios"]),
+        row("success_rate", g.get("success_rate"), new["success_rate"]),
+        row("wilson95", g.get("wilson95"), [round(v, 4) for v in new["wilson95"]]),
+    ]
     lines += [row(f"placement_error_mm.{s}", g_pe.get(s), pe[s]) for s, _ in PERCENTILES]
-    lines.append(row("failures_by_reason", json.dumps(g.get("failures_by_reason")),
-                     json.dumps(new["failures_by_reason"])))
+    lines.append(
+        row(
+            "failures_by_reason",
+            json.dumps(g.get("failures_by_reason")),
+            json.dumps(new["failures_by_reason"]),
+        )
+    )
     return "\n".join(lines) + "\n"

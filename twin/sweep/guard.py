@@ -4,11 +4,11 @@ A `Child` is a forked process that runs the batches of scenarios sent to it, one
 scenario, in order, so the parent always knows which scenario is running. It dies with its parent
 (PR_SET_PDEATHSIG) and leaves Ctrl-C to it. `GuardedPool` keeps `jobs` children busy with batches
 taken from an iterator (only as many as it has children: the window is bounded whatever the sweep's
-size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs past the wall-clock
-limit into a failed scenario: that scenario is run once more, alone in a fresh child and recorded per
-the job's --save; if it dies or hangs again, its row says why, the rest of its batch goes on in
-another child and so does the sweep. The local executor runs a pool of `jobs` children; a Dask task
-runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
+size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs past the
+wall-clock limit into a failed scenario: that scenario is run once more, alone in a fresh child and
+recorded per the job's --save; if it dies or hangs again, its row says why, the rest of its batch
+goes on in another child and so does the sweep. The local executor runs a pool of `jobs` children; a
+Dask task runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
 """
 
 from __future__ import annotations
@@ -35,9 +35,11 @@ from twin.sweep.worker import (
 )
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
-OOM_EVENTS = "/sys/fs/cgroup/memory.events"  # cgroup v2: oom_kill counts the processes the OOM killer ended
-_PARENT_ENDS: set[int] = set()  # this process's ends of its children's pipes: a new child closes them, or a
-#                                 child would never read the end of its pipe while a sibling held that end open
+# cgroup v2: oom_kill counts the processes the OOM killer ended
+OOM_EVENTS = "/sys/fs/cgroup/memory.events"
+# this process's ends of its children's pipes: a new child closes them, or a child would never
+# read the end of its pipe while a sibling held that end open
+_PARENT_ENDS: set[int] = set()
 
 
 class Child:
@@ -58,7 +60,8 @@ class Child:
         finally:
             if pid != 0:
                 signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        if pid == 0:  # the child: serve until the parent closes its end, never return into the parent's code
+        # the child: serve until the parent closes its end, never return into the parent's code
+        if pid == 0:
             code = 0
             try:
                 parent_end.close()
@@ -75,7 +78,8 @@ class Child:
         _PARENT_ENDS.add(self.conn.fileno())
         self.pending: deque[int] = deque()
         self.started_s = time.monotonic()  # when the scenario pending[0] started
-        self.confirm: str | None = None  # running one scenario again, alone: why its first run ended
+        # running one scenario again, alone: why its first run ended
+        self.confirm: str | None = None
         self.timed_out = False
         self.oom_before = oom_kills()
 
@@ -115,8 +119,8 @@ class Child:
 
 
 def _serve(conn: Connection, job: Job, parent_pid: int, mask: set) -> None:
-    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop", error).
-    mask: the signal mask to restore once the child's own handlers are set."""
+    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop",
+    error). mask: the signal mask to restore once the child's own handlers are set."""
     libc = ctypes.CDLL(None, use_errno=True)
     prctl = getattr(libc, "prctl", None)
     if prctl is not None:
@@ -167,7 +171,8 @@ class GuardedPool:
         self.busy: list[Child] = []
         self.idle: list[Child] = []
         self.again: deque[list[int]] = deque()  # the rest of a batch whose child died
-        self.to_confirm: deque[tuple[int, str]] = deque()  # scenarios to run once more, alone: (i, first reason)
+        # scenarios to run once more, alone: (i, first reason)
+        self.to_confirm: deque[tuple[int, str]] = deque()
 
     def run(self, batches: Iterable[list[int]]) -> Iterator[dict]:
         source = iter(batches)
@@ -211,7 +216,9 @@ class GuardedPool:
         time limit is marked and returned too."""
         timeout = None
         if self.timeout_s is not None:
-            timeout = max(0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic())
+            timeout = max(
+                0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic()
+            )
         ready = wait([c.conn for c in self.busy], timeout)
         out = [c for c in self.busy if c.conn in ready]
         if self.timeout_s is not None:
@@ -245,7 +252,8 @@ class GuardedPool:
         if child.pending:
             self.again.append(list(child.pending))
             child.pending.clear()
-        if child.confirm is None:  # first time: run it once more, alone, before calling it a failure
+        # first time: run it once more, alone, before calling it a failure
+        if child.confirm is None:
             self.to_confirm.append((scenario, reason))
             return None
         why = reason if reason == child.confirm else f"{reason} (first run: {child.confirm})"
@@ -263,7 +271,9 @@ class GuardedPool:
                 child.reap()
 
 
-def run_batch_guarded(job: Job, scenarios: list[int], scenario_timeout_s: float | None = None) -> list[dict]:
+def run_batch_guarded(
+    job: Job, scenarios: list[int], scenario_timeout_s: float | None = None
+) -> list[dict]:
     """A batch's rows, run in a child of this process (what a Dask task runs): a scenario that kills
     its process or hangs is a failed row, the Dask worker lives on."""
     return list(GuardedPool(job, 1, scenario_timeout_s).run([scenarios]))

@@ -31,8 +31,9 @@ def identity(spec: SweepSpec) -> dict:
 
 
 class Journal:
-    """The journal of one sweep in out_dir. resume=False starts it afresh; resume=True keeps the rows
-    of an earlier run of the same definition (`rows`; `done(i)` says whether scenario i has one)."""
+    """The journal of one sweep in out_dir. resume=False starts it afresh; resume=True keeps the
+    rows of an earlier run of the same definition (`rows`; `done(i)` says whether scenario i has
+    one)."""
 
     def __init__(self, out_dir: str | os.PathLike, spec: SweepSpec, *, resume: bool) -> None:
         self.path = Path(out_dir) / JOURNAL
@@ -49,7 +50,9 @@ class Journal:
                 self._file = open(self.path, "wb")  # noqa: SIM115
                 self._write(head)
         except OSError as err:
-            raise ConfigError(f"cannot write the sweep's journal {str(self.path)!r}: {err.strerror or err}") from err
+            raise ConfigError(
+                f"cannot write the sweep's journal {str(self.path)!r}: {err.strerror or err}"
+            ) from err
 
     def _read(self, spec: SweepSpec, definition: dict) -> int:
         """Read the rows an earlier run wrote; the byte offset after the last whole line."""
@@ -61,18 +64,24 @@ class Journal:
         except ConfigError:  # not JSON, or nested past what twin reads
             head = None
         if not isinstance(head, dict) or head.get("twin_sweep_journal") != FORMAT:
-            raise ConfigError(f"--resume: {str(self.path)!r} is not a twin sweep journal; expected one that "
-                              "twin sweep wrote (or run without --resume to start afresh)")
+            raise ConfigError(
+                f"--resume: {str(self.path)!r} is not a twin sweep journal; expected one that "
+                "twin sweep wrote (or run without --resume to start afresh)"
+            )
         if head.get("definition") != definition:
-            raise ConfigError(f"--resume: {str(self.path)!r} holds a different sweep (task, robot, seed, vary, "
-                              "params, rate or timeout differ); expected the same definition, or no --resume")
+            raise ConfigError(
+                f"--resume: {str(self.path)!r} holds a different sweep (task, robot, seed, vary, "
+                "params, rate or timeout differ); expected the same definition, or no --resume"
+            )
         for number, line in enumerate(lines[1:], start=2):
             try:
                 row = load_json_text(line, "journal")
                 i = row["scenario"]
             except (ConfigError, TypeError, KeyError):
-                raise ConfigError(f"--resume: {str(self.path)!r} line {number} is damaged; expected one "
-                                  "scenario's row per line") from None
+                raise ConfigError(
+                    f"--resume: {str(self.path)!r} line {number} is damaged; expected one "
+                    "scenario's row per line"
+                ) from None
             if isinstance(i, int) and 0 <= i < spec.scenarios and not self.done(i):
                 self._done[i >> 3] |= 1 << (i & 7)
                 self.rows.append(row)
@@ -89,7 +98,9 @@ class Journal:
             self._file.write(json.dumps(data, separators=(",", ":")).encode() + b"\n")
             self._file.flush()  # in the kernel's hands: a killed process loses nothing written
         except OSError as err:
-            raise ConfigError(f"cannot write the sweep's journal {str(self.path)!r}: {err.strerror or err}") from err
+            raise ConfigError(
+                f"cannot write the sweep's journal {str(self.path)!r}: {err.strerror or err}"
+            ) from err
 
     def close(self) -> None:
         self._file.close()

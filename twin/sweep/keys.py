@@ -19,19 +19,34 @@ from twin.model.config import SUCTION_SCHEMA, TwinConfig
 from twin.sweep.dists import Dist
 from twin.tasks import TaskFn, task_params
 
-OBJECT_FIELDS = {"x_m": ("pos_m", 0), "y_m": ("pos_m", 1), "z_m": ("pos_m", 2), "yaw_rad": ("yaw_rad", None),
-                 "mass_kg": ("mass_kg", None), "friction": ("friction", None)}
-ROBOT_FIELDS = ("revolute_max_velocity_rad_s", "prismatic_max_velocity_m_s", "revolute_max_torque_nm",
-                "prismatic_max_force_n")
-ENGINE_FIELDS = ("num_solver_iterations", "position_gain", "velocity_gain", "solver_residual_threshold")
+OBJECT_FIELDS = {
+    "x_m": ("pos_m", 0),
+    "y_m": ("pos_m", 1),
+    "z_m": ("pos_m", 2),
+    "yaw_rad": ("yaw_rad", None),
+    "mass_kg": ("mass_kg", None),
+    "friction": ("friction", None),
+}
+ROBOT_FIELDS = (
+    "revolute_max_velocity_rad_s",
+    "prismatic_max_velocity_m_s",
+    "revolute_max_torque_nm",
+    "prismatic_max_force_n",
+)
+ENGINE_FIELDS = (
+    "num_solver_iterations",
+    "position_gain",
+    "velocity_gain",
+    "solver_residual_threshold",
+)
 PAD_FIELDS = tuple(SUCTION_SCHEMA)
 
 
 @dataclass(frozen=True)
 class Key:
-    """A varied key: `name` as written; `part` is "object", "pad", "robot", "engine" or "task"; `owner`
-    the object's name (objects only); `field` the dataclass field or task parameter; `index` the
-    component of a tuple field (pos_m) or None."""
+    """A varied key: `name` as written; `part` is "object", "pad", "robot", "engine" or "task";
+    `owner` the object's name (objects only); `field` the dataclass field or task parameter; `index`
+    the component of a tuple field (pos_m) or None."""
 
     name: str
     part: str
@@ -45,22 +60,31 @@ def resolve_key(name: str, config: TwinConfig, fn: TaskFn, task: str) -> Key:
     head, dot, tail = name.partition(".")
     objects = [o.name for o in config.objects]
     if not dot or not tail:
-        raise ConfigError(f"--vary key {name!r} is invalid; expected PART.FIELD: {_expected(objects)}")
+        raise ConfigError(
+            f"--vary key {name!r} is invalid; expected PART.FIELD: {_expected(objects)}"
+        )
     if head == "task":
         known = task_params(fn)
         if known is not None and tail not in known:
-            raise ConfigError(f"--vary key {name!r}: task {task!r} takes no parameter {tail!r}; "
-                              f"its parameters: {', '.join(known) or 'none'}")
+            raise ConfigError(
+                f"--vary key {name!r}: task {task!r} takes no parameter {tail!r}; "
+                f"its parameters: {', '.join(known) or 'none'}"
+            )
         return Key(name, "task", tail)
     fields = {"pad": PAD_FIELDS, "robot": ROBOT_FIELDS, "engine": ENGINE_FIELDS}.get(head)
     if fields is not None:
         if tail not in fields:
-            raise ConfigError(f"--vary key {name!r} is unknown; expected {head}. followed by one of {', '.join(fields)}")
+            raise ConfigError(
+                f"--vary key {name!r} is unknown; expected {head}. followed by one of "
+                f"{', '.join(fields)}"
+            )
         return Key(name, head, tail)
     if head in objects:
         if tail not in OBJECT_FIELDS:
-            raise ConfigError(f"--vary key {name!r} is unknown; expected {head}. followed by one of "
-                              f"{', '.join(OBJECT_FIELDS)}")
+            raise ConfigError(
+                f"--vary key {name!r} is unknown; expected {head}. followed by one of "
+                f"{', '.join(OBJECT_FIELDS)}"
+            )
         field, index = OBJECT_FIELDS[tail]
         return Key(name, "object", field, head, index)
     raise ConfigError(f"--vary key {name!r} is unknown; expected {_expected(objects)}")
@@ -68,8 +92,10 @@ def resolve_key(name: str, config: TwinConfig, fn: TaskFn, task: str) -> Key:
 
 def _expected(objects: list[str]) -> str:
     names = "/".join(objects) or "(no objects)"
-    return (f"<object>.x_m|y_m|z_m|yaw_rad|mass_kg|friction (objects: {names}), pad.<field>, "
-            "robot.<joint speed or strength>, engine.<field> or task.<parameter>")
+    return (
+        f"<object>.x_m|y_m|z_m|yaw_rad|mass_kg|friction (objects: {names}), pad.<field>, "
+        "robot.<joint speed or strength>, engine.<field> or task.<parameter>"
+    )
 
 
 def check_dist(key: Key, dist: Dist, config: TwinConfig, fn: TaskFn) -> None:
@@ -83,7 +109,8 @@ def check_dist(key: Key, dist: Dist, config: TwinConfig, fn: TaskFn) -> None:
 
 
 def _check_task_values(key: Key, dist: Dist, fn: TaskFn) -> None:
-    """A task parameter with a default takes values of the default's type (bool, int, float, str)."""
+    """A task parameter with a default takes values of the default's type (bool, int, float,
+    str)."""
     param = (task_params(fn) or {}).get(key.field)
     default = None if param is None or param.default is inspect.Parameter.empty else param.default
     if default is None:
@@ -92,17 +119,25 @@ def _check_task_values(key: Key, dist: Dist, fn: TaskFn) -> None:
     if kind is bool:
         ok = not dist.real and all(isinstance(v, bool) for v in dist.candidates())
     elif kind is int:
-        ok = not dist.real and all(isinstance(v, int) and not isinstance(v, bool) for v in dist.candidates())
+        ok = not dist.real and all(
+            isinstance(v, int) and not isinstance(v, bool) for v in dist.candidates()
+        )
     elif kind is float:
         ok = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in dist.candidates())
     else:
-        ok = kind is not str or (not dist.real and all(isinstance(v, str) for v in dist.candidates()))
+        ok = kind is not str or (
+            not dist.real and all(isinstance(v, str) for v in dist.candidates())
+        )
     if not ok:
-        raise ConfigError(f"--vary {key.name}={dist.text} is invalid; the task's {key.field} takes "
-                          f"{kind.__name__} values (its default is {default!r})")
+        raise ConfigError(
+            f"--vary {key.name}={dist.text} is invalid; the task's {key.field} takes "
+            f"{kind.__name__} values (its default is {default!r})"
+        )
 
 
-def apply_values(config: TwinConfig, values: dict[Key, object], where: str = "scenario") -> TwinConfig:
+def apply_values(
+    config: TwinConfig, values: dict[Key, object], where: str = "scenario"
+) -> TwinConfig:
     """config with the non-task values set, checked against the configuration's schema (the check a
     recording's configuration gets); ConfigError naming the key and value that are invalid."""
     changed = config
@@ -119,7 +154,9 @@ def apply_values(config: TwinConfig, values: dict[Key, object], where: str = "sc
                 try:
                     TwinConfig.from_dict(json.loads(json.dumps(_set(config, key, value).to_dict())))
                 except (ConfigError, TypeError, ValueError) as one:
-                    raise ConfigError(f"{where}: {key.name} = {value!r} is invalid ({one})") from None
+                    raise ConfigError(
+                        f"{where}: {key.name} = {value!r} is invalid ({one})"
+                    ) from None
         raise ConfigError(f"{where}: {err}") from None
     return changed
 
@@ -135,11 +172,21 @@ def _set(config: TwinConfig, key: Key, value: object) -> TwinConfig:
         objects = list(config.objects)
         i = [o.name for o in objects].index(key.owner)
         old = getattr(objects[i], key.field)
-        new = value if key.index is None else tuple(value if j == key.index else v for j, v in enumerate(old))
+        new = (
+            value
+            if key.index is None
+            else tuple(value if j == key.index else v for j, v in enumerate(old))
+        )
         objects[i] = dataclasses.replace(objects[i], **{key.field: new})
         return dataclasses.replace(config, objects=tuple(objects))
     if key.part == "pad":
-        return dataclasses.replace(config, suction=dataclasses.replace(config.suction, **{key.field: value}))
+        return dataclasses.replace(
+            config, suction=dataclasses.replace(config.suction, **{key.field: value})
+        )
     if key.part == "robot":
-        return dataclasses.replace(config, profile=dataclasses.replace(config.profile, **{key.field: value}))
-    return dataclasses.replace(config, engine=dataclasses.replace(config.engine, **{key.field: value}))
+        return dataclasses.replace(
+            config, profile=dataclasses.replace(config.profile, **{key.field: value})
+        )
+    return dataclasses.replace(
+        config, engine=dataclasses.replace(config.engine, **{key.field: value})
+    )

@@ -19,9 +19,16 @@ from twin.sweep.worker import COUNTED
 RESULTS, SUMMARY, DEFINITION = "results.parquet", "summary.json", "sweep.toml"
 LEADING = ("scenario", "seed")
 TRAILING = ("outcome", "error", "placement_error_mm", *COUNTED, "sim_s", "wall_s")
-_TYPES = {"scenario": pa.int64(), "seed": pa.int64(), "outcome": pa.string(), "error": pa.string(),
-          "placement_error_mm": pa.float64(), **dict.fromkeys(COUNTED, pa.int64()), "sim_s": pa.float64(),
-          "wall_s": pa.float64()}
+_TYPES = {
+    "scenario": pa.int64(),
+    "seed": pa.int64(),
+    "outcome": pa.string(),
+    "error": pa.string(),
+    "placement_error_mm": pa.float64(),
+    **dict.fromkeys(COUNTED, pa.int64()),
+    "sim_s": pa.float64(),
+    "wall_s": pa.float64(),
+}
 
 
 def table(spec: SweepSpec, rows: list[dict]) -> pa.Table:
@@ -31,12 +38,15 @@ def table(spec: SweepSpec, rows: list[dict]) -> pa.Table:
     columns = {}
     for name in (*LEADING, *(k for k, _ in spec.vary), *TRAILING):
         values = [r.get(name) for r in rows]
-        columns[name] = pa.array(values, type=_TYPES.get(name)) if name in _TYPES else _varied(values)
+        columns[name] = (
+            pa.array(values, type=_TYPES.get(name)) if name in _TYPES else _varied(values)
+        )
     return pa.table(columns)
 
 
 def _varied(values: list) -> pa.Array:
-    """A varied key's column: numbers, booleans or text as they come; mixed kinds as their JSON text."""
+    """A varied key's column: numbers, booleans or text as they come; mixed kinds as their JSON
+    text."""
     try:
         return pa.array(values)
     except (pa.ArrowInvalid, pa.ArrowTypeError):
@@ -46,8 +56,12 @@ def _varied(values: list) -> pa.Array:
 def summary(spec: SweepSpec, rows: list[dict], *, planned: int | None = None) -> dict:
     """summary.json's content: the definition's task, robot and seed, then the statistics; planned
     (when the sweep was stopped part-way) is the number of scenarios asked for."""
-    names = {k: Path(v).name if v.endswith((".py", ".toml")) else v for k, v in (("task", spec.task), ("robot", spec.robot))}
-    out = {**names, "seed": spec.seed, **summarize(rows)}  # a file by its name: no folder, no absolute path
+    names = {
+        k: Path(v).name if v.endswith((".py", ".toml")) else v
+        for k, v in (("task", spec.task), ("robot", spec.robot))
+    }
+    # a file by its name: no folder, no absolute path
+    out = {**names, "seed": spec.seed, **summarize(rows)}
     if planned is not None and planned != len(rows):
         out["interrupted"] = True
         out["planned"] = planned
@@ -59,8 +73,9 @@ def summary_text(data: dict) -> str:
     return json.dumps(data, indent=2, allow_nan=False) + "\n"
 
 
-def write_results(out_dir: str | os.PathLike, spec: SweepSpec, rows: list[dict], *,
-                  planned: int | None = None) -> dict:
+def write_results(
+    out_dir: str | os.PathLike, spec: SweepSpec, rows: list[dict], *, planned: int | None = None
+) -> dict:
     """Write results.parquet and summary.json into out_dir; returns the summary."""
     out = Path(out_dir)
     data = summary(spec, rows, planned=planned)
@@ -70,12 +85,14 @@ def write_results(out_dir: str | os.PathLike, spec: SweepSpec, rows: list[dict],
 
 
 def write_definition(out_dir: str | os.PathLike, spec: SweepSpec) -> None:
-    """DIR/sweep.toml: the definition that made the results (copy it to recordings/sweeps/ as a golden).
-    A task or profile file is named relative to DIR, as load_spec finds it."""
+    """DIR/sweep.toml: the definition that made the results (copy it to recordings/sweeps/ as a
+    golden). A task or profile file is named relative to DIR, as load_spec finds it."""
     for name in ("task", "robot"):
         path = getattr(spec, name)
         if path.endswith((".py", ".toml")) and Path(path).is_file():
-            spec = dataclasses.replace(spec, **{name: os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir))})
+            spec = dataclasses.replace(
+                spec, **{name: os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir))}
+            )
     text = dump_spec(spec)
     _publish(Path(out_dir) / DEFINITION, lambda p: p.write_text(text))
 

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from twin.signals import Terminated
 from twin.sweep.worker import Job
 
-MAX_BATCH = 16  # scenarios per task: long enough to amortize sending it, short enough for steady progress
+# scenarios per task: long enough to amortize sending it, short enough for steady progress
+MAX_BATCH = 16
 BATCHES_PER_JOB = 4  # at least this many batches per worker, so the last ones finish together
 
 
@@ -35,21 +36,31 @@ def batch_size(count: int, jobs: int, per_job: int = BATCHES_PER_JOB) -> int:
 
 
 def batches(scenarios: Iterable[int], n: int, size: int) -> Iterator[list[int]]:
-    """The n scenarios cut into batches of at most `size`, all of nearly one length (a short last batch
-    would leave a worker idle at the end), made as they are asked for: 10M planned cost nothing."""
+    """The n scenarios cut into batches of at most `size`, all of nearly one length (a short last
+    batch would leave a worker idle at the end), made as they are asked for: 10M planned cost
+    nothing."""
     source = iter(scenarios)
     count = math.ceil(n / size)
     for k in range(count):
         yield list(itertools.islice(source, (k + 1) * n // count - k * n // count))
 
 
-def run_sweep(job: Job, scenarios: Iterable[int], executor, *, count: int | None = None,
-              batch_size_n: int | None = None, scenario_timeout_s: float | None = None,
-              on_row: Callable[[dict], None] | None = None, rows: list[dict] | None = None,
-              planned: int | None = None) -> SweepRun:
-    """Run the scenarios (count of them: len(scenarios) when not given); on_row is told each finished
-    one. rows: those already finished (a resumed sweep); planned: how many the whole sweep has. The
-    caller closes the executor (it may run more); an interrupted sweep closes it at once."""
+def run_sweep(
+    job: Job,
+    scenarios: Iterable[int],
+    executor,
+    *,
+    count: int | None = None,
+    batch_size_n: int | None = None,
+    scenario_timeout_s: float | None = None,
+    on_row: Callable[[dict], None] | None = None,
+    rows: list[dict] | None = None,
+    planned: int | None = None,
+) -> SweepRun:
+    """Run the scenarios (count of them: len(scenarios) when not given); on_row is told each
+    finished one. rows: those already finished (a resumed sweep); planned: how many the whole sweep
+    has. The caller closes the executor (it may run more); an interrupted sweep closes it at
+    once."""
     t0 = time.perf_counter()
     rows = list(rows or [])
     count = len(scenarios) if count is None else count
@@ -65,4 +76,6 @@ def run_sweep(job: Job, scenarios: Iterable[int], executor, *, count: int | None
         stopped_by = err
         executor.close()  # stop the workers now; the scenarios that finished are kept
     rows.sort(key=lambda r: r["scenario"])
-    return SweepRun(rows, count if planned is None else planned, time.perf_counter() - t0, stopped_by)
+    return SweepRun(
+        rows, count if planned is None else planned, time.perf_counter() - t0, stopped_by
+    )

@@ -19,8 +19,19 @@ from twin.tasks import TaskFn, check_params, resolve
 
 MAX_SCENARIOS = 10_000_000
 MAX_SEED = 2**63 - 1
-SPEC_FIELDS = ("task", "robot", "seed", "scenarios", "rate_hz", "timeout_s", "params", "vary", "tolerance")
-TOLERANCES = {  # what a statistical golden allows by default (recordings/sweeps/README in the README's Sweeps)
+SPEC_FIELDS = (
+    "task",
+    "robot",
+    "seed",
+    "scenarios",
+    "rate_hz",
+    "timeout_s",
+    "params",
+    "vary",
+    "tolerance",
+)
+# what a statistical golden allows by default (recordings/sweeps/README in the README's Sweeps)
+TOLERANCES = {
     "placement_p50_mm": 0.5,
     "placement_p95_mm": 1.0,
     "placement_max_mm": 2.0,
@@ -45,36 +56,72 @@ class SweepSpec:
     tolerance: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if isinstance(self.scenarios, bool) or not isinstance(self.scenarios, int) or \
-                not 1 <= self.scenarios <= MAX_SCENARIOS:
-            raise ConfigError(f"scenarios {self.scenarios!r} is invalid; expected a whole number 1..{MAX_SCENARIOS}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
+        if (
+            isinstance(self.scenarios, bool)
+            or not isinstance(self.scenarios, int)
+            or not 1 <= self.scenarios <= MAX_SCENARIOS
+        ):
+            raise ConfigError(
+                f"scenarios {self.scenarios!r} is invalid; expected a whole number "
+                f"1..{MAX_SCENARIOS}"
+            )
+        if (
+            isinstance(self.seed, bool)
+            or not isinstance(self.seed, int)
+            or not 0 <= self.seed <= MAX_SEED
+        ):
             raise ConfigError(f"seed {self.seed!r} is invalid; expected a whole number 0..2**63-1")
         names = [k for k, _ in self.vary]
         if len(set(names)) != len(names):
-            raise ConfigError(f"--vary names a key twice: {min(k for k in names if names.count(k) > 1)!r}")
-        if self.timeout_s is not None and not (isinstance(self.timeout_s, (int, float)) and
-                                               math.isfinite(self.timeout_s) and self.timeout_s > 0):
-            raise ConfigError(f"timeout_s {self.timeout_s!r} is invalid; expected seconds of simulated time > 0")
+            raise ConfigError(
+                f"--vary names a key twice: {min(k for k in names if names.count(k) > 1)!r}"
+            )
+        if self.timeout_s is not None and not (
+            isinstance(self.timeout_s, (int, float))
+            and math.isfinite(self.timeout_s)
+            and self.timeout_s > 0
+        ):
+            raise ConfigError(
+                f"timeout_s {self.timeout_s!r} is invalid; expected seconds of simulated time > 0"
+            )
         for name, value in self.tolerance.items():
             if name == "paired":
                 if value not in PAIRED_RULES:
-                    raise ConfigError(f"tolerance paired = {value!r:.60} is invalid; expected "
-                                      '"significant" or "strict"')
+                    raise ConfigError(
+                        f"tolerance paired = {value!r:.60} is invalid; expected "
+                        '"significant" or "strict"'
+                    )
                 continue
-            if name not in TOLERANCES or isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                    not math.isfinite(value) or value < 0:  # a NaN tolerance would pass any move
-                raise ConfigError(f"tolerance {name} = {value!r:.60} is invalid; expected one of "
-                                  f"{', '.join(TOLERANCES)} = a finite number >= 0 (mm), "
-                                  'or paired = "significant" or "strict"')
+            if (
+                name not in TOLERANCES
+                or isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+                or value < 0
+            ):  # a NaN tolerance would pass any move
+                raise ConfigError(
+                    f"tolerance {name} = {value!r:.60} is invalid; expected one of "
+                    f"{', '.join(TOLERANCES)} = a finite number >= 0 (mm), "
+                    'or paired = "significant" or "strict"'
+                )
 
     def tolerances(self) -> dict[str, float]:
         return {**TOLERANCES, **self.tolerance}
 
     def key(self) -> str:
         """A text that identifies the definition (workers cache what they prepared under it)."""
-        return json.dumps([self.task, self.robot, self.seed, self.vary, self.params, self.rate_hz, self.timeout_s],
-                          sort_keys=True)
+        return json.dumps(
+            [
+                self.task,
+                self.robot,
+                self.seed,
+                self.vary,
+                self.params,
+                self.rate_hz,
+                self.timeout_s,
+            ],
+            sort_keys=True,
+        )
 
 
 @dataclass(frozen=True)
@@ -98,7 +145,9 @@ def prepare(spec: SweepSpec) -> Prepared:
     for name, text in spec.vary:
         key = resolve_key(name, config, fn, spec.task)
         if key.part == "task" and key.field in spec.params:
-            raise ConfigError(f"task parameter {key.field!r} is both --param and --vary {name}; expected one")
+            raise ConfigError(
+                f"task parameter {key.field!r} is both --param and --vary {name}; expected one"
+            )
         dist = parse_dist(text, name)
         check_dist(key, dist, config, fn)
         keys.append((key, dist))
@@ -111,7 +160,9 @@ def parse_vary(texts: list[str]) -> tuple[tuple[str, str], ...]:
     for text in texts:
         key, sep, dist = text.partition("=")
         if not sep or not key.strip() or not dist.strip():
-            raise ConfigError(f"--vary {text!r} is invalid; expected KEY=DIST, e.g. box.x_m=uniform(0.18,0.22)")
+            raise ConfigError(
+                f"--vary {text!r} is invalid; expected KEY=DIST, e.g. box.x_m=uniform(0.18,0.22)"
+            )
         out.append((key.strip(), dist.strip()))
     return tuple(out)
 
@@ -123,38 +174,66 @@ def load_spec(path: str | Path) -> SweepSpec:
     try:
         text = path.read_text()
     except OSError as err:
-        raise ConfigError(f"sweep definition {str(path)!r} cannot be read: {err.strerror or err}") from err
+        raise ConfigError(
+            f"sweep definition {str(path)!r} cannot be read: {err.strerror or err}"
+        ) from err
     except UnicodeDecodeError as err:
         raise ConfigError(f"sweep definition {str(path)!r} is not valid TOML: {err}") from err
-    data = load_toml_text(text, f"sweep definition {str(path)!r} is not valid TOML")  # also too deep: one line
+    # also too deep: one line
+    data = load_toml_text(text, f"sweep definition {str(path)!r} is not valid TOML")
     unknown = sorted(set(data) - set(SPEC_FIELDS))
     if unknown:
-        raise ConfigError(f"sweep definition {str(path)!r} has unknown field {unknown[0]!r}; "
-                          f"expected {', '.join(SPEC_FIELDS)}")
-    for name, kind in (("task", str), ("robot", str), ("params", dict), ("vary", dict), ("tolerance", dict)):
+        raise ConfigError(
+            f"sweep definition {str(path)!r} has unknown field {unknown[0]!r}; "
+            f"expected {', '.join(SPEC_FIELDS)}"
+        )
+    for name, kind in (
+        ("task", str),
+        ("robot", str),
+        ("params", dict),
+        ("vary", dict),
+        ("tolerance", dict),
+    ):
         if name in data and not isinstance(data[name], kind):
-            raise ConfigError(f"sweep definition {str(path)!r}: {name} must be a {'string' if kind is str else 'table'}")
+            raise ConfigError(
+                f"sweep definition {str(path)!r}: {name} must be a "
+                f"{'string' if kind is str else 'table'}"
+            )
     for name in ("rate_hz", "timeout_s"):
-        if name in data and (isinstance(data[name], bool) or not isinstance(data[name], (int, float))):
-            raise ConfigError(f"sweep definition {str(path)!r}: {name} = {data[name]!r:.60} is invalid; "
-                              "expected a number")
+        if name in data and (
+            isinstance(data[name], bool) or not isinstance(data[name], (int, float))
+        ):
+            raise ConfigError(
+                f"sweep definition {str(path)!r}: {name} = {data[name]!r:.60} is invalid; "
+                "expected a number"
+            )
     for name, value in data.get("params", {}).items():
         bad = _not_json_like(value)
         if bad is not None:
-            raise ConfigError(f"sweep definition {str(path)!r}: params.{name} holds {bad}; expected a finite "
-                              "number, an int64 whole number, true/false, text, or a list or table of them")
+            raise ConfigError(
+                f"sweep definition {str(path)!r}: params.{name} holds {bad}; expected a finite "
+                "number, an int64 whole number, true/false, text, or a list or table of them"
+            )
     if "task" not in data or "scenarios" not in data:
         raise ConfigError(f"sweep definition {str(path)!r} needs task and scenarios")
     if not all(isinstance(v, str) for v in data.get("vary", {}).values()):
-        raise ConfigError(f"sweep definition {str(path)!r}: each vary value must be a string such as "
-                          '"uniform(0.18, 0.22)"')
+        raise ConfigError(
+            f"sweep definition {str(path)!r}: each vary value must be a string such as "
+            '"uniform(0.18, 0.22)"'
+        )
     folder = path.parent
     try:
-        return SweepSpec(task=_beside(data["task"], folder, ".py"), scenarios=data["scenarios"],
-                         robot=_beside(data.get("robot", "mtb"), folder, ".toml"), seed=data.get("seed", 0),
-                         vary=tuple(data.get("vary", {}).items()), params=dict(data.get("params", {})),
-                         rate_hz=float(data.get("rate_hz", 240.0)), timeout_s=data.get("timeout_s"),
-                         tolerance=dict(data.get("tolerance", {})))
+        return SweepSpec(
+            task=_beside(data["task"], folder, ".py"),
+            scenarios=data["scenarios"],
+            robot=_beside(data.get("robot", "mtb"), folder, ".toml"),
+            seed=data.get("seed", 0),
+            vary=tuple(data.get("vary", {}).items()),
+            params=dict(data.get("params", {})),
+            rate_hz=float(data.get("rate_hz", 240.0)),
+            timeout_s=data.get("timeout_s"),
+            tolerance=dict(data.get("tolerance", {})),
+        )
     except ConfigError as err:
         raise ConfigError(f"sweep definition {str(path)!r}: {err}") from err
     except (TypeError, ValueError) as err:
@@ -179,21 +258,31 @@ def _not_json_like(value: object) -> str | None:
 
 
 def _beside(name: str, folder: Path, suffix: str) -> str:
-    """A file named relative to the definition's folder, when it is one; a built-in name as it is."""
+    """A file named relative to the definition's folder, when it is one; a built-in name as it
+    is."""
     if name.endswith(suffix) and not Path(name).is_absolute() and (folder / name).is_file():
         return str(folder / name)
     return name
 
 
 def dump_spec(spec: SweepSpec) -> str:
-    """The definition as TOML (the format load_spec reads), e.g. DIR/sweep.toml of a sweep's output."""
-    lines = [f"task = {_toml(spec.task)}", f"robot = {_toml(spec.robot)}", f"seed = {spec.seed}",
-             f"scenarios = {spec.scenarios}"]
+    """The definition as TOML (the format load_spec reads), e.g. DIR/sweep.toml of a sweep's
+    output."""
+    lines = [
+        f"task = {_toml(spec.task)}",
+        f"robot = {_toml(spec.robot)}",
+        f"seed = {spec.seed}",
+        f"scenarios = {spec.scenarios}",
+    ]
     if spec.rate_hz != 240.0:
         lines.append(f"rate_hz = {_toml(spec.rate_hz)}")
     if spec.timeout_s is not None:
         lines.append(f"timeout_s = {_toml(spec.timeout_s)}")
-    for table, items in (("params", spec.params.items()), ("vary", spec.vary), ("tolerance", spec.tolerance.items())):
+    for table, items in (
+        ("params", spec.params.items()),
+        ("vary", spec.vary),
+        ("tolerance", spec.tolerance.items()),
+    ):
         items = list(items)
         if items:
             lines += ["", f"[{table}]"] + [f"{_toml(k)} = {_toml(v)}" for k, v in items]
@@ -209,5 +298,7 @@ def _toml(value: object) -> str:
         return json.dumps(value)  # a TOML basic string
     if isinstance(value, list):
         return "[" + ", ".join(_toml(v) for v in value) + "]"
-    raise ConfigError(f"value {value!r:.60} cannot be written to a sweep definition; expected numbers, "
-                      "true/false, text or lists")
+    raise ConfigError(
+        f"value {value!r:.60} cannot be written to a sweep definition; expected numbers, "
+        "true/false, text or lists"
+    )

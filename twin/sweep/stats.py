@@ -39,8 +39,12 @@ def percentiles(values: list[float]) -> dict:
     if not values:
         return {"count": 0, "p50": None, "p95": None, "max": None}
     arr = np.asarray(values, dtype=float)
-    return {"count": len(values), "p50": float(np.percentile(arr, 50)), "p95": float(np.percentile(arr, 95)),
-            "max": float(arr.max())}
+    return {
+        "count": len(values),
+        "p50": float(np.percentile(arr, 50)),
+        "p95": float(np.percentile(arr, 95)),
+        "max": float(arr.max()),
+    }
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -56,9 +60,15 @@ def summarize(rows: list[dict]) -> dict:
         if r["outcome"] != "ok":
             key = reason(r["error"])
             counts[key] = counts.get(key, 0) + 1
-    return {"scenarios": n, "ok": ok, "failed": n - ok, "success_rate": ok / n if n else 0.0, "wilson95": [lo, hi],
-            "placement_error_mm": percentiles(errors),
-            "failures_by_reason": dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))}
+    return {
+        "scenarios": n,
+        "ok": ok,
+        "failed": n - ok,
+        "success_rate": ok / n if n else 0.0,
+        "wilson95": [lo, hi],
+        "placement_error_mm": percentiles(errors),
+        "failures_by_reason": dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))),
+    }
 
 
 # Paired and unpaired comparisons of two sweeps. "Difference" is always new minus reference.
@@ -76,8 +86,9 @@ def newcombe_unpaired(ok1: int, n1: int, ok2: int, n2: int, z: float = Z95) -> t
     return d - math.hypot(p1 - l1, u2 - p2), d + math.hypot(u1 - p1, p2 - l2)
 
 
-def newcombe_paired(both: int, only1: int, only2: int, neither: int,
-                    z: float = Z95) -> tuple[float, float]:
+def newcombe_paired(
+    both: int, only1: int, only2: int, neither: int, z: float = Z95
+) -> tuple[float, float]:
     """Newcombe's interval (1998, method 10 for paired proportions) of p1 - p2, where p1 =
     (both + only1) / n and p2 = (both + only2) / n: the two marginal Wilson intervals combined
     with phi, the correlation of the pairs, corrected towards 0 by n/2 when positive (as

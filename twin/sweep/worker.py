@@ -41,7 +41,8 @@ class Job:
     save: str = "failures"
 
 
-_PREPARED: dict[str, tuple[Prepared, RandomSampler]] = {}  # per worker process: a definition is prepared once
+# per worker process: a definition is prepared once
+_PREPARED: dict[str, tuple[Prepared, RandomSampler]] = {}
 
 
 def warm(job: Job) -> None:
@@ -60,8 +61,10 @@ def _prepared(spec: SweepSpec) -> tuple[Prepared, RandomSampler]:
 
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
-TRIM_THRESHOLD_BYTES = 64 << 20  # free memory at the heap's top kept for reuse: over twice what a scenario frees
-MMAP_THRESHOLD_BYTES = 32 << 20  # blocks below this come from the heap (glibc's largest dynamic threshold)
+# free memory at the heap's top kept for reuse: over twice what a scenario frees
+TRIM_THRESHOLD_BYTES = 64 << 20
+# blocks below this come from the heap (glibc's largest dynamic threshold)
+MMAP_THRESHOLD_BYTES = 32 << 20
 
 
 @functools.cache  # once per process (a forked child inherits the setting with the cache)
@@ -100,7 +103,8 @@ def run_scenario(job: Job, scenario: int) -> dict:
                 failed.parent.mkdir(exist_ok=True)
                 shutil.copyfile(first, failed)
             except OSError as err:
-                raise RecordingError(f"cannot write {str(failed)!r}: {err.strerror or err}") from err
+                why = err.strerror or err
+                raise RecordingError(f"cannot write {str(failed)!r}: {why}") from err
         else:  # the run is deterministic: running it again, recorded, gives this same run
             _run(prep, values, scenario, failed)
     return row
@@ -126,19 +130,32 @@ def confirm_scenario(job: Job, scenario: int) -> dict:
         if row["outcome"] == "ok":
             failed.unlink()
     except OSError as err:
-        raise RecordingError(f"cannot write the recording of scenario {scenario}: {err.strerror or err}") from err
+        raise RecordingError(
+            f"cannot write the recording of scenario {scenario}: {err.strerror or err}"
+        ) from err
     return row
 
 
 def failed_row(job: Job, scenario: int, reason: str, wall_s: float) -> dict:
     """The row of a scenario that gave no result (its process died, or it ran out of wall time)."""
     _, sampler = _prepared(job.spec)
-    return {**_row(job, scenario, sampler.values(scenario)), "outcome": "error", "error": reason,
-            "placement_error_mm": None, **dict.fromkeys(COUNTED, 0), "sim_s": None, "wall_s": wall_s}
+    return {
+        **_row(job, scenario, sampler.values(scenario)),
+        "outcome": "error",
+        "error": reason,
+        "placement_error_mm": None,
+        **dict.fromkeys(COUNTED, 0),
+        "sim_s": None,
+        "wall_s": wall_s,
+    }
 
 
 def _row(job: Job, scenario: int, values: dict) -> dict:
-    return {"scenario": scenario, "seed": job.spec.seed, **{key.name: value for key, value in values.items()}}
+    return {
+        "scenario": scenario,
+        "seed": job.spec.seed,
+        **{key.name: value for key, value in values.items()},
+    }
 
 
 class _Tally(Sink):
@@ -154,7 +171,9 @@ class _Tally(Sink):
             self.counts[event.kind] += 1
         elif event.kind == "placed":
             error_m = event.data.get("error_m")
-            if isinstance(error_m, (int, float)) and (self.worst_m is None or error_m > self.worst_m):
+            if isinstance(error_m, (int, float)) and (
+                self.worst_m is None or error_m > self.worst_m
+            ):
                 self.worst_m = float(error_m)
 
 
@@ -176,24 +195,35 @@ def _run(prep: Prepared, values: dict, scenario: int, mcap_path: Path | None) ->
             try:
                 mcap_path.parent.mkdir(exist_ok=True)
             except OSError as err:
-                raise RecordingError(f"cannot create {str(mcap_path.parent)!r}: {err.strerror or err}") from err
+                raise RecordingError(
+                    f"cannot create {str(mcap_path.parent)!r}: {err.strerror or err}"
+                ) from err
             run = task_run(spec.task, params, mcap_path)
             if spec.timeout_s is not None:
                 run["timeout_s"] = spec.timeout_s
-            with open_recorders(config, run, mcap_path=mcap_path, background=False,
-                                engine=engine_versions()) as sinks:
+            with open_recorders(
+                config, run, mcap_path=mcap_path, background=False, engine=engine_versions()
+            ) as sinks:
                 _task(config, prep.fn, params, tally, [*sinks, *limit])
-    except RecordingError:  # a file that cannot be written ends the sweep (one line), not the scenario
+    except RecordingError:
+        # a file that cannot be written ends the sweep (one line), not the scenario
         raise
-    except TwinError as err:  # the task failed, or the scenario's values are invalid: the sweep goes on
+    except TwinError as err:
+        # the task failed, or the scenario's values are invalid: the sweep goes on
         error = exception_text(err) or type(err).__name__
     worst = tally.worst_m
-    return {"outcome": "error" if error else "ok", "error": error.splitlines()[0] if error else "",
-            "placement_error_mm": None if worst is None else worst * 1000.0, **tally.counts, "sim_s": tally.sim_s}
+    return {
+        "outcome": "error" if error else "ok",
+        "error": error.splitlines()[0] if error else "",
+        "placement_error_mm": None if worst is None else worst * 1000.0,
+        **tally.counts,
+        "sim_s": tally.sim_s,
+    }
 
 
 def _task(config, fn, params: dict, tally: _Tally, sinks: list) -> None:
-    """Run the task on a fresh twin (tally first among its sinks, which keeps the simulated time)."""
+    """Run the task on a fresh twin (tally first among its sinks, which keeps the simulated
+    time)."""
     twin = Twin(config, sinks=[tally, *sinks])
     try:
         run_task(twin, fn, params)

@@ -14,8 +14,13 @@ from twin.model.sink import Sink
 from twin.tasks import pick_place, pick_place_vision, seed000, seed001, seed002
 
 TaskFn = Callable[..., None]
-TASKS: dict[str, TaskFn] = {"pick_place": pick_place.run, "seed000": seed000.run, "seed001": seed001.run,
-                             "seed002": seed002.run, "pick_place_vision": pick_place_vision.run}
+TASKS: dict[str, TaskFn] = {
+    "pick_place": pick_place.run,
+    "seed000": seed000.run,
+    "seed001": seed001.run,
+    "seed002": seed002.run,
+    "pick_place_vision": pick_place_vision.run,
+}
 
 
 def resolve(name_or_path: str) -> TaskFn:
@@ -24,7 +29,9 @@ def resolve(name_or_path: str) -> TaskFn:
         return TASKS[name_or_path]
     path = Path(name_or_path)
     if path.suffix != ".py":
-        raise ConfigError(f"unknown task {name_or_path!r}; expected one of {', '.join(TASKS)} or a .py file")
+        raise ConfigError(
+            f"unknown task {name_or_path!r}; expected one of {', '.join(TASKS)} or a .py file"
+        )
     if not path.is_file():
         raise ConfigError(f"task file {name_or_path!r} does not exist")
     spec = importlib.util.spec_from_file_location(f"twin_user_task_{path.stem}", path)
@@ -34,7 +41,9 @@ def resolve(name_or_path: str) -> TaskFn:
         spec.loader.exec_module(module)
     except Exception as err:  # a user's file: report, do not crash
         sys.modules.pop(spec.name, None)
-        raise ConfigError(f"task file {name_or_path!r} failed to import: {type(err).__name__}: {err}") from err
+        raise ConfigError(
+            f"task file {name_or_path!r} failed to import: {type(err).__name__}: {err}"
+        ) from err
     fn = getattr(module, "run", None)
     if not callable(fn):
         raise ConfigError(f"task file {name_or_path!r} has no function run(twin, **params)")
@@ -42,7 +51,8 @@ def resolve(name_or_path: str) -> TaskFn:
 
 
 def accepted_params(fn: TaskFn, params: dict) -> dict:
-    """The subset of params the task's signature accepts (so --cycles only reaches tasks that take it)."""
+    """The subset of params the task's signature accepts (so --cycles only reaches tasks that take
+    it)."""
     sig = inspect.signature(fn)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return dict(params)
@@ -50,12 +60,16 @@ def accepted_params(fn: TaskFn, params: dict) -> dict:
 
 
 def task_params(fn: TaskFn) -> dict[str, inspect.Parameter] | None:
-    """The keyword parameters a task takes after `twin` (name -> Parameter); None when it takes **params."""
+    """The keyword parameters a task takes after `twin` (name -> Parameter); None when it takes
+    **params."""
     sig = inspect.signature(fn)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return None
-    return {name: p for name, p in list(sig.parameters.items())[1:]
-            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    return {
+        name: p
+        for name, p in list(sig.parameters.items())[1:]
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    }
 
 
 def check_params(fn: TaskFn, params: dict, task: str) -> dict:
@@ -66,7 +80,9 @@ def check_params(fn: TaskFn, params: dict, task: str) -> dict:
         for name in params:
             if name not in known:
                 takes = ", ".join(known) or "none"
-                raise ConfigError(f"task {task!r} takes no parameter {name!r}; its parameters: {takes}")
+                raise ConfigError(
+                    f"task {task!r} takes no parameter {name!r}; its parameters: {takes}"
+                )
     return dict(params)
 
 
@@ -77,8 +93,8 @@ def source_sha256(path: str | Path) -> str:
 
 
 def task_identity(fn: TaskFn) -> str:
-    """What a recording names a task by: the content of its source file (`sha256:<hex>`), so the same
-    task run by name, from its file or from a renamed copy is the same task. A function with no
+    """What a recording names a task by: the content of its source file (`sha256:<hex>`), so the
+    same task run by name, from its file or from a renamed copy is the same task. A function with no
     source file is named by its module and name."""
     try:
         path = inspect.getsourcefile(fn)
@@ -111,10 +127,10 @@ def run_task(twin, fn: TaskFn, params: dict) -> None:
 
 
 class TimeLimit(Sink):
-    """A sink that ends a task run at the first frame past `limit_s` of simulated time (`--timeout`):
-    an endless task would otherwise record until the disk is full. Put it after the recorders, so
-    they hold that frame too; it raises again on every later frame, so a task that catches the
-    error cannot run on."""
+    """A sink that ends a task run at the first frame past `limit_s` of simulated time
+    (`--timeout`): an endless task would otherwise record until the disk is full. Put it after the
+    recorders, so they hold that frame too; it raises again on every later frame, so a task that
+    catches the error cannot run on."""
 
     def __init__(self, limit_s: float) -> None:
         self.limit_s = limit_s
@@ -122,5 +138,7 @@ class TimeLimit(Sink):
 
     def on_frame(self, frame) -> None:
         if frame.t_ns > self._limit_ns:
-            raise TaskTimeout(f"task ran past --timeout {self.limit_s:g} s of simulated time "
-                              f"(stopped at t = {frame.t_ns * 1e-9:.3f} s)")
+            raise TaskTimeout(
+                f"task ran past --timeout {self.limit_s:g} s of simulated time "
+                f"(stopped at t = {frame.t_ns * 1e-9:.3f} s)"
+            )

@@ -1,4 +1,5 @@
-"""Keyboard teleoperation: a session that turns key presses into Commands, in real or simulated time.
+"""Keyboard teleoperation: a session that turns key presses into Commands, in real or simulated
+time.
 
 Each press becomes twin.press_key(key), a Command stamped with the step it takes effect at, and the
 key map in the twin's config interprets it, so `twin replay` re-executes a session exactly. The
@@ -32,7 +33,15 @@ CHUNK_S = 0.02  # at most this much simulated time between two polls of the keyb
 DRAW_PERIOD_S = 0.05
 MAX_LAG_S = 0.25  # beyond this the twin stops catching up with wall time (slow machine): time slips
 DEFAULT_KEY_INTERVAL_S = 0.5
-SHOWN_EVENTS = ("attach", "release", "break", "suction_empty", "joint_limit", "key_unknown", "settle_timeout")
+SHOWN_EVENTS = (
+    "attach",
+    "release",
+    "break",
+    "suction_empty",
+    "joint_limit",
+    "key_unknown",
+    "settle_timeout",
+)
 
 
 @dataclass(frozen=True)
@@ -62,7 +71,9 @@ class KeySource(Protocol):
 class Session:
     """One teleop session on a twin: key presses, the log the screen shows, and the pacing loops."""
 
-    def __init__(self, twin: Twin, log: EventLog, *, mode: str = "scripted", record_path: str = "") -> None:
+    def __init__(
+        self, twin: Twin, log: EventLog, *, mode: str = "scripted", record_path: str = ""
+    ) -> None:
         self.twin = twin
         self.log = log
         self.mode = mode
@@ -80,8 +91,11 @@ class Session:
         self.presses.append(KeyPress(self.twin.step_index, key, key in self.twin.config.keymap))
         return True
 
-    def run_scripted(self, keys: list[str], interval_s: float, *, pace: Callable[[], None] | None = None) -> None:
-        """Press each key (`wait`: none), then let interval_s of simulated time pass; a quit key ends it."""
+    def run_scripted(
+        self, keys: list[str], interval_s: float, *, pace: Callable[[], None] | None = None
+    ) -> None:
+        """Press each key (`wait`: none), then let interval_s of simulated time pass; a quit key
+        ends it."""
         steps = round(interval_s * 1e9 / self.twin.config.dt_ns)
         for key in keys:
             if key != WAIT and not self.press(key):
@@ -100,7 +114,8 @@ class Session:
         return True
 
     def _step(self, steps: int) -> bool:
-        """Step the twin; False when the PyBullet window was closed (PyBullet closes it on Esc, too)."""
+        """Step the twin; False when the PyBullet window was closed (PyBullet closes it on Esc,
+        too)."""
         try:
             self.twin.step(steps)
         except Exception:
@@ -110,9 +125,15 @@ class Session:
             raise
         return True
 
-    def run_realtime(self, sources: list[KeySource], draw: Callable[[], None] | None = None,
-                     *, clock: Callable[[], float] = time.monotonic) -> None:
-        """Step the twin up to wall-clock time, reading keys between steps, until a quit key or Ctrl-C."""
+    def run_realtime(
+        self,
+        sources: list[KeySource],
+        draw: Callable[[], None] | None = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        """Step the twin up to wall-clock time, reading keys between steps, until a quit key or
+        Ctrl-C."""
         dt_s = self.twin.config.dt_s
         max_lag_steps = max(1, round(MAX_LAG_S / dt_s))
         chunk_steps = max(1, round(CHUNK_S / dt_s))
@@ -121,7 +142,8 @@ class Session:
         try:
             while True:
                 behind = origin_step + int((clock() - origin_s) / dt_s) - self.twin.step_index
-                for i, source in enumerate(sources):  # wait for keys only when the twin is not behind
+                # wait for keys only when the twin is not behind
+                for i, source in enumerate(sources):
                     for key in source.read(POLL_S if i == 0 and behind <= 0 else 0.0):
                         if not self.press(key):
                             return
@@ -181,8 +203,12 @@ class TeleopOptions:
 
 def teleop_config(options: TeleopOptions) -> TwinConfig:
     profile = get_profile(options.robot)
-    return TwinConfig(profile=profile, dt_ns=dt_ns_from_hz(options.rate_hz),
-                      keymap=keymap_for(profile, options.keymap_path or None), cameras=tuple(options.cameras))
+    return TwinConfig(
+        profile=profile,
+        dt_ns=dt_ns_from_hz(options.rate_hz),
+        keymap=keymap_for(profile, options.keymap_path or None),
+        cameras=tuple(options.cameras),
+    )
 
 
 def run_teleop(options: TeleopOptions) -> Session:
@@ -191,22 +217,42 @@ def run_teleop(options: TeleopOptions) -> Session:
     keys = parse_keys(options.keys) if options.keys is not None else None
     interval = options.key_interval_s
     if not (math.isfinite(interval) and 0.0 < interval <= 60.0):
-        raise ConfigError(f"--key-interval {interval} s is invalid; expected a number of seconds in (0, 60]")
+        raise ConfigError(
+            f"--key-interval {interval} s is invalid; expected a number of seconds in (0, 60]"
+        )
     if keys is None and not options.gui and not (sys.stdin.isatty() and sys.stdout.isatty()):
-        raise ConfigError("the teleop screen needs a terminal; use --keys \"...\" for a scripted session")
+        raise ConfigError(
+            'the teleop screen needs a terminal; use --keys "..." for a scripted session'
+        )
     mode = "scripted" if keys is not None else ("gui" if options.gui else "terminal")
-    run = {"source": "teleop", "task": "", "params": {
-        "mode": mode, "keys": options.keys or "", "key_interval_s": interval, "keymap_file": options.keymap_path}}
+    run = {
+        "source": "teleop",
+        "task": "",
+        "params": {
+            "mode": mode,
+            "keys": options.keys or "",
+            "key_interval_s": interval,
+            "keymap_file": options.keymap_path,
+        },
+    }
     from twin.record import open_recorders  # only record/ touches mcap and rerun
 
     log = EventLog()
-    with open_recorders(config, run, mcap_path=options.record_path, rrd_path=options.rrd_path,
-                        rate=options.record_rate, engine=engine_versions()) as sinks:
+    with open_recorders(
+        config,
+        run,
+        mcap_path=options.record_path,
+        rrd_path=options.rrd_path,
+        rate=options.record_rate,
+        engine=engine_versions(),
+    ) as sinks:
         twin = Twin(config, gui=options.gui, sinks=[log, *sinks, *options.extra_sinks])
         session = Session(twin, log, mode=mode, record_path=options.record_path or "")
         try:
             if keys is not None:
-                session.run_scripted(keys, interval, pace=session.real_time_pacer() if options.gui else None)
+                session.run_scripted(
+                    keys, interval, pace=session.real_time_pacer() if options.gui else None
+                )
             else:
                 _run_interactive(session, options.gui)
         finally:
@@ -234,15 +280,22 @@ def summary_lines(session: Session) -> list[str]:
     f = twin.frame
     unknown = [p.key for p in session.presses if not p.known]
     lines = [
-        (f"teleop ({session.mode}) robot {twin.profile.name}: {len(session.presses)} key presses "
-         f"({len(unknown)} not in the key map), {twin.step_index} steps, simulated {twin.t_s:.3f} s; "
-         f"ended by {session.ended_by or 'quit'}"),
-        "events: " + (", ".join(f"{k} {v}" for k, v in sorted(session.log.counts.items())) or "none"),
+        (
+            f"teleop ({session.mode}) robot {twin.profile.name}: {len(session.presses)} "
+            f"key presses "
+            f"({len(unknown)} not in the key map), {twin.step_index} steps, simulated "
+            f"{twin.t_s:.3f} s; "
+            f"ended by {session.ended_by or 'quit'}"
+        ),
+        "events: "
+        + (", ".join(f"{k} {v}" for k, v in sorted(session.log.counts.items())) or "none"),
     ]
     for obj, pose in zip(twin.config.objects, f.object_poses, strict=True):
         off_mm = 1000.0 * math.hypot(pose[0] - PLACE_M[0], pose[1] - PLACE_M[1])
-        lines.append(f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m, "
-                     f"{off_mm:.1f} mm from the place point ({PLACE_M[0]:g}, {PLACE_M[1]:g}) in x and y")
+        lines.append(
+            f"{obj.name} final pose: x {pose[0]:+.4f} y {pose[1]:+.4f} z {pose[2]:+.4f} m, "
+            f"{off_mm:.1f} mm from the place point ({PLACE_M[0]:g}, {PLACE_M[1]:g}) in x and y"
+        )
     if session.record_path:
         lines.append(f"recorded {session.record_path}")
     return lines

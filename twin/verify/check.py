@@ -33,16 +33,24 @@ from twin.verify.replay import collected, replay, replayed_event_kinds
 DEFAULT_DIR = "recordings"
 
 
-def record_task(config: TwinConfig, task: str, params: dict, *, sinks: Sequence[Sink] = (),
-                task_dir: str | os.PathLike | None = None, timeout_s: float | None = None) -> Recording:
-    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not raised);
-    timeout_s bounds it in simulated time, as `twin run --timeout` did."""
+def record_task(
+    config: TwinConfig,
+    task: str,
+    params: dict,
+    *,
+    sinks: Sequence[Sink] = (),
+    task_dir: str | os.PathLike | None = None,
+    timeout_s: float | None = None,
+) -> Recording:
+    """Run a task on a fresh twin and return the run in memory (a failing task is recorded, not
+    raised); timeout_s bounds it in simulated time, as `twin run --timeout` did."""
     fn = resolve(_task_path(task, task_dir))
     collector = ColumnCollector()
     limit = [TimeLimit(timeout_s)] if timeout_s is not None else []
     twin = Twin(config, sinks=[collector, *sinks, *limit])
     try:
-        with contextlib.suppress(TwinError):  # recorded, not raised: the task_error event is part of the run
+        # recorded, not raised: the task_error event is part of the run
+        with contextlib.suppress(TwinError):
             run_task(twin, fn, dict(params))
     finally:
         twin.close()
@@ -72,7 +80,9 @@ def _task_path(task: str, task_dir: str | os.PathLike | None) -> str:
     return task
 
 
-def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, frozenset[str] | None]:
+def rerun(
+    golden: Recording, *, sinks: Sequence[Sink] = ()
+) -> tuple[Recording, frozenset[str] | None]:
     """Re-run golden from the current code: its task if it has one, else its commands.
 
     Returns the new run and the event kinds to compare (None: all).
@@ -80,8 +90,14 @@ def rerun(golden: Recording, *, sinks: Sequence[Sink] = ()) -> tuple[Recording, 
     run = golden.run or {}
     if run.get("source") == "task" and run.get("task"):
         task_dir = Path(golden.path).parent if golden.path else None
-        new = record_task(golden.config, run["task"], run.get("params") or {}, sinks=sinks, task_dir=task_dir,
-                          timeout_s=run.get("timeout_s"))
+        new = record_task(
+            golden.config,
+            run["task"],
+            run.get("params") or {},
+            sinks=sinks,
+            task_dir=task_dir,
+            timeout_s=run.get("timeout_s"),
+        )
         new.run = dict(run)
         return new, None
     return replay(golden, sinks=sinks), replayed_event_kinds(golden)
@@ -97,7 +113,8 @@ class Outcome:
     """What checking one golden gave."""
 
     path: str
-    status: str  # "match", "differ", "updated", "refused" (differs; the re-run failed, not written), "error"
+    # "match", "differ", "updated", "refused" (differs; the re-run failed, not written), "error"
+    status: str
     exit_code: int
     summary: str  # the first divergence or the error, one line
     report: str  # the full text report ("" on error)
@@ -105,9 +122,11 @@ class Outcome:
     seconds: float = 0.0
 
 
-def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False) -> Outcome:
-    """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a run
-    whose task failed unless allow_error (a crash is not a new golden)."""
+def check_one(
+    path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False
+) -> Outcome:
+    """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a
+    run whose task failed unless allow_error (a crash is not a new golden)."""
     from twin.record import open_recorders
     from twin.record.mcap.reader import load
 
@@ -119,32 +138,64 @@ def check_one(path: str, tolerances: Tolerances, update: bool = False, allow_err
         if update:
             run = dict(golden.run or {})
             if sha_now not in (None, "missing"):
-                run["task_sha256"] = sha_now  # the rewrite holds the task file's source as it is now
-            with open_recorders(golden.config, run, mcap_path=str(tmp), rate=golden.rate_steps,
-                                engine=engine_versions()) as sinks:
+                # the rewrite holds the task file's source as it is now
+                run["task_sha256"] = sha_now
+            with open_recorders(
+                golden.config,
+                run,
+                mcap_path=str(tmp),
+                rate=golden.rate_steps,
+                engine=engine_versions(),
+            ) as sinks:
                 new, kinds = rerun(golden, sinks=sinks)
         else:
             new, kinds = rerun(golden)
         result = judge(golden, new, tolerances, remade, source=golden, event_kinds=kinds)
         if sha_now is not None and sha_now != recorded_sha:
-            result.notes.append(f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
-                                f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)")
+            result.notes.append(
+                f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
+                f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)"
+            )
         report = render_text(result)
         if result.match:
-            return Outcome(path, "match", 0, noise_summary(result), report, len(golden.frames), time.perf_counter() - t0)
+            return Outcome(
+                path,
+                "match",
+                0,
+                noise_summary(result),
+                report,
+                len(golden.frames),
+                time.perf_counter() - t0,
+            )
         summary = first_line(result.first)
         if result.floor is not None and allowance_text(result.first):
             summary += ": " + allowance_text(result.first)
         if update and new.outcome != "ok" and not allow_error:
             why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
-            return Outcome(path, "refused", 1, f"not rewritten: the re-run's task failed ({why}); the golden is "
-                           "left as it was (--allow-error writes it anyway)", report, len(golden.frames),
-                           time.perf_counter() - t0)
+            return Outcome(
+                path,
+                "refused",
+                1,
+                f"not rewritten: the re-run's task failed ({why}); the golden is "
+                "left as it was (--allow-error writes it anyway)",
+                report,
+                len(golden.frames),
+                time.perf_counter() - t0,
+            )
         if update:
             os.replace(tmp, path)
-            return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, len(golden.frames),
-                           time.perf_counter() - t0)
-        return Outcome(path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0)
+            return Outcome(
+                path,
+                "updated",
+                0,
+                "rewritten; was: " + summary,
+                report,
+                len(golden.frames),
+                time.perf_counter() - t0,
+            )
+        return Outcome(
+            path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0
+        )
     except TwinError as err:
         return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
     finally:
@@ -163,29 +214,37 @@ def _task_sha256_now(golden: Recording) -> str | None:
 
 def golden_paths(paths: Sequence[str]) -> list[str]:
     """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped), each file
-    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden would
-    race on its temporary file."""
+    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden
+    would race on its temporary file."""
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
-            raise ConfigError(f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap files or folders")
+            raise ConfigError(
+                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap "
+                f"files or folders"
+            )
         paths = [DEFAULT_DIR]
     out: list[str] = []
     for p in paths:
         path = Path(p)
         if path.is_dir():
-            found = sorted(str(f) for f in path.glob("*.mcap") if not f.name.endswith(".obtained.mcap"))
+            found = sorted(
+                str(f) for f in path.glob("*.mcap") if not f.name.endswith(".obtained.mcap")
+            )
             if not found:
                 raise ConfigError(f"folder {p!r} holds no .mcap recordings")
             out += found
         elif path.exists():
             out.append(str(path))
         else:
-            raise ConfigError(f"golden {p!r} does not exist; expected an .mcap file or a folder of them")
+            raise ConfigError(
+                f"golden {p!r} does not exist; expected an .mcap file or a folder of them"
+            )
     return _each_file_once(out)
 
 
 def _each_file_once(paths: list[str]) -> list[str]:
-    """paths without a second name of a file already listed (same device and inode), in their order."""
+    """paths without a second name of a file already listed (same device and inode), in their
+    order."""
     seen: set[tuple[int, int]] = set()
     out = []
     for p in paths:
@@ -209,19 +268,31 @@ class Progress:
         if self.tty:
             width = 30
             filled = width * self.done // self.total
-            self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} {name:<40.40}")
+            self.stream.write(
+                f"\r[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} {name:<40.40}"
+            )
             if self.done == self.total:
                 self.stream.write("\n")
         else:
-            self.stream.write(f"[{self.done}/{self.total}] {name}: {outcome.status} ({outcome.seconds:.2f} s)\n")
+            self.stream.write(
+                f"[{self.done}/{self.total}] {name}: {outcome.status} ({outcome.seconds:.2f} s)\n"
+            )
         self.stream.flush()
 
 
-def check_all(paths: Sequence[str], tolerances: Tolerances, *, update: bool = False, jobs: int = 1,
-              progress: Callable[[Outcome], None] | None = None, allow_error: bool = False,
-              run_many: Callable | None = None) -> list[Outcome]:
-    """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which yields
-    (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order of paths."""
+def check_all(
+    paths: Sequence[str],
+    tolerances: Tolerances,
+    *,
+    update: bool = False,
+    jobs: int = 1,
+    progress: Callable[[Outcome], None] | None = None,
+    allow_error: bool = False,
+    run_many: Callable | None = None,
+) -> list[Outcome]:
+    """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which
+    yields (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order
+    of paths."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     if run_many is None:
@@ -250,10 +321,17 @@ def _in_pool(jobs: int, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[
 
 def summary_table(outcomes: list[Outcome]) -> str:
     rows = [("golden", "status", "frames", "time", "detail")] + [
-        (o.path, o.status, str(o.frames), f"{o.seconds:.2f} s", o.summary) for o in outcomes]
+        (o.path, o.status, str(o.frames), f"{o.seconds:.2f} s", o.summary) for o in outcomes
+    ]
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4] for r in rows]
-    counts = {s: sum(o.status == s for o in outcomes) for s in ("match", "differ", "updated", "refused", "error")}
+    lines = [
+        "  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4]
+        for r in rows
+    ]
+    counts = {
+        s: sum(o.status == s for o in outcomes)
+        for s in ("match", "differ", "updated", "refused", "error")
+    }
     lines.append(", ".join(f"{n} {s}" for s, n in counts.items() if n) or "nothing checked")
     return "\n".join(lines) + "\n"
 

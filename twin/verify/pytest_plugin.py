@@ -7,8 +7,9 @@
 
 Goldens live in the `twin_goldens_dir` ini folder (default `recordings/`, relative to the rootdir).
 A missing golden is written and the test fails (review it, then commit it); `--update-goldens`
-rewrites goldens that differ, but never with a run whose task failed (`allow_error=True` says so). On a mismatch NAME.obtained.mcap and NAME.report.md are left beside
-the golden, and the failure message is the diff's text report.
+rewrites goldens that differ, but never with a run whose task failed (`allow_error=True` says so).
+On a mismatch NAME.obtained.mcap and NAME.report.md are left beside the golden, and the failure
+message is the diff's text report.
 """
 
 from __future__ import annotations
@@ -35,31 +36,51 @@ class GoldenChecker:
     def path(self, name: str) -> Path:
         return self.directory / f"{name}.mcap"
 
-    def check(self, run: Recording | str | os.PathLike, name: str, *, tolerance: str = DEFAULT,
-              tol: Sequence[str] = (), event_window_steps: int | None = None,
-              event_kinds: frozenset[str] | None = None, allow_error: bool = False) -> DiffResult:
-        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the diff. Under
-        the default `noise` preset the run is made once more with its math perturbed (its task re-run, or its
-        commands replayed) to measure its noise floor."""
+    def check(
+        self,
+        run: Recording | str | os.PathLike,
+        name: str,
+        *,
+        tolerance: str = DEFAULT,
+        tol: Sequence[str] = (),
+        event_window_steps: int | None = None,
+        event_kinds: frozenset[str] | None = None,
+        allow_error: bool = False,
+    ) -> DiffResult:
+        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the
+        diff. Under the default `noise` preset the run is made once more with its math perturbed
+        (its task re-run, or its commands replayed) to measure its noise floor."""
         from twin.record.mcap.reader import load
         from twin.verify.check import remade
         from twin.verify.noise import judge
         from twin.verify.replay import save
 
         candidate = run if isinstance(run, Recording) else load(run)
-        tolerances = Tolerances.from_preset(tolerance).with_overrides(list(tol)).with_event_window(event_window_steps)
+        tolerances = (
+            Tolerances.from_preset(tolerance)
+            .with_overrides(list(tol))
+            .with_event_window(event_window_steps)
+        )
         golden_path = self.path(name)
         obtained = golden_path.with_name(f"{name}.obtained.mcap")
         report = golden_path.with_name(f"{name}.report.md")
         failed = None if allow_error or candidate.outcome == "ok" else _failure(candidate)
         if not golden_path.exists():
-            if failed is not None:  # a golden is never made from a failed run unless asked (allow_error)
-                pytest.fail(f"golden {str(golden_path)!r} does not exist, and this run cannot become it: {failed} "
-                            "(pass allow_error=True to keep a failing run as the golden)", pytrace=False)
+            # a golden is never made from a failed run unless asked (allow_error)
+            if failed is not None:
+                pytest.fail(
+                    f"golden {str(golden_path)!r} does not exist, and this run cannot "
+                    f"become it: {failed} "
+                    "(pass allow_error=True to keep a failing run as the golden)",
+                    pytrace=False,
+                )
             golden_path.parent.mkdir(parents=True, exist_ok=True)
             save(candidate, golden_path)
-            pytest.fail(f"golden {str(golden_path)!r} did not exist; wrote it from this run: review and commit it",
-                        pytrace=False)
+            pytest.fail(
+                f"golden {str(golden_path)!r} did not exist; wrote it from this run: "
+                f"review and commit it",
+                pytrace=False,
+            )
         golden = load(golden_path)
         result = judge(golden, candidate, tolerances, remade, event_kinds=event_kinds)
         if result.match:
@@ -73,18 +94,33 @@ class GoldenChecker:
             return result
         save(candidate, obtained)
         write_report(result, report)
-        hint = ("if the change is intended, rerun with --update-goldens: it rewrites the golden with this run"
-                if failed is None else f"this run cannot become the golden: {failed}; pass allow_error=True to "
-                "accept a failing run")
-        pytest.fail(f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
-                    f"{report.name}; {hint})\n{render_text(result)}", pytrace=False)
+        hint = (
+            "if the change is intended, rerun with --update-goldens: it rewrites the "
+            "golden with this run"
+            if failed is None
+            else f"this run cannot become the golden: {failed}; pass allow_error=True to "
+            "accept a failing run"
+        )
+        pytest.fail(
+            f"run differs from golden {str(golden_path)!r} (obtained: {obtained.name}, report: "
+            f"{report.name}; {hint})\n{render_text(result)}",
+            pytrace=False,
+        )
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("twin", "twin golden recordings")
-    group.addoption("--update-goldens", action="store_true", default=False,
-                    help="rewrite golden recordings that differ from the run (twin's `golden` fixture)")
-    parser.addini("twin_goldens_dir", "folder of golden recordings for the `golden` fixture", default="recordings")
+    group.addoption(
+        "--update-goldens",
+        action="store_true",
+        default=False,
+        help="rewrite golden recordings that differ from the run (twin's `golden` fixture)",
+    )
+    parser.addini(
+        "twin_goldens_dir",
+        "folder of golden recordings for the `golden` fixture",
+        default="recordings",
+    )
 
 
 @pytest.fixture

@@ -25,20 +25,25 @@ from twin.sim.world import engine_versions
 from twin.verify.collectors import ColumnCollector, FrameCollector
 
 # Events the twin itself emits while applying commands and stepping (not the task's annotations).
-REPLAYED_EVENT_KINDS = frozenset({"attach", "release", "break", "suction_empty", "joint_limit", "key_unknown"})
+REPLAYED_EVENT_KINDS = frozenset(
+    {"attach", "release", "break", "suction_empty", "joint_limit", "key_unknown"}
+)
 
 
 def replayed_event_kinds(rec: Recording) -> frozenset[str] | None:
     """The event kinds a replay of rec reproduces: all (None) when what its task or clients said is
     recorded as `event` Commands, or when it holds only the twin's own events; else (a recording
     from before annotations were Commands) just the twin's own."""
-    if any(c.kind == "event" for c in rec.commands) or all(e.kind in REPLAYED_EVENT_KINDS for e in rec.events):
+    if any(c.kind == "event" for c in rec.commands) or all(
+        e.kind in REPLAYED_EVENT_KINDS for e in rec.events
+    ):
         return None
     return REPLAYED_EVENT_KINDS
 
 
 def replay_run(rec: Recording) -> dict:
-    """The run description of a replay of rec: rec's own, plus which file it replays (name and hash)."""
+    """The run description of a replay of rec: rec's own, plus which file it replays (name and
+    hash)."""
     import hashlib
 
     run = {k: v for k, v in (rec.run or {}).items() if k != "replay_of"}
@@ -48,11 +53,21 @@ def replay_run(rec: Recording) -> dict:
     return {**run, "replay_of": source}
 
 
-def collected(collector: FrameCollector | ColumnCollector, rec_config, run: dict, *, path: str = "") -> Recording:
+def collected(
+    collector: FrameCollector | ColumnCollector, rec_config, run: dict, *, path: str = ""
+) -> Recording:
     """An in-memory Recording of what a collector saw."""
-    return Recording(config=rec_config, frames=collector.columns(), commands=list(collector.commands),
-                     events=list(collector.events), run=dict(run), meta={}, finalized=True, path=path,
-                     cameras=tracks(rec_config.cameras, collector.images))
+    return Recording(
+        config=rec_config,
+        frames=collector.columns(),
+        commands=list(collector.commands),
+        events=list(collector.events),
+        run=dict(run),
+        meta={},
+        finalized=True,
+        path=path,
+        cameras=tracks(rec_config.cameras, collector.images),
+    )
 
 
 def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
@@ -61,11 +76,16 @@ def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
         raise RecordingError(f"recording {rec.path or '<memory>'} has no frames to replay")
     first, last = int(rec.frames.step[0]), int(rec.frames.step[-1])
     if first != 0:
-        raise RecordingError(f"recording {rec.path or '<memory>'} starts at step {first}; replay needs step 0")
-    commands = sorted(rec.commands, key=lambda c: c.step)  # stable: keeps the recorded order within a step
+        raise RecordingError(
+            f"recording {rec.path or '<memory>'} starts at step {first}; replay needs step 0"
+        )
+    # stable: keeps the recorded order within a step
+    commands = sorted(rec.commands, key=lambda c: c.step)
     if commands and commands[-1].step > last:
-        raise RecordingError(f"recording {rec.path or '<memory>'} has a command at step {commands[-1].step}, "
-                             f"after its last frame (step {last})")
+        raise RecordingError(
+            f"recording {rec.path or '<memory>'} has a command at step {commands[-1].step}, "
+            f"after its last frame (step {last})"
+        )
     collector = ColumnCollector()
     with _robot_files(rec) as config:
         twin = Twin(config, sinks=[collector, *sinks])
@@ -97,16 +117,21 @@ def _robot_files(rec: Recording) -> Iterator[TwinConfig]:
         for name, data in rec.assets.items():
             target = (root / name).resolve()
             if root not in target.parents:  # an attachment name must not escape the folder
-                raise RecordingError(f"recording {rec.path or '<memory>'} has an attachment named {name!r}; "
-                                     "expected a path inside the robot's folder")
+                raise RecordingError(
+                    f"recording {rec.path or '<memory>'} has an attachment named {name!r}; "
+                    "expected a path inside the robot's folder"
+                )
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_bytes(data)
-        yield dataclasses.replace(rec.config, profile=dataclasses.replace(profile, urdf_path=str(root / "robot.urdf")))
+        yield dataclasses.replace(
+            rec.config, profile=dataclasses.replace(profile, urdf_path=str(root / "robot.urdf"))
+        )
 
 
 def feed(rec: Recording, sinks: Sequence[Sink]) -> None:
-    """Send a recording's frames, pictures, commands and events to sinks, step by step: frame s, then
-    the pictures, commands and events stamped s (those happen after frame s, before frame s + 1)."""
+    """Send a recording's frames, pictures, commands and events to sinks, step by step: frame s,
+    then the pictures, commands and events stamped s (those happen after frame s, before frame s +
+    1)."""
     commands = sorted(rec.commands, key=lambda c: c.step)
     events = sorted(rec.events, key=lambda e: e.step)
     images = recorded_images(rec.config.cameras, rec.cameras, rec.frames.step, rec.frames.pad_pose)
@@ -117,7 +142,8 @@ def feed(rec: Recording, sinks: Sequence[Sink]) -> None:
         for s in sinks:
             s.on_frame(frame)
         upto = int(steps[i + 1]) if i + 1 < len(steps) else None
-        while mi < len(images) and (upto is None or images[mi].step < upto):  # pictures come right after their frame
+        # pictures come right after their frame
+        while mi < len(images) and (upto is None or images[mi].step < upto):
             for s in sinks:
                 s.on_image(images[mi])
             mi += 1
@@ -135,5 +161,7 @@ def save(rec: Recording, path: str | os.PathLike, *, rate: int = 1) -> None:
     """Write an in-memory recording to an MCAP file (the same writer as `twin run --record`)."""
     from twin.record import open_recorders
 
-    with open_recorders(rec.config, rec.run, mcap_path=path, rate=rate, engine=engine_versions()) as sinks:
+    with open_recorders(
+        rec.config, rec.run, mcap_path=path, rate=rate, engine=engine_versions()
+    ) as sinks:
         feed(rec, sinks)

@@ -1,5 +1,6 @@
-"""Every /commands message of a real file satisfies the JSON Schema that the file itself carries, and
-that schema names exactly the command kinds the Twin applies (a new kind cannot be forgotten there)."""
+"""Every /commands message of a real file satisfies the JSON Schema that the file itself carries,
+and that schema names exactly the command kinds the Twin applies (a new kind cannot be forgotten
+there)."""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ def test_the_command_schema_names_every_kind_the_twin_applies(pick_place_mcap):
 def test_every_recorded_command_satisfies_the_files_own_schema(pick_place_mcap):
     schema, commands = _schema_and_commands(pick_place_mcap[0])
     kinds = {c["kind"] for c in commands}
-    assert {"event", "joint_target", "signal"} <= kinds  # what the task said, what it moved, the pad
+    # what the task said, what it moved, the pad
+    assert {"event", "joint_target", "signal"} <= kinds
     props = schema["properties"]
     for c in commands:
         assert set(schema["required"]) <= set(c)

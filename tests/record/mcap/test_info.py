@@ -1,4 +1,5 @@
-"""`twin info` and bad input to the recording commands: one clear line, exit code 2, no traceback."""
+"""`twin info` and bad input to the recording commands: one clear line, exit code 2, no
+traceback."""
 
 from __future__ import annotations
 
@@ -32,11 +33,13 @@ def test_info_of_a_finalized_recording(whole, capsys):
     counts = {topic: n for topic, _, _, n in info.channels}
     assert sum(counts.values()) == stats.message_count
     assert counts[S.COMMANDS.topic] == len(rec.commands) == info.commands
-    assert info.events == {k: sum(e.kind == k for e in rec.events) for k in {e.kind for e in rec.events}}
+    assert info.events == {
+        k: sum(e.kind == k for e in rec.events) for k in {e.kind for e in rec.events}
+    }
     for topic, n in counts.items():
         assert f"{topic}" in out and f"{n:>7,} messages" in out
     assert "twin.versions: mcap=1.6.0" in out and "robot.urdf" in out
-    assert "run: task pick_place params {\"cycles\": 1}" in out
+    assert 'run: task pick_place params {"cycles": 1}' in out
 
 
 def test_info_of_a_file_cut_short_says_not_finalized(whole, tmp_path, capsys):

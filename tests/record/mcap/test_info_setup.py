@@ -27,7 +27,17 @@ def test_info_events_lists_every_event_with_time_and_data(capsys):
     assert code == 0
     lines = out.split("all events (6):\n", 1)[1].splitlines()
     assert len(lines) == 6
-    assert lines[3].split() == ["t=", "2.263", "s", "step", "543", "attach", "box", "suction", "attached"]
+    assert lines[3].split() == [
+        "t=",
+        "2.263",
+        "s",
+        "step",
+        "543",
+        "attach",
+        "box",
+        "suction",
+        "attached",
+    ]
     assert "break" in lines[4] and "shear 3.996 N > max_shear_force 1.0 N" in lines[4]
     identity = task_identity(pick_place.run)  # the task by its content
     assert lines[0].endswith(f'task_start            {identity} {{"cycles": 1}}'), lines[0]

@@ -38,7 +38,8 @@ def record(path: Path, *, rate: int = 1, config: TwinConfig | None = None) -> Fr
 
 @pytest.fixture(scope="module")
 def recorded(pick_place_mcap) -> tuple[Path, FrameCollector]:
-    """(path, collector) of one pick_place cycle: the session's shared recording, made by record()'s helper."""
+    """(path, collector) of one pick_place cycle: the session's shared recording, made by record()'s
+    helper."""
     return pick_place_mcap
 
 
@@ -71,7 +72,8 @@ def test_rate_keeps_every_nth_step_and_the_last(tmp_path):
     expected = FrameColumns.concat([full.slice(i, i + 1) for i in keep])
     rec = twin.load(tmp_path / "rate.mcap")
     assert rec.frames.equals(expected)
-    assert rec.commands == collector.commands  # inputs are never thinned: the run stays re-executable
+    # inputs are never thinned: the run stays re-executable
+    assert rec.commands == collector.commands
 
 
 def _decoded(path: Path) -> dict[str, list]:
@@ -102,24 +104,39 @@ def test_every_channel_decodes_with_the_standard_reader(recorded):
     assert np.array_equal(np.concatenate([m.step for m in joints]), cols.step)
     assert np.array_equal(np.concatenate([m.t_ns for m in joints]), cols.t_ns)
     assert list(joints[0].joint_names) == list(TwinConfig().profile.joint_names)
-    for field, column in (("position", cols.joint_q), ("velocity", cols.joint_qd), ("effort", cols.joint_effort),
-                          ("target", cols.joint_target)):
-        assert np.concatenate([np.array(getattr(m, field)) for m in joints]).tobytes() == column.tobytes()
+    for field, column in (
+        ("position", cols.joint_q),
+        ("velocity", cols.joint_qd),
+        ("effort", cols.joint_effort),
+        ("target", cols.joint_target),
+    ):
+        assert (
+            np.concatenate([np.array(getattr(m, field)) for m in joints]).tobytes()
+            == column.tobytes()
+        )
     suction = [m for _, m in d[S.SUCTION.topic]]
     assert np.array_equal(np.concatenate([m.on for m in suction]), cols.suction_on)
     assert np.array_equal(np.concatenate([m.sensed_body for m in suction]), cols.sensed_body)
     assert np.array_equal(np.concatenate([m.held_body for m in suction]), cols.held_body)
-    assert np.concatenate([m.hold_force_n for m in suction]).tobytes() == cols.hold_force_n.tobytes()
-    assert np.concatenate([m.hold_torque_nm for m in suction]).tobytes() == cols.hold_torque_nm.tobytes()
+    assert (
+        np.concatenate([m.hold_force_n for m in suction]).tobytes() == cols.hold_force_n.tobytes()
+    )
+    assert (
+        np.concatenate([m.hold_torque_nm for m in suction]).tobytes()
+        == cols.hold_torque_nm.tobytes()
+    )
     poses = [m for _, m in d[S.POSES.topic]]
     assert np.concatenate([m.pad_pose for m in poses]).tobytes() == cols.pad_pose.tobytes()
     assert np.concatenate([m.object_poses for m in poses]).tobytes() == cols.object_poses.tobytes()
     logs = [m for _, m in d[S.LOG.topic]]
     assert [(m.name, m.file) for m in logs] == [(e.kind, e.body) for e in collector.events]
-    assert [m.timestamp.seconds * 10**9 + m.timestamp.nanos for m in logs] == [e.t_ns for e in collector.events]
+    assert [m.timestamp.seconds * 10**9 + m.timestamp.nanos for m in logs] == [
+        e.t_ns for e in collector.events
+    ]
     assert [m["kind"] for _, m in d[S.EVENTS.topic]] == [e.kind for e in collector.events]
     assert [(c["step"], c["kind"], c["args"]) for _, c in d[S.COMMANDS.topic]] == [
-        (c.step, c.kind, c.args) for c in collector.commands]
+        (c.step, c.kind, c.args) for c in collector.commands
+    ]
     assert d[S.ROBOT_DESCRIPTION.topic][0][1]["data"] == urdf_text(TwinConfig().profile)
 
 
@@ -127,11 +144,15 @@ def test_fast_path_equals_the_protobuf_decoder_on_every_block(recorded):
     path, _ = recorded
     s = scan(path)
     topics = s.by_topic()
-    fast = decode_frames(topics[S.JOINTS.topic], topics[S.SUCTION.topic], topics[S.POSES.topic], 1, str(path))
+    fast = decode_frames(
+        topics[S.JOINTS.topic], topics[S.SUCTION.topic], topics[S.POSES.topic], 1, str(path)
+    )
     d = _decoded(path)
     slow = np.concatenate([np.array(m.position) for _, m in d[S.JOINTS.topic]]).reshape(-1, 4)
     assert slow.tobytes() == fast.joint_q.tobytes()
-    poses = np.concatenate([np.array(m.object_poses) for _, m in d[S.POSES.topic]]).reshape(-1, 1, 7)
+    poses = np.concatenate([np.array(m.object_poses) for _, m in d[S.POSES.topic]]).reshape(
+        -1, 1, 7
+    )
     assert poses.tobytes() == fast.object_poses.tobytes()
 
 
@@ -162,8 +183,12 @@ def test_transforms_chain_to_the_pad_and_carry_the_frames_time(recorded):
         link = "suctionPad"
         while link != "world":
             parent, t = edges[link]
-            chain.append(((t.translation.x, t.translation.y, t.translation.z),
-                          (t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w)))
+            chain.append(
+                (
+                    (t.translation.x, t.translation.y, t.translation.z),
+                    (t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w),
+                )
+            )
             link = parent
         for step in reversed(chain):
             pose = _compose(pose, step)
@@ -174,7 +199,9 @@ def test_transforms_chain_to_the_pad_and_carry_the_frames_time(recorded):
         yaw = 2 * math.atan2(pose[1][2], pose[1][3])
         assert math.cos(yaw - pad.heading_rad) == pytest.approx(1.0, abs=1e-12)
         box = edges["box"][1]
-        assert (box.translation.x, box.translation.y, box.translation.z) == frame.object_poses[0][:3]
+        assert (box.translation.x, box.translation.y, box.translation.z) == frame.object_poses[0][
+            :3
+        ]
 
 
 def test_the_file_carries_the_urdf_and_metadata_a_replay_needs(recorded):
@@ -203,7 +230,10 @@ def test_twin_run_records_by_default_and_no_record_disables(tmp_path, monkeypatc
 
 def test_a_raising_task_closes_the_file_with_the_error(tmp_path, capsys):
     task = tmp_path / "boom.py"
-    task.write_text("def run(twin):\n    twin.suction(True)\n    twin.wait(1.3)\n    raise RuntimeError('sensor on fire')\n")
+    task.write_text(
+        "def run(twin):\n    twin.suction(True)\n    twin.wait(1.3)\n    raise "
+        "RuntimeError('sensor on fire')\n"
+    )
     out = tmp_path / "boom.mcap"
     assert main(["run", str(task), "--record", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
@@ -256,9 +286,14 @@ def test_varints_round_trip(value):
     assert wire.read_varint(encoded, 0) == (value, len(encoded))
 
 
-@given(st.lists(st.floats(allow_nan=False), max_size=20), st.lists(st.integers(-2**63, 2**63 - 1), max_size=20))
+@given(
+    st.lists(st.floats(allow_nan=False), max_size=20),
+    st.lists(st.integers(-(2**63), 2**63 - 1), max_size=20),
+)
 def test_packed_fields_split_back_exactly(doubles, ints):
-    buf = wire.packed(4, np.array(doubles, dtype=np.float64), "<f8") + wire.packed(1, np.array(ints, np.int64), "<i8")
+    buf = wire.packed(4, np.array(doubles, dtype=np.float64), "<f8") + wire.packed(
+        1, np.array(ints, np.int64), "<i8"
+    )
     fields = wire.split_fields(buf)
     assert wire.array_of(fields, 4, "<f8").tolist() == doubles
     assert wire.array_of(fields, 1, "<i8").tolist() == ints
@@ -272,11 +307,16 @@ def test_the_fast_scanner_reads_what_mcaps_own_stream_reader_reads(recorded):
 
     path, _ = recorded
     with open(path, "rb") as f:
-        # the scanner skips index, statistics and summary-offset records (it reads every chunk anyway)
-        theirs = [r for r in StreamReader(f).records if type(r) in {Message, *mcap_scan._PARSED.values()}]
+        # the scanner skips index, statistics and summary-offset records (it reads every chunk
+        # anyway)
+        theirs = [
+            r for r in StreamReader(f).records if type(r) in {Message, *mcap_scan._PARSED.values()}
+        ]
     with open(path, "rb") as f:
-        ours = [r.as_mcap() if isinstance(r, mcap_scan.Message) else r
-                for r in mcap_scan.records(f, path.stat().st_size)]
+        ours = [
+            r.as_mcap() if isinstance(r, mcap_scan.Message) else r
+            for r in mcap_scan.records(f, path.stat().st_size)
+        ]
     assert ours == theirs
     assert sum(isinstance(r, Message) for r in ours) > 250
 
@@ -287,7 +327,9 @@ def test_every_chunk_compression_loads_the_same(recorded, tmp_path, compression)
 
     _, collector = recorded
     config = TwinConfig()
-    recorder = McapRecorder(tmp_path / "c.mcap", config, RUN, urdf=urdf_text(config.profile), compression=compression)
+    recorder = McapRecorder(
+        tmp_path / "c.mcap", config, RUN, urdf=urdf_text(config.profile), compression=compression
+    )
     for frame in collector.frames:
         recorder.on_frame(frame)
     recorder.close()
@@ -296,10 +338,10 @@ def test_every_chunk_compression_loads_the_same(recorded, tmp_path, compression)
 
 @pytest.mark.parametrize("rate", [1, 7])
 def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path, rate):
-    """The recorder process hands on_rows runs of rows in a buffer it overwrites once on_rows returns
-    (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame writes.
-    Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last frame is
-    kept only from the last run (the buffer is garbage by then)."""
+    """The recorder process hands on_rows runs of rows in a buffer it overwrites once on_rows
+    returns (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame
+    writes. Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last
+    frame is kept only from the last run (the buffer is garbage by then)."""
     from twin.record.mcap.writer import McapRecorder
     from twin.record.rows import FrameRows
 
@@ -311,7 +353,7 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
         recorder = McapRecorder(path, config, RUN, urdf=urdf_text(config.profile), rate=rate)
         frames, buf, at = collector.frames, bytearray(64 * rows.size), 0
         for size in itertools.cycle((1, 7, 64, 33, 3)):
-            batch = frames[at:at + size]
+            batch = frames[at : at + size]
             if not batch:
                 break
             at += size
@@ -321,20 +363,22 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
                 continue
             for k, frame in enumerate(batch):
                 rows.pack_into(buf, k * rows.size, frame)
-            recorder.on_rows(rows, memoryview(buf)[:len(batch) * rows.size])
+            recorder.on_rows(rows, memoryview(buf)[: len(batch) * rows.size])
             buf[:] = b"\xff" * len(buf)
         for event in collector.events:
             recorder.on_event(event)
         recorder.close()
         return path.read_bytes()
 
-    assert write(tmp_path / "rows.mcap", by_rows=True) == write(tmp_path / "frames.mcap", by_rows=False)
+    assert write(tmp_path / "rows.mcap", by_rows=True) == write(
+        tmp_path / "frames.mcap", by_rows=False
+    )
 
 
 def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
-    """The writer gathers its block messages from the rows in one go; field by field from numpy columns
-    (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame count and
-    in whatever order the counts come (the gather's index is kept for the last count)."""
+    """The writer gathers its block messages from the rows in one go; field by field from numpy
+    columns (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame
+    count and in whatever order the counts come (the gather's index is kept for the last count)."""
     from twin.model import fields as F
     from twin.record.mcap.blocks import BlockEncoder
     from twin.record.rows import FrameRows
@@ -345,13 +389,20 @@ def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
     encoder = BlockEncoder(rows, names)
     at = 0
     for n in (60, 1, 7, 60, 60, 2):
-        block = b"".join(rows.pack(f) for f in collector.frames[at:at + n])
+        block = b"".join(rows.pack(f) for f in collector.frames[at : at + n])
         at += n
         records = rows.records(block)
-        expected = [b"".join([wire.packed(f.number, records[f.name].reshape(n, -1), f.wire) for f in fields[:2]]
-                             + [names[b]] + [wire.packed(f.number, records[f.name].reshape(n, -1), f.wire)
-                                             for f in fields[2:]])
-                    for b, fields in ((b, F.block_fields(b)) for b in F.BLOCKS)]
+        expected = [
+            b"".join(
+                [wire.packed(f.number, records[f.name].reshape(n, -1), f.wire) for f in fields[:2]]
+                + [names[b]]
+                + [
+                    wire.packed(f.number, records[f.name].reshape(n, -1), f.wire)
+                    for f in fields[2:]
+                ]
+            )
+            for b, fields in ((b, F.block_fields(b)) for b in F.BLOCKS)
+        ]
         assert encoder.messages(block) == expected
 
 
@@ -360,19 +411,31 @@ def test_a_user_urdf_travels_with_its_meshes_and_drives_the_transforms(tmp_path,
 
     profile = write_user_robot(tmp_path / "robot")
     out = tmp_path / "user.mcap"
-    assert main(["run", "pick_place", "--cycles", "1", "--robot", str(profile), "--record", str(out)]) == 0
+    assert (
+        main(["run", "pick_place", "--cycles", "1", "--robot", str(profile), "--record", str(out)])
+        == 0
+    )
     with open(out, "rb") as f:
         reader = make_reader(f)
         attachments = {a.name: a for a in reader.iter_attachments()}
     stls = sorted((tmp_path / "robot" / "meshes").glob("*.stl"))
-    assert sorted(n for n in attachments if n.startswith("meshes/")) == [f"meshes/{p.name}" for p in stls]
+    assert sorted(n for n in attachments if n.startswith("meshes/")) == [
+        f"meshes/{p.name}" for p in stls
+    ]
     for p in stls:
         assert attachments[f"meshes/{p.name}"].data == p.read_bytes()
         assert attachments[f"meshes/{p.name}"].media_type == "model/stl"
     assert attachments["robot.urdf"].data == (tmp_path / "robot" / "stl_scara.urdf").read_bytes()
     tf = _decoded(out)[S.TF.topic][-1][1]
     edges = {(t.parent_frame_id, t.child_frame_id) for t in tf.transforms}
-    assert {("world", "base"), ("base", "arm1"), ("arm1", "arm2"), ("arm2", "quill"), ("quill", "tool0"),
-            ("world", "pad_tip"), ("world", "box")} == edges
+    assert {
+        ("world", "base"),
+        ("base", "arm1"),
+        ("arm1", "arm2"),
+        ("arm2", "quill"),
+        ("quill", "tool0"),
+        ("world", "pad_tip"),
+        ("world", "box"),
+    } == edges
     rec = twin.load(out)
     assert rec.config.profile.name == "stl_scara" and len(rec.frames) > 1000

@@ -1,4 +1,5 @@
-"""Crash safety: a run killed with SIGKILL, or a file cut anywhere, is restored by `twin recover`."""
+"""Crash safety: a run killed with SIGKILL, or a file cut anywhere, is restored by `twin
+recover`."""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from twin.sim.twin import Twin
 from twin.tasks import run_task
 from twin.verify.collectors import FrameCollector
 
-LOOP_TASK = '''"""Moves between three points forever, reporting simulated time (a crash-test task)."""
+LOOP_TASK = '''"""Moves between three points forever, reporting simulated time \
+(a crash-test task)."""
 import time
 
 
@@ -52,8 +54,12 @@ def test_a_killed_run_is_recovered_but_for_at_most_the_last_second(tmp_path, cap
     task = tmp_path / "loop.py"
     task.write_text(LOOP_TASK)
     broken = tmp_path / "killed.mcap"
-    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "run", str(task), "--record", str(broken)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", "run", str(task), "--record", str(broken)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     reported_s = 0.0
     try:
         for line in proc.stdout:
@@ -85,7 +91,8 @@ def test_a_killed_run_is_recovered_but_for_at_most_the_last_second(tmp_path, cap
     again = _rerun(task, kept_s + 0.5)
     assert rec.frames.equals(again.columns().slice(0, len(rec.frames)))
     last = int(rec.frames.step[-1])
-    # (the task_start event, a Command too, names how the task was loaded and its parameters, which differ here)
+    # (the task_start event, a Command too, names how the task was loaded and its parameters, which
+    # differ here)
     assert rec.commands[1:] == [c for c in again.commands if c.step <= last][1:]
     assert rec.events[1:] == [e for e in again.events if e.step <= last][1:]
 
@@ -137,7 +144,8 @@ def test_a_damaged_chunk_is_reported_and_recovery_stops_before_it(complete, tmp_
     path, collector = complete
     data = bytearray(path.read_bytes())
     middle = len(data) // 2
-    data[middle:middle + 64] = bytes(64)  # zero 64 bytes inside a chunk: its CRC or its compression fails
+    # zero 64 bytes inside a chunk: its CRC or its compression fails
+    data[middle : middle + 64] = bytes(64)
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
     with pytest.raises(twin.errors.RecordingError, match="damaged"):
@@ -157,8 +165,13 @@ def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_
     _, collector = complete
     config = TwinConfig()
     live = tmp_path / "live.mcap"
-    recorder = McapRecorder(live, config, {"source": "task", "task": "x", "params": {}},
-                            urdf=urdf_text(config.profile), rate=rate)
+    recorder = McapRecorder(
+        live,
+        config,
+        {"source": "task", "task": "x", "params": {}},
+        urdf=urdf_text(config.profile),
+        rate=rate,
+    )
     for frame in collector.frames:
         recorder.on_frame(frame)
         for event in [e for e in collector.events if e.step == frame.step]:
@@ -177,9 +190,13 @@ def test_a_file_still_being_written_holds_all_but_the_last_second(complete, tmp_
 
 
 def test_recovering_a_run_that_left_no_file_says_so(tmp_path, capsys, monkeypatch):
-    """Neither the recording nor its .partial file: one line naming both, exit 2 (not a hint about -o)."""
+    """Neither the recording nor its .partial file: one line naming both, exit 2 (not a hint about
+    -o)."""
     monkeypatch.chdir(tmp_path)
     assert main(["recover", "runs/killed.mcap"]) == 2
     err = capsys.readouterr().err
-    assert err == ("twin: error: recording 'runs/killed.mcap' does not exist, nor does 'runs/killed.mcap.partial'; "
-                   "expected a recording or the .partial file a killed run left\n")
+    assert err == (
+        "twin: error: recording 'runs/killed.mcap' does not exist, nor does "
+        "'runs/killed.mcap.partial'; "
+        "expected a recording or the .partial file a killed run left\n"
+    )

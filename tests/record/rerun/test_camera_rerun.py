@@ -1,5 +1,6 @@
-"""A camera run's .rrd holds each picture as an encoded image on the camera's entity (also when an MCAP
-file is drawn), and the viewer shows the pictures beside the 3D view, which frames the whole workspace."""
+"""A camera run's .rrd holds each picture as an encoded image on the camera's entity (also when an
+MCAP file is drawn), and the viewer shows the pictures beside the 3D view, which frames the whole
+workspace."""
 
 from __future__ import annotations
 
@@ -45,14 +46,19 @@ def test_rrd_holds_every_picture_on_the_cameras_entity(camera_run, tmp_path, cap
         assert live == dict(zip(track.step.tolist(), track.data, strict=True))
     drawn = tmp_path / "drawn.rrd"
     assert main(["view", str(camera_run["mcap"]), "--rrd", str(drawn)]) == 0
-    assert _pictures(drawn, "/world/cameras/wrist") == _pictures(camera_run["rrd"], "/world/cameras/wrist")
+    assert _pictures(drawn, "/world/cameras/wrist") == _pictures(
+        camera_run["rrd"], "/world/cameras/wrist"
+    )
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not glob.glob("/usr/share/vulkan/icd.d/*.json"), reason="the headless viewer needs Vulkan")
+@pytest.mark.skipif(
+    not glob.glob("/usr/share/vulkan/icd.d/*.json"), reason="the headless viewer needs Vulkan"
+)
 def test_viewer_shows_the_pictures_beside_the_3d_view(camera_run, capsys):
     png = camera_run["mcap"].parent / "camera.png"
-    assert main(["view", str(camera_run["rrd"]), "--screenshot", str(png), "--at", "2.27"]) == 0  # at the attach
+    # at the attach
+    assert main(["view", str(camera_run["rrd"]), "--screenshot", str(png), "--at", "2.27"]) == 0
     image = np.asarray(Image.open(png).convert("RGB")).astype(int)
     r, g, b = image[..., 0], image[..., 1], image[..., 2]
     view_3d, pictures = slice(0, 550), slice(565, 830)  # column shares 5 : 2.5 : 4 of 1280 px
@@ -61,7 +67,10 @@ def test_viewer_shows_the_pictures_beside_the_3d_view(camera_run, capsys):
     orange = (r > 180) & (g > 100) & (g < 200) & (b < 90)  # the arm's links
     assert white[80:760, pictures].mean() > 0.3  # the two camera views show pictures
     assert blue[:, pictures].sum() > 500  # the box under the pad, large in the wrist picture
-    assert blue[:, view_3d].sum() > 20 and orange[:, view_3d].sum() > 300  # the whole arm and the box in 3D
-    inside = (orange | blue)[45:765, 0:550]  # the 3D view below its title bar (the top bar has orange text)
+    # the whole arm and the box in 3D
+    assert blue[:, view_3d].sum() > 20 and orange[:, view_3d].sum() > 300
+    # the 3D view below its title bar (the top bar has orange text)
+    inside = (orange | blue)[45:765, 0:550]
     rows, cols = np.nonzero(inside)
-    assert rows.min() > 10 and rows.max() < 710 and cols.min() > 10 and cols.max() < 540  # nothing cut off
+    # nothing cut off
+    assert rows.min() > 10 and rows.max() < 710 and cols.min() > 10 and cols.max() < 540

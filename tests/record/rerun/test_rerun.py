@@ -34,7 +34,8 @@ def rerun_env(home) -> dict:
 
 @pytest.fixture(autouse=True)
 def rerun_home(tmp_path, monkeypatch):
-    """verify_rrd runs the `rerun` CLI, which writes an analytics config under the home directory."""
+    """verify_rrd runs the `rerun` CLI, which writes an analytics config under the home
+    directory."""
     for var, value in rerun_env(tmp_path / "home").items():
         if var == "HOME" or var.startswith("XDG_"):
             monkeypatch.setenv(var, value)
@@ -54,8 +55,14 @@ def run(tmp_path_factory):
     finally:
         twin.close()
         recorder.close()
-    return {"path": path, "config": config, "collector": collector, "cols": collector.columns(),
-            "recorder": recorder, "tmp": tmp}
+    return {
+        "path": path,
+        "config": config,
+        "collector": collector,
+        "cols": collector.columns(),
+        "recorder": recorder,
+        "tmp": tmp,
+    }
 
 
 def _component(path, entity: str, component: str) -> tuple[np.ndarray, list]:
@@ -76,8 +83,14 @@ def _component(path, entity: str, component: str) -> tuple[np.ndarray, list]:
 def test_rerun_rrd_verify_accepts_the_file(run):
     home = run["tmp"] / "home"
     home.mkdir(exist_ok=True)
-    done = subprocess.run([rerun_executable(), "rrd", "verify", str(run["path"])], capture_output=True, text=True,
-                          env=rerun_env(home), timeout=120, check=False)
+    done = subprocess.run(
+        [rerun_executable(), "rrd", "verify", str(run["path"])],
+        capture_output=True,
+        text=True,
+        env=rerun_env(home),
+        timeout=120,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     assert "1 file verified without error" in done.stdout + done.stderr
     verify_rrd(run["path"])  # magic bytes + the same check, as `twin view` runs it
@@ -114,33 +127,53 @@ def test_suction_plots_follow_the_pad(run):
 
 def test_box_and_pad_move_as_in_the_frames(run):
     cols = run["cols"]
-    steps, translations = _component(run["path"], "/" + scene.object_path("box"), "Transform3D:translation")
+    steps, translations = _component(
+        run["path"], "/" + scene.object_path("box"), "Transform3D:translation"
+    )
     np.testing.assert_array_equal(steps, cols.step)
-    np.testing.assert_allclose(np.array([t[0] for t in translations]), cols.object_poses[:, 0, :3], atol=1e-6)
+    np.testing.assert_allclose(
+        np.array([t[0] for t in translations]), cols.object_poses[:, 0, :3], atol=1e-6
+    )
     _, pads = _component(run["path"], "/" + scene.PAD_PATH, "Cylinders3D:centers")
     pad_m = run["config"].profile.pad_length_m
-    np.testing.assert_allclose(np.array([p[0] for p in pads]), cols.pad_pose[:, :3] + [0, 0, pad_m / 2], atol=1e-6)
+    np.testing.assert_allclose(
+        np.array([p[0] for p in pads]), cols.pad_pose[:, :3] + [0, 0, pad_m / 2], atol=1e-6
+    )
     _, colors = _component(run["path"], "/" + scene.PAD_PATH, "Cylinders3D:colors")
     held = cols.held_body >= 0
-    expected = np.array([scene.PAD_HOLDING_RGB if h else scene.PAD_ON_RGB if on else scene.PAD_OFF_RGB
-                         for h, on in zip(held, cols.suction_on, strict=True)])
+    expected = np.array(
+        [
+            scene.PAD_HOLDING_RGB if h else scene.PAD_ON_RGB if on else scene.PAD_OFF_RGB
+            for h, on in zip(held, cols.suction_on, strict=True)
+        ]
+    )
     rgba = np.array([c[0] for c in colors], dtype=np.uint32)
-    np.testing.assert_array_equal(np.stack([rgba >> 24, (rgba >> 16) & 255, (rgba >> 8) & 255], axis=1), expected)
+    np.testing.assert_array_equal(
+        np.stack([rgba >> 24, (rgba >> 16) & 255, (rgba >> 8) & 255], axis=1), expected
+    )
 
 
 def test_joint_transforms_turn_the_urdf_links_by_the_joint_values(run):
     cols = run["cols"]
     names = run["config"].profile.joint_names
     for j in (0, 1, 3):  # revolute about +z: the rotation angle is the joint value
-        steps, quats = _component(run["path"], "/" + scene.joint_path(names[j]), "Transform3D:quaternion")
+        steps, quats = _component(
+            run["path"], "/" + scene.joint_path(names[j]), "Transform3D:quaternion"
+        )
         np.testing.assert_array_equal(steps, cols.step)
         q = np.array([row[0] for row in quats])
         angle = 2.0 * np.arctan2(q[:, 2], q[:, 3])
-        np.testing.assert_allclose(np.angle(np.exp(1j * (angle - cols.joint_q[:, j]))), 0.0, atol=1e-6)
-    _, translations = _component(run["path"], "/" + scene.joint_path(names[2]), "Transform3D:translation")
+        np.testing.assert_allclose(
+            np.angle(np.exp(1j * (angle - cols.joint_q[:, j]))), 0.0, atol=1e-6
+        )
+    _, translations = _component(
+        run["path"], "/" + scene.joint_path(names[2]), "Transform3D:translation"
+    )
     z = np.array([t[0][2] for t in translations])
     np.testing.assert_allclose(z, -cols.joint_q[:, 2], atol=1e-6)  # the Z joint's axis is 0 0 -1
-    _, parents = _component(run["path"], "/" + scene.joint_path(names[2]), "Transform3D:parent_frame")
+    _, parents = _component(
+        run["path"], "/" + scene.joint_path(names[2]), "Transform3D:parent_frame"
+    )
     assert {p[0] for p in parents} == {"MTB_link2"}
 
 
@@ -148,8 +181,9 @@ def test_events_and_commands_become_text_logs(run):
     collector = run["collector"]
     steps, texts = _component(run["path"], "/" + scene.EVENTS_PATH, "TextLog:text")
     assert len(texts) == len(collector.events) > 5
-    assert [t[0] for t in texts][:2] == [" ".join(p for p in (e.kind, e.body, e.message) if p)
-                                         for e in collector.events[:2]]
+    assert [t[0] for t in texts][:2] == [
+        " ".join(p for p in (e.kind, e.body, e.message) if p) for e in collector.events[:2]
+    ]
     assert any(t[0].startswith("attach box") for t in texts)
     np.testing.assert_array_equal(steps, sorted(e.step for e in collector.events))
     _, commands = _component(run["path"], "/" + scene.COMMANDS_PATH, "TextLog:text")
@@ -159,7 +193,8 @@ def test_events_and_commands_become_text_logs(run):
 def test_static_scene_has_the_robot_the_box_and_a_blueprint(run):
     reader = RrdReader(str(run["path"]))
     static = {c.entity_path for c in reader.stream() if c.is_static}
-    assert "/robot/mtb/visual_geometries/MTB_link1/visual_0" in static  # Rerun's URDF loader drew the links
+    # Rerun's URDF loader drew the links
+    assert "/robot/mtb/visual_geometries/MTB_link1/visual_0" in static
     assert "/" + scene.object_path("box") in static
     assert len(reader.blueprints()) == 1
     assert reader.recordings()[0].application_id == scene.APPLICATION_ID
@@ -167,13 +202,22 @@ def test_static_scene_has_the_robot_the_box_and_a_blueprint(run):
 
 def test_write_rrd_converts_a_recording_through_the_same_sink(run):
     collector, cols = run["collector"], run["cols"]
-    recording = Recording(config=run["config"], frames=cols, commands=collector.commands, events=collector.events,
-                          run={"source": "task", "task": "pick_place", "params": {"cycles": 1}},
-                          urdf=urdf_text(run["config"].profile))
+    recording = Recording(
+        config=run["config"],
+        frames=cols,
+        commands=collector.commands,
+        events=collector.events,
+        run={"source": "task", "task": "pick_place", "params": {"cycles": 1}},
+        urdf=urdf_text(run["config"].profile),
+    )
     out = run["tmp"] / "converted.rrd"
     assert write_rrd(recording, out, batch_steps=333) == len(cols)
     verify_rrd(out)
-    for entity in (f"/{scene.ANGLES_PATH}/shoulder", f"/{scene.Z_PATH}/z_target", f"/{scene.SUCTION_PATH}/holding"):
+    for entity in (
+        f"/{scene.ANGLES_PATH}/shoulder",
+        f"/{scene.Z_PATH}/z_target",
+        f"/{scene.SUCTION_PATH}/holding",
+    ):
         steps_a, a = read_scalars(run["path"], entity)
         steps_b, b = read_scalars(out, entity)
         np.testing.assert_array_equal(steps_a, steps_b)
@@ -183,15 +227,25 @@ def test_write_rrd_converts_a_recording_through_the_same_sink(run):
 
 
 def _urdf_with_tilted_joints() -> str:
-    """Joints with rotated origins and oblique (unit) axes, to check the transform maths in general."""
+    """Joints with rotated origins and oblique (unit) axes, to check the transform maths in
+    general."""
     link = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
-    joint = ('<joint name="{0}" type="{1}"><parent link="{2}"/><child link="{3}"/>'
-             '<origin xyz="{4}" rpy="{5}"/><axis xyz="{6}"/><limit lower="-3" upper="3" effort="1" velocity="1"/>'
-             '</joint>')
-    return ('<?xml version="1.0"?><robot name="tilted">' + "".join(link.format(n) for n in "abcd")
-            + joint.format("j1", "revolute", "a", "b", "0.1 -0.2 0.3", "0.3 -0.5 1.1", "0.6 0 0.8")
-            + joint.format("j2", "prismatic", "b", "c", "0.4 0.0 -0.1", "-1.0 0.2 0.4", "0.48 -0.6 0.64")
-            + joint.format("j3", "continuous", "c", "d", "0 0 0", "0 0 0", "0 1 0") + "</robot>")
+    joint = (
+        '<joint name="{0}" type="{1}"><parent link="{2}"/><child link="{3}"/>'
+        '<origin xyz="{4}" rpy="{5}"/><axis xyz="{6}"/><limit lower="-3" upper="3" '
+        'effort="1" velocity="1"/>'
+        "</joint>"
+    )
+    return (
+        '<?xml version="1.0"?><robot name="tilted">'
+        + "".join(link.format(n) for n in "abcd")
+        + joint.format("j1", "revolute", "a", "b", "0.1 -0.2 0.3", "0.3 -0.5 1.1", "0.6 0 0.8")
+        + joint.format(
+            "j2", "prismatic", "b", "c", "0.4 0.0 -0.1", "-1.0 0.2 0.4", "0.48 -0.6 0.64"
+        )
+        + joint.format("j3", "continuous", "c", "d", "0 0 0", "0 0 0", "0 1 0")
+        + "</robot>"
+    )
 
 
 @pytest.mark.parametrize("source", ["mtb", "tilted"])
@@ -209,7 +263,10 @@ def test_vectorised_joint_transforms_match_rerun(tmp_path, source):
             ref_t = np.array(ref.translation.as_arrow_array().to_pylist()[0])
             ref_q = np.array(ref.quaternion.as_arrow_array().to_pylist()[0])
             np.testing.assert_allclose(translations[k], ref_t, atol=1e-6)
-            assert min(np.abs(quaternions[k] - ref_q).max(), np.abs(quaternions[k] + ref_q).max()) < 1e-6
+            assert (
+                min(np.abs(quaternions[k] - ref_q).max(), np.abs(quaternions[k] + ref_q).max())
+                < 1e-6
+            )
         assert math.isclose(np.linalg.norm(quaternions[-1]), 1.0, abs_tol=1e-12)
 
 
@@ -239,8 +296,11 @@ def test_a_user_urdf_with_stl_meshes_is_drawn_from_its_meshes(tmp_path):
         twin.close()
         recorder.close()
     verify_rrd(path)
-    meshes = {c.entity_path for c in RrdReader(str(path)).stream()
-              if c.is_static and "Asset3D:blob" in c.to_record_batch().schema.names}
+    meshes = {
+        c.entity_path
+        for c in RrdReader(str(path)).stream()
+        if c.is_static and "Asset3D:blob" in c.to_record_batch().schema.names
+    }
     links = ("base", "arm1", "arm2", "quill", "tool0")
     assert {f"/robot/stl_scara/visual_geometries/{link}/visual_0" for link in links} <= meshes
     steps, shoulder = read_scalars(path, f"/{scene.ANGLES_PATH}/shoulder")
@@ -267,7 +327,9 @@ def test_to_stream_logs_into_a_stream_the_caller_opened(tmp_path):
     assert RrdReader(str(path)).blueprints() == []  # the caller sends its own blueprint, if any
 
 
-@pytest.mark.parametrize("objects", [(), (SceneObject("box a/b"), SceneObject("box2", pos_m=(0.3, 0.6, 0.025)))])
+@pytest.mark.parametrize(
+    "objects", [(), (SceneObject("box a/b"), SceneObject("box2", pos_m=(0.3, 0.6, 0.025)))]
+)
 def test_any_number_of_objects_with_any_names(tmp_path, objects):
     config = TwinConfig(objects=objects)
     path = tmp_path / "scene.rrd"
@@ -277,7 +339,9 @@ def test_any_number_of_objects_with_any_names(tmp_path, objects):
         twin.close()
     verify_rrd(path)
     for k, obj in enumerate(objects):
-        steps, translations = _component(path, "/" + scene.object_path(obj.name), "Transform3D:translation")
+        steps, translations = _component(
+            path, "/" + scene.object_path(obj.name), "Transform3D:translation"
+        )
         np.testing.assert_array_equal(steps, np.arange(11))
         np.testing.assert_allclose(translations[-1][0], twin.frame.object_poses[k][:3], atol=1e-6)
     assert recorder.frames_written == 11
@@ -285,8 +349,8 @@ def test_any_number_of_objects_with_any_names(tmp_path, objects):
 
 @pytest.mark.parametrize("source", ["mtb", "tilted"])
 def test_the_drawing_and_the_mcap_transforms_pose_every_joint_alike(source):
-    """Both read the joints through robot.urdf: the vectorised poses (Rerun) and the scalar ones (the
-    MCAP's /tf) agree to rounding for every moving joint."""
+    """Both read the joints through robot.urdf: the vectorised poses (Rerun) and the scalar ones
+    (the MCAP's /tf) agree to rounding for every moving joint."""
     from twin.record.mcap.scene_tf import SceneTransforms
 
     text = urdf_text(PROFILES["mtb"]) if source == "mtb" else _urdf_with_tilted_joints()

@@ -1,7 +1,7 @@
-"""`twin view`: MCAP -> .rrd conversion, a headless screenshot that shows the arm, the box and the plots,
-the web and native viewers on loopback and free ports, side by side, their `rerun` child never outliving
-`twin view` (SIGTERM, SIGHUP, SIGKILL), no temporary folder left behind, and one-line errors (exit 2)
-for bad files, busy ports and a missing display."""
+"""`twin view`: MCAP -> .rrd conversion, a headless screenshot that shows the arm, the box and the
+plots, the web and native viewers on loopback and free ports, side by side, their `rerun` child
+never outliving `twin view` (SIGTERM, SIGHUP, SIGKILL), no temporary folder left behind, and
+one-line errors (exit 2) for bad files, busy ports and a missing display."""
 
 import glob
 import os
@@ -37,8 +37,12 @@ def rerun_home(tmp_path, monkeypatch):
     """The `rerun` CLI writes an analytics config under the home directory: keep it in a tmp dir."""
     home = tmp_path / "home"
     home.mkdir()
-    for var, sub in (("HOME", ""), ("XDG_CONFIG_HOME", "config"), ("XDG_DATA_HOME", "data"),
-                     ("XDG_CACHE_HOME", "cache")):
+    for var, sub in (
+        ("HOME", ""),
+        ("XDG_CONFIG_HOME", "config"),
+        ("XDG_DATA_HOME", "data"),
+        ("XDG_CACHE_HOME", "cache"),
+    ):
         monkeypatch.setenv(var, str(home / sub))
     return home
 
@@ -53,8 +57,8 @@ def no_view_folders_left_in_the_temp_dir():
 
 @pytest.fixture(autouse=True)
 def view_tmp(tmp_path, monkeypatch):
-    """A temp dir of the test's own (for `twin view` in this process and in children), empty when the
-    test is over: no `twin-view-*` folder, nor a `rerun-data-*` one the viewer makes."""
+    """A temp dir of the test's own (for `twin view` in this process and in children), empty when
+    the test is over: no `twin-view-*` folder, nor a `rerun-data-*` one the viewer makes."""
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp))
@@ -65,7 +69,8 @@ def view_tmp(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def recorded(pick_place_cli):
-    """One pick_place cycle recorded as MCAP and .rrd by `twin run` (the session's shared recording)."""
+    """One pick_place cycle recorded as MCAP and .rrd by `twin run` (the session's shared
+    recording)."""
     return pick_place_cli
 
 
@@ -103,15 +108,26 @@ def test_bad_files_are_one_line_errors(tmp_path, recorded, capsys):
     cut_rrd.write_bytes(recorded["rrd"].read_bytes()[:4000])
     cut_mcap = tmp_path / "cut.mcap"
     cut_mcap.write_bytes(recorded["mcap"].read_bytes()[:3000])
-    _one_line_error(capsys, ["view", str(tmp_path / "missing.mcap")], "missing.mcap", "does not exist")
+    _one_line_error(
+        capsys, ["view", str(tmp_path / "missing.mcap")], "missing.mcap", "does not exist"
+    )
     _one_line_error(capsys, ["view", str(empty)], "empty.rrd", "is empty")
-    _one_line_error(capsys, ["view", str(text)], "notes.rrd", "neither an MCAP nor a Rerun .rrd file")
+    _one_line_error(
+        capsys, ["view", str(text)], "notes.rrd", "neither an MCAP nor a Rerun .rrd file"
+    )
     _one_line_error(capsys, ["view", str(cut_rrd)], "cut.rrd", "not a valid .rrd file")
-    _one_line_error(capsys, ["view", str(cut_mcap), "--screenshot", str(tmp_path / "x.png")], "cut.mcap")
+    _one_line_error(
+        capsys, ["view", str(cut_mcap), "--screenshot", str(tmp_path / "x.png")], "cut.mcap"
+    )
     _one_line_error(capsys, ["view", str(tmp_path)], "is not a file")
-    _one_line_error(capsys, ["view", str(recorded["rrd"]), "--rrd", str(tmp_path / "y.rrd")], "already a Rerun")
-    _one_line_error(capsys, ["view", str(recorded["mcap"]), "--rrd", str(tmp_path / "no" / "y.rrd")],
-                    "does not exist")
+    _one_line_error(
+        capsys, ["view", str(recorded["rrd"]), "--rrd", str(tmp_path / "y.rrd")], "already a Rerun"
+    )
+    _one_line_error(
+        capsys,
+        ["view", str(recorded["mcap"]), "--rrd", str(tmp_path / "no" / "y.rrd")],
+        "does not exist",
+    )
     assert not (tmp_path / "x.png").exists()
 
 
@@ -119,11 +135,15 @@ def test_holding_time_is_the_end_of_the_first_hold(recorded):
     recording = load(recorded["mcap"])
     held = np.flatnonzero(recording.frames.held_body >= 0)
     assert held.size > 0
-    last_of_first_hold = held[np.flatnonzero(np.diff(held) > 1)[0]] if (np.diff(held) > 1).any() else held[-1]
+    last_of_first_hold = (
+        held[np.flatnonzero(np.diff(held) > 1)[0]] if (np.diff(held) > 1).any() else held[-1]
+    )
     assert holding_time_ns(recorded["rrd"]) == recording.frames.t_ns[last_of_first_hold]
 
 
-@pytest.mark.skipif(not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer")
+@pytest.mark.skipif(
+    not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer"
+)
 def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
     from PIL import Image
 
@@ -145,21 +165,33 @@ def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
     assert orange[:, right].sum() > 300  # the elbow and z lines
     assert blue[:, right].sum() > 300  # the shoulder line
     assert green[:, right].sum() > 100
-    _one_line_error(capsys, ["view", str(recorded["rrd"]), "--screenshot", str(png), "--at", "99"],
-                    "time 99.000 s is after the end of the recording")
+    _one_line_error(
+        capsys,
+        ["view", str(recorded["rrd"]), "--screenshot", str(png), "--at", "99"],
+        "time 99.000 s is after the end of the recording",
+    )
 
 
-URL = re.compile(r"serving the web viewer at (http://127\.0\.0\.1:(\d+)/\?url=(\S+)) \(Ctrl-C to stop\)$")
+URL = re.compile(
+    r"serving the web viewer at (http://127\.0\.0\.1:(\d+)/\?url=(\S+)) \(Ctrl-C to stop\)$"
+)
 
 
 def _start_view(*argv: str, env: dict[str, str] | None = None) -> subprocess.Popen:
     """`twin view ARGV` as a real process in a session of its own."""
-    return subprocess.Popen([sys.executable, "-m", "twin.cli", "view", *argv], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", "view", *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        env=env,
+    )
 
 
 def _end_group(proc: subprocess.Popen) -> None:
-    """Stop the twin process started here (its own session's group; its viewer has a group of its own)."""
+    """Stop the twin process started here (its own session's group; its viewer has a group of its
+    own)."""
     try:
         os.killpg(proc.pid, signal.SIGTERM)
     except ProcessLookupError:
@@ -171,7 +203,9 @@ def _served(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[str, int,
     """(URL, web port, gRPC port) from the line `twin view --web` prints once both listen."""
     line = _first_line(proc, timeout_s)
     match = URL.match(line)
-    assert match, f"no URL line: {line!r}; stderr: {proc.stderr.read() if proc.poll() is not None else ''}"
+    assert match, (
+        f"no URL line: {line!r}; stderr: {proc.stderr.read() if proc.poll() is not None else ''}"
+    )
     source = urllib.parse.unquote(match[3])
     grpc = re.fullmatch(r"rerun\+http://127\.0\.0\.1:(\d+)/proxy", source)
     assert grpc, source
@@ -179,8 +213,9 @@ def _served(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[str, int,
 
 
 def _first_line(proc: subprocess.Popen, timeout_s: float) -> str:
-    """The first line the process prints, or what came before timeout_s (never blocks past it: the viewer,
-    a grandchild, keeps the pipe open, so a line without its newline would otherwise wait forever)."""
+    """The first line the process prints, or what came before timeout_s (never blocks past it: the
+    viewer, a grandchild, keeps the pipe open, so a line without its newline would otherwise wait
+    forever)."""
     deadline, data = time.monotonic() + timeout_s, b""
     fd = proc.stdout.fileno()
     while b"\n" not in data:
@@ -201,7 +236,9 @@ def _viewer_child(proc: subprocess.Popen) -> psutil.Process:
 
 
 def _listening(process: psutil.Process) -> set[tuple[str, int]]:
-    return {c.laddr[:2] for c in process.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+    return {
+        c.laddr[:2] for c in process.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN
+    }
 
 
 _free_port = free_port
@@ -231,29 +268,54 @@ def test_given_ports_are_used_and_busy_ones_are_one_line_errors(recorded, capsys
     proc = _start_view(str(recorded["rrd"]), "--web", "--port", str(web), "--grpc-port", str(grpc))
     try:
         assert _served(proc)[1:] == (web, grpc)
-        _one_line_error(capsys, ["view", str(recorded["rrd"]), "--web", "--port", str(web)],
-                        f"--port {web}: 127.0.0.1:{web} is already in use")
-        _one_line_error(capsys, ["view", str(recorded["rrd"]), "--web", "--grpc-port", str(grpc)],
-                        f"--grpc-port {grpc}: 127.0.0.1:{grpc} is already in use")
+        _one_line_error(
+            capsys,
+            ["view", str(recorded["rrd"]), "--web", "--port", str(web)],
+            f"--port {web}: 127.0.0.1:{web} is already in use",
+        )
+        _one_line_error(
+            capsys,
+            ["view", str(recorded["rrd"]), "--web", "--grpc-port", str(grpc)],
+            f"--grpc-port {grpc}: 127.0.0.1:{grpc} is already in use",
+        )
     finally:
         _end_group(proc)
-    _one_line_error(capsys, ["view", str(recorded["rrd"]), "--web", "--port", str(web), "--grpc-port", str(web)],
-                    f"--port and --grpc-port are the same port {web}")
+    _one_line_error(
+        capsys,
+        ["view", str(recorded["rrd"]), "--web", "--port", str(web), "--grpc-port", str(web)],
+        f"--port and --grpc-port are the same port {web}",
+    )
 
 
-@pytest.mark.skipif(not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer")
+@pytest.mark.skipif(
+    not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer"
+)
 def test_the_printed_url_streams_the_recording(recorded, tmp_path):
-    """What the web page loads from its ?url=: a headless viewer opens that source and gets the whole run."""
+    """What the web page loads from its ?url=: a headless viewer opens that source and gets the
+    whole run."""
     from rerun.experimental import ViewerClient
 
     from twin.record.rerun.rrd_file import rerun_executable
 
     proc = _start_view(str(recorded["mcap"]), "--web")
     port = _free_port()
-    with open(tmp_path / "headless.log", "wb") as log:  # its own TMPDIR: a killed viewer leaves rerun-data-*
-        headless = subprocess.Popen([rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port),
-                                     "--hide-welcome-screen"], stdout=log, stderr=log, start_new_session=True,
-                                    env={**os.environ, "TMPDIR": str(tmp_path)})
+    # its own TMPDIR: a killed viewer leaves rerun-data-*
+    with open(tmp_path / "headless.log", "wb") as log:
+        headless = subprocess.Popen(
+            [
+                rerun_executable(),
+                "--headless",
+                "--bind",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--hide-welcome-screen",
+            ],
+            stdout=log,
+            stderr=log,
+            start_new_session=True,
+            env={**os.environ, "TMPDIR": str(tmp_path)},
+        )
     try:
         url = _served(proc)[0]
         source = urllib.parse.unquote(urllib.parse.urlparse(url).query.removeprefix("url="))
@@ -321,11 +383,15 @@ def test_no_display_is_one_line_naming_the_other_ways(recorded, monkeypatch, cap
     assert main(["view", str(recorded["mcap"])]) == 2
     out, err = capfd.readouterr()
     assert out == "" and err.count("\n") == 1, err
-    assert err.startswith("twin: error: no display for the native viewer") and "--web, --rrd or --screenshot" in err
+    assert (
+        err.startswith("twin: error: no display for the native viewer")
+        and "--web, --rrd or --screenshot" in err
+    )
 
 
 def test_an_unreachable_display_is_one_line_without_rerun_noise(recorded, monkeypatch, capfd):
-    """The real viewer starts, fails to reach the X server, and its log stays out of the terminal."""
+    """The real viewer starts, fails to reach the X server, and its log stays out of the
+    terminal."""
     unused = next(n for n in range(90, 200) if not os.path.exists(f"/tmp/.X11-unix/X{n}"))
     monkeypatch.setenv("DISPLAY", f":{unused}")
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
@@ -336,22 +402,34 @@ def test_an_unreachable_display_is_one_line_without_rerun_noise(recorded, monkey
     assert "X server" in err and "--web, --rrd or --screenshot" in err
 
 
-@pytest.mark.skipif(not (HAVE_VULKAN and shutil.which("Xvfb")), reason="needs Vulkan and Xvfb for a window")
+@pytest.mark.skipif(
+    not (HAVE_VULKAN and shutil.which("Xvfb")), reason="needs Vulkan and Xvfb for a window"
+)
 def test_native_viewer_opens_a_window_on_loopback_beside_a_web_viewer(recorded, view_tmp):
     # Our own X server on a display it picks itself (-displayfd): no race with other X servers.
-    xvfb = subprocess.Popen(["Xvfb", "-displayfd", "1", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True)
+    xvfb = subprocess.Popen(
+        ["Xvfb", "-displayfd", "1", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,
+    )
     try:
         display = xvfb.stdout.readline().strip()
         assert display.isdigit(), "Xvfb did not report its display"
         grpc = _free_port()
-        native = _start_view(str(recorded["mcap"]), "--grpc-port", str(grpc),
-                             env={**os.environ, "DISPLAY": f":{display}"})
+        native = _start_view(
+            str(recorded["mcap"]),
+            "--grpc-port",
+            str(grpc),
+            env={**os.environ, "DISPLAY": f":{display}"},
+        )
         web = _start_view(str(recorded["rrd"]), "--web")
         try:
             _served(web)
             deadline = time.monotonic() + 60
-            while native.poll() is None and time.monotonic() < deadline:  # converting, then starting
+            # converting, then starting
+            while native.poll() is None and time.monotonic() < deadline:
                 children = psutil.Process(native.pid).children()
                 if children and _listening(children[0]):
                     break
@@ -387,7 +465,9 @@ def test_a_run_that_never_holds_is_shown_at_its_end(tmp_path):
     assert holding_time_ns(path) is None
 
 
-@pytest.mark.skipif(not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer")
+@pytest.mark.skipif(
+    not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer"
+)
 def test_screenshot_of_another_programs_rrd_shows_its_end(tmp_path, capsys):
     import rerun as rr
 

@@ -2,10 +2,10 @@
 
 A block message is its frames' step and t_ns, its names, then each of its Frame fields as one packed
 field, frame after frame ([frame][item]; model.fields says which field goes where). The rows hold
-every field little-endian already, in the block's wire types, so every byte of the messages is a byte
-of the rows or a constant (tags, lengths, names): for a given number of frames the three messages are
-one gather from the rows, whose index is worked out once and kept. (11 us a block of 60 pick_place
-frames, where encoding field by field from numpy columns took 19.)
+every field little-endian already, in the block's wire types, so every byte of the messages is a
+byte of the rows or a constant (tags, lengths, names): for a given number of frames the three
+messages are one gather from the rows, whose index is worked out once and kept. (11 us a block of 60
+pick_place frames, where encoding field by field from numpy columns took 19.)
 """
 
 from __future__ import annotations
@@ -18,10 +18,12 @@ from twin.record.rows import FrameRows
 
 
 class BlockEncoder:
-    """Encodes runs of packed rows (record.rows) as the block messages, in model.fields' block order."""
+    """Encodes runs of packed rows (record.rows) as the block messages, in model.fields' block
+    order."""
 
     def __init__(self, rows: FrameRows, names: dict[str, bytes]) -> None:
-        """`names`: each block's encoded names field (joint names for JointBlock, object names else)."""
+        """`names`: each block's encoded names field (joint names for JointBlock, object names
+        else)."""
         self._rows = rows
         self._names = names
         self._plan: tuple[int, np.ndarray, bytes, list[int]] | None = None  # the last frame count's
@@ -36,7 +38,8 @@ class BlockEncoder:
         return [data[start:end] for start, end in zip((0, *ends[:-1]), ends, strict=True)]
 
     def _make_plan(self, n: int) -> tuple[int, np.ndarray, bytes, list[int]]:
-        """(n, where each output byte comes from in `rows + constants`, the constants, each message's end)."""
+        """(n, where each output byte comes from in `rows + constants`, the constants, each
+        message's end)."""
         size = self._rows.size
         frame_starts = np.arange(n, dtype=np.intp)[:, None] * size
         constants = bytearray()
@@ -52,7 +55,9 @@ class BlockEncoder:
             if dtype.base.itemsize != np.dtype(f.wire).itemsize:
                 raise ValueError(f"field {f.name}: its row values are not its {f.wire} wire values")
             const(tag(f.number, LEN) + varint(n * dtype.itemsize))
-            parts.append((frame_starts + np.arange(offset, offset + dtype.itemsize, dtype=np.intp)).ravel())
+            parts.append(
+                (frame_starts + np.arange(offset, offset + dtype.itemsize, dtype=np.intp)).ravel()
+            )
 
         for block in F.BLOCKS:
             step, t_ns, *rest = F.block_fields(block)

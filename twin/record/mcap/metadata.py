@@ -35,12 +35,18 @@ def _version(dist: str) -> str:
 
 
 def versions(engine: dict[str, str] | None = None) -> dict[str, str]:
-    """The packages' versions; engine: what the simulation says of itself (sim.world.engine_versions)."""
+    """The packages' versions; engine: what the simulation says of itself
+    (sim.world.engine_versions)."""
     api = (engine or {}).get("pybullet_api", "unknown")
     return {
-        "twin": _version("twin"), "pybullet": _version("pybullet"), "pybullet_api": api,
-        "numpy": _version("numpy"), "mcap": _version("mcap"), "protobuf": _version("protobuf"),
-        "python": platform.python_version(), "platform": f"{sys.platform} {platform.machine()}",
+        "twin": _version("twin"),
+        "pybullet": _version("pybullet"),
+        "pybullet_api": api,
+        "numpy": _version("numpy"),
+        "mcap": _version("mcap"),
+        "protobuf": _version("protobuf"),
+        "python": platform.python_version(),
+        "platform": f"{sys.platform} {platform.machine()}",
     }
 
 
@@ -53,27 +59,37 @@ def portable_config(config: TwinConfig, recording: str | Path | None) -> TwinCon
         return config
     folder = Path(os.path.abspath(recording)).parent
     relative = Path(os.path.relpath(urdf, folder)).as_posix()
-    return dataclasses.replace(config, profile=dataclasses.replace(config.profile, urdf_path=relative))
+    return dataclasses.replace(
+        config, profile=dataclasses.replace(config.profile, urdf_path=relative)
+    )
 
 
 def located_config(config: TwinConfig, recording: str | Path) -> TwinConfig:
-    """The inverse of portable_config on reading: a relative URDF path resolved from the recording's folder."""
+    """The inverse of portable_config on reading: a relative URDF path resolved from the recording's
+    folder."""
     urdf = config.profile.urdf_path
     if not urdf or Path(urdf).is_absolute():
         return config
     absolute = os.path.normpath(Path(os.path.abspath(recording)).parent / urdf)
-    return dataclasses.replace(config, profile=dataclasses.replace(config.profile, urdf_path=absolute))
+    return dataclasses.replace(
+        config, profile=dataclasses.replace(config.profile, urdf_path=absolute)
+    )
 
 
 def check_run(run: dict) -> dict:
     """The run description, validated: source, task name or path, JSON-safe parameters, and when
     present the task file's sha256 and which recording this run replays ({"file", "sha256"})."""
     if not isinstance(run, dict) or run.get("source") not in RUN_SOURCES:
-        raise ConfigError(f"run description {run!r:.200} is invalid; expected source one of {RUN_SOURCES}")
+        raise ConfigError(
+            f"run description {run!r:.200} is invalid; expected source one of {RUN_SOURCES}"
+        )
     params = run.get("params", {})
-    if nesting_depth(params) > MAX_DEPTH:  # a reader refuses deeper (a recursion in every JSON tool)
-        raise ConfigError(f"run parameters nest lists and objects more than {MAX_DEPTH} levels deep; expected "
-                          f"at most {MAX_DEPTH}")
+    # a reader refuses deeper (a recursion in every JSON tool)
+    if nesting_depth(params) > MAX_DEPTH:
+        raise ConfigError(
+            f"run parameters nest lists and objects more than {MAX_DEPTH} levels deep; expected "
+            f"at most {MAX_DEPTH}"
+        )
     try:
         _dumps(params)
     except (TypeError, ValueError, RecursionError) as err:
@@ -88,8 +104,12 @@ def check_run(run: dict) -> dict:
     return out
 
 
-def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str],
-                 engine_versions: dict[str, str] | None = None) -> dict[str, dict[str, str]]:
+def run_metadata(
+    config: TwinConfig,
+    run: dict,
+    recording: dict[str, str],
+    engine_versions: dict[str, str] | None = None,
+) -> dict[str, dict[str, str]]:
     """Metadata records by name, in the order they are written; engine_versions as versions() takes
     it."""
     run = check_run(run)
@@ -102,10 +122,14 @@ def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str],
     }
     return {
         S.META_CONFIG: {"json": _dumps(config.to_dict())},
-        S.META_RUN: {"source": run["source"], "task": run["task"], "params": _dumps(run["params"]),
-                     **({"task_sha256": run["task_sha256"]} if "task_sha256" in run else {}),
-                     **({"replay_of": _dumps(run["replay_of"])} if "replay_of" in run else {}),
-                     **({"timeout_s": repr(run["timeout_s"])} if "timeout_s" in run else {})},
+        S.META_RUN: {
+            "source": run["source"],
+            "task": run["task"],
+            "params": _dumps(run["params"]),
+            **({"task_sha256": run["task_sha256"]} if "task_sha256" in run else {}),
+            **({"replay_of": _dumps(run["replay_of"])} if "replay_of" in run else {}),
+            **({"timeout_s": repr(run["timeout_s"])} if "timeout_s" in run else {}),
+        },
         "twin.engine": engine,
         S.META_RECORDING: dict(sorted(layout.items())),
         S.META_VERSIONS: dict(sorted(versions(engine_versions).items())),
@@ -114,32 +138,41 @@ def run_metadata(config: TwinConfig, run: dict, recording: dict[str, str],
 
 
 def parse_config(records: dict[str, dict[str, str]], where: str) -> TwinConfig:
-    """The TwinConfig stored in a file's metadata; RecordingError naming the file if absent or bad."""
+    """The TwinConfig stored in a file's metadata; RecordingError naming the file if absent or
+    bad."""
     record = records.get(S.META_CONFIG)
     if record is None or "json" not in record:
         raise RecordingError(f"{where} has no {S.META_CONFIG} metadata; it was not written by twin")
     try:
-        return TwinConfig.from_dict(strict_json.loads(record["json"], constants=True))  # the schema names a NaN
+        # the schema names a NaN
+        return TwinConfig.from_dict(strict_json.loads(record["json"], constants=True))
     except (ValueError, ConfigError) as err:
         raise RecordingError(f"{where}: its twin configuration is unreadable: {err}") from err
 
 
 def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") -> dict:
-    """The run description of a file's metadata (empty fields if it has none); RecordingError naming the
-    field if its source or parameters are malformed (a task is re-run with them)."""
+    """The run description of a file's metadata (empty fields if it has none); RecordingError naming
+    the field if its source or parameters are malformed (a task is re-run with them)."""
     record = records.get(S.META_RUN, {})
     try:
         params = strict_json.loads(record.get("params", "{}"))
     except ValueError as err:
         raise RecordingError(f"{where}: {S.META_RUN} field params is not JSON: {err}") from err
     if not isinstance(params, dict):
-        raise RecordingError(f"{where}: {S.META_RUN} field params = {shown(params)} is invalid; expected a JSON object")
+        raise RecordingError(
+            f"{where}: {S.META_RUN} field params = {shown(params)} is invalid; expected "
+            f"a JSON object"
+        )
     if nesting_depth(params) > MAX_DEPTH:  # never printed: repr recurses too
-        raise RecordingError(f"{where}: {S.META_RUN} field params nests more than {MAX_DEPTH} levels deep; expected "
-                             f"at most {MAX_DEPTH}")
+        raise RecordingError(
+            f"{where}: {S.META_RUN} field params nests more than {MAX_DEPTH} levels deep; expected "
+            f"at most {MAX_DEPTH}"
+        )
     if S.META_RUN in records and record.get("source") not in RUN_SOURCES:
-        raise RecordingError(f"{where}: {S.META_RUN} field source = {record.get('source')!r:.60} is invalid; "
-                             f"expected one of {', '.join(RUN_SOURCES)}")
+        raise RecordingError(
+            f"{where}: {S.META_RUN} field source = {record.get('source')!r:.60} is invalid; "
+            f"expected one of {', '.join(RUN_SOURCES)}"
+        )
     run = {"source": record.get("source", ""), "task": record.get("task", ""), "params": params}
     if record.get("task_sha256"):
         run["task_sha256"] = record["task_sha256"]
@@ -156,7 +189,9 @@ def parse_run(records: dict[str, dict[str, str]], where: str = "the recording") 
         except ValueError:
             timeout_s = math.nan
         if not math.isfinite(timeout_s) or timeout_s <= 0:
-            raise RecordingError(f"{where}: {S.META_RUN} field timeout_s = {record['timeout_s']!r:.60} is invalid; "
-                                 "expected seconds > 0")
+            raise RecordingError(
+                f"{where}: {S.META_RUN} field timeout_s = {record['timeout_s']!r:.60} is invalid; "
+                "expected seconds > 0"
+            )
         run["timeout_s"] = timeout_s
     return run

@@ -1,4 +1,5 @@
-"""`twin recover`: rewrite the readable part of a recording cut short (crash, kill -9) as a complete file.
+"""`twin recover`: rewrite the readable part of a recording cut short (crash, kill -9) as a complete
+file.
 
 Reads up to the first damaged record, keeps only the frames all three block channels hold (a
 chunk may end between them), drops commands and events after the last kept frame, and writes
@@ -52,15 +53,27 @@ class RecoverReport:
 
     def lines(self) -> list[str]:
         state = "was already complete" if self.was_complete else f"was cut short ({self.problem})"
-        found = [] if self.asked == self.source else [
-            (f"{self.asked} does not exist; using {self.source}, the unfinished file of a run that was killed "
-             "(it is kept)")]
+        found = (
+            []
+            if self.asked == self.source
+            else [
+                (
+                    f"{self.asked} does not exist; using {self.source}, the unfinished "
+                    f"file of a run that was killed "
+                    "(it is kept)"
+                )
+            ]
+        )
         return [
             *found,
             f"{self.source} {state}",
-            (f"wrote {self.output}: {self.frames:,} frames, steps 0..{self.last_step}, {self.duration_s:.3f} s "
-             f"simulated; {self.messages_kept:,} messages kept, {self.messages_dropped:,} dropped past the last "
-             "whole frame"),
+            (
+                f"wrote {self.output}: {self.frames:,} frames, steps "
+                f"0..{self.last_step}, {self.duration_s:.3f} s "
+                f"simulated; {self.messages_kept:,} messages kept, "
+                f"{self.messages_dropped:,} dropped past the last "
+                "whole frame"
+            ),
         ]
 
 
@@ -89,14 +102,23 @@ class _Ends:
 
 
 class _Enough(Exception):
-    """The second pass has written every message the first one read (a file still being written grows)."""
+    """The second pass has written every message the first one read (a file still being written
+    grows)."""
 
 
 class _Copy:
     """The second pass: each message the first pass read is written at once if it is kept."""
 
-    def __init__(self, writer: Writer, channel_ids: dict[int, int], read: int, last_step: int, dt_ns: int) -> None:
-        self.writer, self.channel_ids, self.left, self.last_step, self.dt_ns = writer, channel_ids, read, last_step, dt_ns
+    def __init__(
+        self, writer: Writer, channel_ids: dict[int, int], read: int, last_step: int, dt_ns: int
+    ) -> None:
+        self.writer, self.channel_ids, self.left, self.last_step, self.dt_ns = (
+            writer,
+            channel_ids,
+            read,
+            last_step,
+            dt_ns,
+        )
         self.kept = 0
 
     def take(self, s: Scan, topic: str, m: Message) -> None:
@@ -104,7 +126,9 @@ class _Copy:
             raise _Enough
         self.left -= 1
         if _keep(s.path, topic, m, self.last_step, self.dt_ns):
-            self.writer.add_message(self.channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+            self.writer.add_message(
+                self.channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence
+            )
             self.kept += 1
 
 
@@ -132,28 +156,40 @@ def default_output(source: Path) -> Path:
     that does not exist (a killed run); never over an existing file."""
     target = final_path(source)
     if target is None or target.exists():
-        why = f"{str(target)!r} exists" if target is not None else f"{str(source)!r} is no .partial file"
+        why = (
+            f"{str(target)!r} exists"
+            if target is not None
+            else f"{str(source)!r} is no .partial file"
+        )
         raise ConfigError(f"name the restored file with -o FIXED.mcap ({why})")
     return target
 
 
 def recover(source: str | Path, output: str | Path | None = None) -> RecoverReport:
     """Write the readable, consistent part of `source` (or the .partial file beside it, see
-    find_source) to `output` (default: see default_output), a complete MCAP file put in place whole."""
+    find_source) to `output` (default: see default_output), a complete MCAP file put in place
+    whole."""
     asked, source = str(source), find_source(source)
     if not source.exists() and not source.is_symlink():
-        raise RecordingError(f"recording {asked!r} does not exist, nor does {str(partial_path(asked))!r}; "
-                             "expected a recording or the .partial file a killed run left")
+        raise RecordingError(
+            f"recording {asked!r} does not exist, nor does {str(partial_path(asked))!r}; "
+            "expected a recording or the .partial file a killed run left"
+        )
     output = default_output(source) if output is None else output
     out_path = check_output(output, ".mcap", inputs=[source], option="output")
     ends = _Ends()
     s = scan(source, strict=False, topics=ends.TOPICS, consume=ends.take)
     if S.META_CONFIG not in s.metadata:
-        raise RecordingError(f"{str(source)!r} holds no readable twin configuration ({s.problem or 'not a twin file'});"
-                             " nothing to recover")
-    dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns  # a damaged config is a RecordingError
+        raise RecordingError(
+            f"{str(source)!r} holds no readable twin configuration "
+            f"({s.problem or 'not a twin file'});"
+            " nothing to recover"
+        )
+    # a damaged config is a RecordingError
+    dt_ns = parse_config(s.metadata, repr(str(source))).dt_ns
     last_step = ends.last_common_step()
-    writing = out_path.with_name(out_path.name + ".recovering")  # not .partial: that may be the source
+    # not .partial: that may be the source
+    writing = out_path.with_name(out_path.name + ".recovering")
     try:
         try:
             with open(writing, "wb") as f:
@@ -165,29 +201,48 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
     finally:
         writing.unlink(missing_ok=True)
     return RecoverReport(
-        source=str(source), output=str(output), asked=asked, was_complete=s.complete, problem=s.problem,
-        messages_kept=kept, messages_dropped=s.message_count - kept, frames=len(recording.frames),
-        last_step=last_step, duration_s=max(0, last_step) * dt_ns * 1e-9,
+        source=str(source),
+        output=str(output),
+        asked=asked,
+        was_complete=s.complete,
+        problem=s.problem,
+        messages_kept=kept,
+        messages_dropped=s.message_count - kept,
+        frames=len(recording.frames),
+        last_step=last_step,
+        duration_s=max(0, last_step) * dt_ns * 1e-9,
     )
 
 
 def _write(f, s: Scan, source: Path, last_step: int, dt_ns: int) -> int:
-    """The recovered file: the first pass's schemas, channels, metadata (and the recovered marker) and
-    attachments, then the kept messages of a second pass over the source. Returns how many were kept."""
+    """The recovered file: the first pass's schemas, channels, metadata (and the recovered marker)
+    and attachments, then the kept messages of a second pass over the source. Returns how many were
+    kept."""
     writer = Writer(f, compression=CompressionType.ZSTD)
     writer.start(profile="", library=S.LIBRARY)
-    schema_ids = {sid: writer.register_schema(x.name, x.encoding, x.data) for sid, x in sorted(s.schemas.items())}
+    schema_ids = {
+        sid: writer.register_schema(x.name, x.encoding, x.data)
+        for sid, x in sorted(s.schemas.items())
+    }
     channel_ids = {
-        cid: writer.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
+        cid: writer.register_channel(
+            c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata)
+        )
         for cid, c in sorted(s.channels.items())
     }
-    for name, record in s.metadata.items():  # a file cut short loses its finalization too: what followed the
-        if name != S.META_RECOVERED and (s.complete or name != S.META_FINALIZED):  # kept frames is gone
+    # a file cut short loses its finalization too: what followed the kept frames is gone
+    for name, record in s.metadata.items():
+        if name != S.META_RECOVERED and (s.complete or name != S.META_FINALIZED):
             writer.add_metadata(name, record)
-    writer.add_metadata(S.META_RECOVERED, {
-        "source": Path(s.path).name, "problem": s.problem if not s.complete else "none (the source was complete)",
-        "last_step": str(last_step), "source_bytes": str(s.size_bytes),
-    })
+    writer.add_metadata(
+        S.META_RECOVERED,
+        {
+            "source": Path(s.path).name,
+            "problem": s.problem if not s.complete else "none (the source was complete)",
+            "last_step": str(last_step),
+            "source_bytes": str(s.size_bytes),
+        },
+    )
     for a in s.attachments:
         writer.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
     copy = _Copy(writer, channel_ids, s.message_count, last_step, dt_ns)

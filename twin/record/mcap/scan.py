@@ -10,16 +10,16 @@ and every flush), a message holds at most MAX_MESSAGE_BYTES, and a file decompre
 MAX_EXPANSION times its size (recordings measured here expand 2.6-6.6 times) or MAX_CHUNK_BYTES,
 whichever is larger. Decompression stops at the declared size, whatever the compressed stream says.
 
-Per record, the cost is bounded too. A chunk holds only schema, channel and message records (the MCAP
-specification's rule); a message names a channel registered before it. The records inside chunks
-number at most RECORD_ALLOWANCE plus one per MIN_BYTES_PER_RECORD (8) bytes of the file: twin's writer
-puts a 16-byte message index entry in the file for every message, beside its compressed record (17.6
-bytes a message in all, measured on a task that says one event 100,000 times in one step; 60-600
-bytes in ordinary runs). So a file of tiny or empty messages that decompresses 32 times cannot make
-the pass walk hundreds of millions of them (a 45 MB file of 44 million empty messages stops after 5.7
-million). A caller that names the channels it wants (`keep`) gets Message objects for those only;
-every message is counted by channel (`counts`), which is all a message the caller does not interpret
-costs: memory does not grow with the number of messages.
+Per record, the cost is bounded too. A chunk holds only schema, channel and message records (the
+MCAP specification's rule); a message names a channel registered before it. The records inside
+chunks number at most RECORD_ALLOWANCE plus one per MIN_BYTES_PER_RECORD (8) bytes of the file:
+twin's writer puts a 16-byte message index entry in the file for every message, beside its
+compressed record (17.6 bytes a message in all, measured on a task that says one event 100,000 times
+in one step; 60-600 bytes in ordinary runs). So a file of tiny or empty messages that decompresses
+32 times cannot make the pass walk hundreds of millions of them (a 45 MB file of 44 million empty
+messages stops after 5.7 million). A caller that names the channels it wants (`keep`) gets Message
+objects for those only; every message is counted by channel (`counts`), which is all a message the
+caller does not interpret costs: memory does not grow with the number of messages.
 """
 
 from __future__ import annotations
@@ -62,9 +62,18 @@ _IN_CHUNK = (int(Opcode.SCHEMA), int(Opcode.CHANNEL))
 _MESSAGE = int(Opcode.MESSAGE)
 _RECORD_HEAD = struct.Struct("<BQ")
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
-_RECORD_HEAD_AND_ID = struct.Struct("<BQH")  # a record's opcode and length, and a message's channel id
-_PARSED = {Opcode.HEADER: Header, Opcode.FOOTER: Footer, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
-           Opcode.METADATA: Metadata, Opcode.ATTACHMENT: Attachment, Opcode.DATA_END: DataEnd, Opcode.CHUNK: Chunk}
+# a record's opcode and length, and a message's channel id
+_RECORD_HEAD_AND_ID = struct.Struct("<BQH")
+_PARSED = {
+    Opcode.HEADER: Header,
+    Opcode.FOOTER: Footer,
+    Opcode.SCHEMA: Schema,
+    Opcode.CHANNEL: Channel,
+    Opcode.METADATA: Metadata,
+    Opcode.ATTACHMENT: Attachment,
+    Opcode.DATA_END: DataEnd,
+    Opcode.CHUNK: Chunk,
+}
 
 
 class Truncated(Exception):
@@ -77,7 +86,8 @@ class Damaged(Exception):
 
 @dataclass(slots=True)  # not frozen: a frozen dataclass's __init__ costs 3x more, per message
 class Message:
-    """A message record: the fields of mcap's Message, in a fifth of its memory (a file may hold millions)."""
+    """A message record: the fields of mcap's Message, in a fifth of its memory (a file may hold
+    millions)."""
 
     channel_id: int
     sequence: int
@@ -97,16 +107,24 @@ def _parse(opcode: int, body: bytes) -> McapRecord | None:
     try:
         return kind.read(ReadDataStream(BytesIO(body)))
     except Exception as err:
-        raise Damaged(f"{Opcode(opcode).name.lower()} record does not parse ({type(err).__name__}: {err})") from err
+        raise Damaged(
+            f"{Opcode(opcode).name.lower()} record does not parse ({type(err).__name__}: {err})"
+        ) from err
 
 
 def _decompress(chunk: Chunk, budget: list[int]) -> bytes:
-    """A chunk's records, decompressed to exactly its declared size (refused over the caps) and CRC-checked."""
+    """A chunk's records, decompressed to exactly its declared size (refused over the caps) and
+    CRC-checked."""
     size = chunk.uncompressed_size
     if size > MAX_CHUNK_BYTES:
-        raise Damaged(f"a chunk declares {size:,} bytes decompressed; twin writes at most {MAX_CHUNK_BYTES:,}")
+        raise Damaged(
+            f"a chunk declares {size:,} bytes decompressed; twin writes at most {MAX_CHUNK_BYTES:,}"
+        )
     if size > budget[0]:
-        raise Damaged(f"the chunks decompress to more than {MAX_EXPANSION} times the file's size; twin's do not")
+        raise Damaged(
+            f"the chunks decompress to more than {MAX_EXPANSION} times the file's size; "
+            f"twin's do not"
+        )
     budget[0] -= size
     try:
         if chunk.compression == "zstd":
@@ -122,12 +140,18 @@ def _decompress(chunk: Chunk, budget: list[int]) -> bytes:
         elif chunk.compression == "":
             data = chunk.data
         else:
-            raise Damaged(f"chunk compression {chunk.compression[:40]!r} is unknown; expected zstd, lz4 or none")
+            raise Damaged(
+                f"chunk compression {chunk.compression[:40]!r} is unknown; expected "
+                f"zstd, lz4 or none"
+            )
     except (zstandard.ZstdError, RuntimeError, ValueError) as err:
         raise Damaged(f"chunk does not decompress ({type(err).__name__}: {err})") from err
     if len(data) != size:
-        raise Damaged(f"a chunk decompresses to {'more than ' if len(data) > size else ''}{len(data):,} bytes; "
-                      f"it declares {size:,}")
+        raise Damaged(
+            f"a chunk decompresses to "
+            f"{'more than ' if len(data) > size else ''}{len(data):,} bytes; "
+            f"it declares {size:,}"
+        )
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise Damaged("a chunk fails its CRC")
     return data
@@ -138,9 +162,14 @@ class _Pass:
 
     __slots__ = ("budget", "counts", "keep", "records_left", "records_limit")
 
-    def __init__(self, size_bytes: int, counts: dict[int, int], keep: Container[int] | None) -> None:
-        self.budget = max(MAX_CHUNK_BYTES, MAX_EXPANSION * size_bytes)  # decompressed bytes still allowed
-        self.records_limit = self.records_left = RECORD_ALLOWANCE + size_bytes // MIN_BYTES_PER_RECORD
+    def __init__(
+        self, size_bytes: int, counts: dict[int, int], keep: Container[int] | None
+    ) -> None:
+        # decompressed bytes still allowed
+        self.budget = max(MAX_CHUNK_BYTES, MAX_EXPANSION * size_bytes)
+        self.records_limit = self.records_left = (
+            RECORD_ALLOWANCE + size_bytes // MIN_BYTES_PER_RECORD
+        )
         self.counts = counts
         self.keep = keep
 
@@ -167,23 +196,34 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                 raise Damaged("a record runs past the end of its chunk")
             left -= 1
             if left < 0:
-                raise Damaged(f"the chunks hold more than {state.records_limit:,} records ({RECORD_ALLOWANCE:,} and "
-                              f"one per {MIN_BYTES_PER_RECORD} bytes of the file); twin's hold far fewer")
+                raise Damaged(
+                    f"the chunks hold more than {state.records_limit:,} records "
+                    f"({RECORD_ALLOWANCE:,} and "
+                    f"one per {MIN_BYTES_PER_RECORD} bytes of the file); twin's hold far fewer"
+                )
             if opcode == _MESSAGE:
                 if length < 22:
                     raise Damaged("a message record is shorter than its header")
                 if length - 22 > MAX_MESSAGE_BYTES:
-                    raise Damaged(f"a message holds {length - 22:,} bytes; twin writes at most {MAX_MESSAGE_BYTES:,}")
+                    raise Damaged(
+                        f"a message holds {length - 22:,} bytes; twin writes at most "
+                        f"{MAX_MESSAGE_BYTES:,}"
+                    )
                 try:
                     counts[channel_id] += 1
                 except KeyError:
-                    raise Damaged(f"a message on channel {channel_id}, which no channel record before it "
-                                  "registers") from None
+                    raise Damaged(
+                        f"a message on channel {channel_id}, which no channel record before it "
+                        "registers"
+                    ) from None
                 if keep is None or channel_id in keep:
                     channel_id, sequence, log_time, publish_time = message_head(data, start)
-                    yield Message(channel_id, sequence, log_time, publish_time, data[start + 22:stop])
-                elif length == same and not (left & 255):  # now and then in a run of same-size messages:
-                    skipped = _count_run(data, stop, end, length, counts, keep, left)  # count it at once
+                    yield Message(
+                        channel_id, sequence, log_time, publish_time, data[start + 22 : stop]
+                    )
+                elif length == same and not (left & 255):
+                    # now and then in a run of same-size messages: count it at once
+                    skipped = _count_run(data, stop, end, length, counts, keep, left)
                     left -= skipped
                     stop += skipped * (9 + length)
                 same = length
@@ -196,23 +236,37 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                     name = Opcode(opcode).name.lower()
                 except ValueError:
                     name = f"opcode {opcode:#x}"
-                raise Damaged(f"a chunk holds a {name} record; chunks hold only schema, channel and message records")
+                raise Damaged(
+                    f"a chunk holds a {name} record; chunks hold only schema, channel "
+                    f"and message records"
+                )
             pos = stop
     finally:
         state.records_left = left
 
 
-def _count_run(data: bytes, pos: int, end: int, length: int, counts: dict[int, int], keep: Container[int] | None,
-               left: int) -> int:
-    """How many message records of `length` bytes follow one another from `pos`, none on a channel kept
-    or unknown, counted by channel in one numpy pass (at most `left`); 0 if fewer than 64. Floods of
-    empty or equal messages cost no Python work per message."""
+def _count_run(
+    data: bytes,
+    pos: int,
+    end: int,
+    length: int,
+    counts: dict[int, int],
+    keep: Container[int] | None,
+    left: int,
+) -> int:
+    """How many message records of `length` bytes follow one another from `pos`, none on a channel
+    kept or unknown, counted by channel in one numpy pass (at most `left`); 0 if fewer than 64.
+    Floods of empty or equal messages cost no Python work per message."""
     stride = 9 + length
     rows = min((end - pos) // stride, left, 1 << 20)
     if rows < 64:
         return 0
-    head = np.frombuffer(data, np.uint8, count=rows * stride, offset=pos).reshape(rows, stride)[:, :11]
-    same = (head[:, 0] == _MESSAGE) & (head[:, 1:9] == np.frombuffer(struct.pack("<Q", length), np.uint8)).all(1)
+    head = np.frombuffer(data, np.uint8, count=rows * stride, offset=pos).reshape(rows, stride)[
+        :, :11
+    ]
+    same = (head[:, 0] == _MESSAGE) & (
+        head[:, 1:9] == np.frombuffer(struct.pack("<Q", length), np.uint8)
+    ).all(1)
     run = rows if same.all() else int(np.argmin(same))
     if run < 64:
         return 0
@@ -224,8 +278,13 @@ def _count_run(data: bytes, pos: int, end: int, length: int, counts: dict[int, i
     return run
 
 
-def records(f: BinaryIO, size_bytes: int, *, keep: Container[int] | None = None,
-            counts: dict[int, int] | None = None) -> Iterator[McapRecord | Message]:
+def records(
+    f: BinaryIO,
+    size_bytes: int,
+    *,
+    keep: Container[int] | None = None,
+    counts: dict[int, int] | None = None,
+) -> Iterator[McapRecord | Message]:
     """Every record of the file (chunks opened), in order. Raises Truncated or Damaged where the
     file stops making sense; everything yielded before that is sound.
 
@@ -241,7 +300,9 @@ def records(f: BinaryIO, size_bytes: int, *, keep: Container[int] | None = None,
             raise Truncated("the file ends before its MCAP footer (cut short)")
         opcode, length = _RECORD_HEAD.unpack(head)
         if opcode == 0:  # no MCAP record has opcode 0: zeros (a preallocated or overwritten tail)
-            raise Damaged(f"zero bytes where a record should start (byte {pos:,}), not an MCAP record")
+            raise Damaged(
+                f"zero bytes where a record should start (byte {pos:,}), not an MCAP record"
+            )
         if pos + 9 + length > size_bytes:
             raise Truncated("the file ends inside a record (cut short)")
         pos += 9 + length
@@ -261,5 +322,8 @@ def records(f: BinaryIO, size_bytes: int, *, keep: Container[int] | None = None,
             if f.read(len(MAGIC)) != MAGIC:
                 raise Truncated("the file ends without its closing MCAP magic bytes")
             if pos + len(MAGIC) != size_bytes:
-                raise Damaged(f"{size_bytes - pos - len(MAGIC):,} bytes follow the MCAP file's closing magic bytes")
+                raise Damaged(
+                    f"{size_bytes - pos - len(MAGIC):,} bytes follow the MCAP file's "
+                    f"closing magic bytes"
+                )
             return

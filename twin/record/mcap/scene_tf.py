@@ -18,15 +18,30 @@ IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
 
 # A FrameTransform's translation (Vector3, field 4) and rotation (Quaternion, field 5): the constant
 # bytes (tags, lengths) around its seven numbers x, y, z, qx, qy, qz, qw, in order.
-_TAIL = (b"\x22\x1b\x09", 0, b"\x11", 1, b"\x19", 2, b"\x2a\x24\x09", 3, b"\x11", 4, b"\x19", 5, b"\x21", 6)
+_TAIL = (
+    b"\x22\x1b\x09",
+    0,
+    b"\x11",
+    1,
+    b"\x19",
+    2,
+    b"\x2a\x24\x09",
+    3,
+    b"\x11",
+    4,
+    b"\x19",
+    5,
+    b"\x21",
+    6,
+)
 _TAIL_BYTES = sum(len(p) if isinstance(p, bytes) else 8 for p in _TAIL)
 _DOUBLE = struct.Struct("<d")
 _SECONDS_TAG, _NANOS_TAG = tag(1, VARINT), tag(2, VARINT)  # a Timestamp's fields
 
 
 class _Joint:
-    """One URDF joint (robot.urdf's reading of it), pre-digested so a transform costs a sine, a cosine
-    and a pack."""
+    """One URDF joint (robot.urdf's reading of it), pre-digested so a transform costs a sine, a
+    cosine and a pack."""
 
     def __init__(self, joint: UrdfJoint, column: int) -> None:
         self.kind = joint.kind
@@ -46,7 +61,11 @@ class _Joint:
             return self.xyz, quat_mul(self.q_origin, motion) if self.rotated else motion
         if self.kind == "prismatic":
             a = self.axis_in_parent
-            return (self.xyz[0] + a[0] * q, self.xyz[1] + a[1] * q, self.xyz[2] + a[2] * q), self.q_origin
+            return (
+                self.xyz[0] + a[0] * q,
+                self.xyz[1] + a[1] * q,
+                self.xyz[2] + a[2] * q,
+            ), self.q_origin
         return self.xyz, self.q_origin
 
 
@@ -64,22 +83,30 @@ def timestamp_field(t_ns: int) -> bytes:
 
 
 class SceneTransforms:
-    """Builds one FrameTransforms message per viewed frame from a URDF and the scene's object names."""
+    """Builds one FrameTransforms message per viewed frame from a URDF and the scene's object
+    names."""
 
-    def __init__(self, urdf: str, joint_names: tuple[str, ...], object_names: tuple[str, ...]) -> None:
+    def __init__(
+        self, urdf: str, joint_names: tuple[str, ...], object_names: tuple[str, ...]
+    ) -> None:
         root = parse_urdf(urdf)
         columns = {name: i for i, name in enumerate(joint_names)}
         joints = urdf_joints(root)
         self.joints = [_Joint(j, columns.get(j.name, -1)) for j in joints]
         children = {j.child for j in joints}
-        roots = sorted(link.get("name") for link in root.iter("link") if link.get("name") not in children)
+        roots = sorted(
+            link.get("name") for link in root.iter("link") if link.get("name") not in children
+        )
         self.root_link = roots[0] if roots else WORLD
         taken = {WORLD, PAD_TIP, *(link.get("name") for link in root.iter("link"))}
         self.object_frames = tuple(n if n not in taken else f"object_{n}" for n in object_names)
         root_names = len_field(2, WORLD.encode()) + len_field(3, self.root_link.encode())
         pad_names = len_field(2, WORLD.encode()) + len_field(3, PAD_TIP.encode())
-        object_names = [len_field(2, WORLD.encode()) + len_field(3, n.encode()) for n in self.object_frames]
-        # the robot's transforms, in message order: (names, constant tail or None, moving joint or None)
+        object_names = [
+            len_field(2, WORLD.encode()) + len_field(3, n.encode()) for n in self.object_frames
+        ]
+        # the robot's transforms, in message order: (names, constant tail or None, moving joint or
+        # None)
         static = [(root_names, _tail((0.0, 0.0, 0.0), IDENTITY_Q), None)]
         for j in self.joints:
             moving = j.column >= 0 and j.moving
@@ -91,10 +118,11 @@ class SceneTransforms:
         self._encoders: dict[int, tuple[struct.Struct, itemgetter, tuple[bytes, ...]]] = {}
 
     def _encoder(self, ts_len: int) -> tuple[struct.Struct, itemgetter, tuple[bytes, ...]]:
-        """The whole message as one struct, given the timestamp's encoded length, and which value goes
-        in each of its places: message() fills it from one tuple (timestamp, the moving joints' numbers,
-        the poses' numbers, the constant pieces), so a message costs one pack (pick_place's scene: about
-        5 us a message from a row, where a Frame from the row and a pack per transform cost 7.3)."""
+        """The whole message as one struct, given the timestamp's encoded length, and which value
+        goes in each of its places: message() fills it from one tuple (timestamp, the moving joints'
+        numbers, the poses' numbers, the constant pieces), so a message costs one pack (pick_place's
+        scene: about 5 us a message from a row, where a Frame from the row and a pack per transform
+        cost 7.3)."""
         pieces: list[bytes | int] = []  # constant bytes, or a value's index in that tuple
         at = 1  # the next number's index (0 is the timestamp)
         for names, tail in self._transforms:

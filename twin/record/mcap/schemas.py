@@ -28,18 +28,28 @@ BLOCKS_PROTO = "twin/blocks.proto"
 STEP, T_NS, NAMES = F.BY_NAME["step"].number, F.BY_NAME["t_ns"].number, F.NAMES_FIELD
 
 _F = descriptor_pb2.FieldDescriptorProto
-_PROTO_TYPES = {"<f8": _F.TYPE_DOUBLE, "<i8": _F.TYPE_SFIXED64, "<i4": _F.TYPE_SFIXED32, "|u1": _F.TYPE_BOOL}
+_PROTO_TYPES = {
+    "<f8": _F.TYPE_DOUBLE,
+    "<i8": _F.TYPE_SFIXED64,
+    "<i4": _F.TYPE_SFIXED32,
+    "|u1": _F.TYPE_BOOL,
+}
 
 
 def _block_fields(block: str) -> list[tuple[str, int, int]]:
-    """(name, number, protobuf type) of a block message's fields: step, t_ns, its names, then its Frame fields."""
+    """(name, number, protobuf type) of a block message's fields: step, t_ns, its names, then its
+    Frame fields."""
     step, t_ns, *rest = F.block_fields(block)
-    return ([(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in (step, t_ns)]
-            + [(F.NAMES_FIELD_NAME[block], F.NAMES_FIELD, _F.TYPE_STRING)]
-            + [(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in rest])
+    return (
+        [(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in (step, t_ns)]
+        + [(F.NAMES_FIELD_NAME[block], F.NAMES_FIELD, _F.TYPE_STRING)]
+        + [(f.proto_name, f.number, _PROTO_TYPES[f.wire]) for f in rest]
+    )
 
 
-_BLOCK_FIELDS: dict[str, list[tuple[str, int, int]]] = {block: _block_fields(block) for block in F.BLOCKS}
+_BLOCK_FIELDS: dict[str, list[tuple[str, int, int]]] = {
+    block: _block_fields(block) for block in F.BLOCKS
+}
 
 
 @cache
@@ -49,7 +59,13 @@ def blocks_descriptor_set() -> bytes:
     for message, fields in _BLOCK_FIELDS.items():
         m = fd.message_type.add(name=message)
         for name, number, kind in fields:
-            m.field.add(name=name, number=number, type=kind, label=_F.LABEL_REPEATED, json_name=_json_name(name))
+            m.field.add(
+                name=name,
+                number=number,
+                type=kind,
+                label=_F.LABEL_REPEATED,
+                json_name=_json_name(name),
+            )
     return descriptor_pb2.FileDescriptorSet(file=[fd]).SerializeToString(deterministic=True)
 
 
@@ -60,7 +76,8 @@ def _json_name(name: str) -> str:
 
 @cache
 def foxglove_descriptor_set(message_name: str) -> bytes:
-    """FileDescriptorSet of a Foxglove well-known message ('FrameTransforms', 'Log') and its imports."""
+    """FileDescriptorSet of a Foxglove well-known message ('FrameTransforms', 'Log') and its
+    imports."""
     import importlib
 
     module = importlib.import_module(f"foxglove_schemas_protobuf.{message_name}_pb2")
@@ -86,10 +103,17 @@ def _json_schema(properties: dict, required: list[str]) -> bytes:
 
 COMMAND_SCHEMA = _json_schema(
     {
-        "step": {"type": "integer", "minimum": 0, "description": "physics step the command takes effect at"},
+        "step": {
+            "type": "integer",
+            "minimum": 0,
+            "description": "physics step the command takes effect at",
+        },
         "kind": {"type": "string", "enum": list(COMMAND_ARGS)},
-        "args": {"type": "object", "description": "kind-specific arguments (joint, q, v, name, value, key; for an "
-                                                  "event, what a task or client said: kind, body, message, data)"},
+        "args": {
+            "type": "object",
+            "description": "kind-specific arguments (joint, q, v, name, value, key; for an "
+            "event, what a task or client said: kind, body, message, data)",
+        },
     },
     ["step", "kind", "args"],
 )
@@ -119,9 +143,11 @@ class ChannelSpec:
             return blocks_descriptor_set()
         if self.schema_name.startswith("foxglove."):
             return foxglove_descriptor_set(self.schema_name.removeprefix("foxglove."))
-        return {"twin.Command": COMMAND_SCHEMA, "twin.Event": EVENT_SCHEMA, "std_msgs/String": STRING_SCHEMA}[
-            self.schema_name
-        ]
+        return {
+            "twin.Command": COMMAND_SCHEMA,
+            "twin.Event": EVENT_SCHEMA,
+            "std_msgs/String": STRING_SCHEMA,
+        }[self.schema_name]
 
 
 JOINTS = ChannelSpec("/twin/joints", "twin.JointBlock", "protobuf", "protobuf")
@@ -136,8 +162,9 @@ ROBOT_DESCRIPTION = ChannelSpec("/robot_description", "std_msgs/String", "jsonsc
 # registration order fixes the schema and channel ids in every file
 CHANNELS = (ROBOT_DESCRIPTION, JOINTS, SUCTION, POSES, TF, LOG, EVENTS, COMMANDS)
 
-# A camera's channels, registered after CHANNELS for each of the configuration's cameras (a recording
-# without cameras has none): its pictures and, with each one, its calibration (Foxglove projects with it).
+# A camera's channels, registered after CHANNELS for each of the configuration's cameras (a
+# recording without cameras has none): its pictures and, with each one, its calibration (Foxglove
+# projects with it).
 IMAGE_SCHEMA, CALIBRATION_SCHEMA = "foxglove.CompressedImage", "foxglove.CameraCalibration"
 
 
@@ -147,8 +174,12 @@ def image_channel(camera: str) -> ChannelSpec:
 
 def calibration_channel(camera: str) -> ChannelSpec:
     return ChannelSpec(f"/camera/{camera}/calibration", CALIBRATION_SCHEMA, "protobuf", "protobuf")
+
+
 # block message -> its channel's topic, in model.fields' block order
-BLOCK_TOPICS = {block: next(c.topic for c in CHANNELS if c.schema_name == f"twin.{block}") for block in F.BLOCKS}
+BLOCK_TOPICS = {
+    block: next(c.topic for c in CHANNELS if c.schema_name == f"twin.{block}") for block in F.BLOCKS
+}
 
 # metadata record names
 META_CONFIG = "twin.config"

@@ -13,7 +13,8 @@ from twin.errors import RecordingError
 
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
 # Fields one message may hold: twin writes each block field once (packed), so a handful; other
-# writers' unpacked arrays are accepted up to this many values. A damaged message costs bounded time.
+# writers' unpacked arrays are accepted up to this many values. A damaged message costs bounded
+# time.
 MAX_FIELDS = 65_536
 _VARINT_CACHE = [bytes([i]) for i in range(128)]
 
@@ -46,7 +47,8 @@ def str_field(field_number: int, text: str) -> bytes:
 
 
 def packed(field_number: int, array: np.ndarray, dtype: str) -> bytes:
-    """A packed repeated field from a numpy array ('<f8' double, '<i8' sfixed64, '<i4' sfixed32, '|u1' bool)."""
+    """A packed repeated field from a numpy array ('<f8' double, '<i8' sfixed64, '<i4' sfixed32,
+    '|u1' bool)."""
     return len_field(field_number, np.ascontiguousarray(array, dtype=dtype).tobytes())
 
 
@@ -82,20 +84,24 @@ def split_fields(buf: bytes) -> dict[int, list[tuple[int, bytes | int]]]:
             raise RecordingError("protobuf field number 0 (zero bytes or garbage), not a field")
         count += 1
         if count > MAX_FIELDS:
-            raise RecordingError(f"protobuf message holds more than {MAX_FIELDS:,} fields; expected packed arrays")
+            raise RecordingError(
+                f"protobuf message holds more than {MAX_FIELDS:,} fields; expected packed arrays"
+            )
         if wire_type == LEN:
             if pos < end and buf[pos] < 128:
                 size, pos = buf[pos], pos + 1
             else:
                 size, pos = read_varint(buf, pos)
-            value, pos = buf[pos:pos + size], pos + size
+            value, pos = buf[pos : pos + size], pos + size
         elif wire_type == VARINT:
             value, pos = read_varint(buf, pos)
         elif wire_type in (I64, I32):
             width = 8 if wire_type == I64 else 4
-            value, pos = buf[pos:pos + width], pos + width
+            value, pos = buf[pos : pos + width], pos + width
         else:
-            raise RecordingError(f"protobuf wire type {wire_type} (field {number}) is not supported")
+            raise RecordingError(
+                f"protobuf wire type {wire_type} (field {number}) is not supported"
+            )
         if pos > end:
             raise RecordingError(f"protobuf field {number} runs past the end of its message")
         out.setdefault(number, []).append((wire_type, value))

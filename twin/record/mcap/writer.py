@@ -44,12 +44,16 @@ _ERROR = {"task_error", "break"}
 
 
 def _json(value: object) -> bytes:
-    """Standard JSON: a NaN or infinity (a diverged simulation's event data) is written as null, never as
-    the NaN/Infinity tokens Python would write and other JSON readers refuse."""
+    """Standard JSON: a NaN or infinity (a diverged simulation's event data) is written as null,
+    never as the NaN/Infinity tokens Python would write and other JSON readers refuse."""
     try:
-        return json.dumps(value, sort_keys=True, separators=(",", ":"), default=_plain, allow_nan=False).encode()
+        return json.dumps(
+            value, sort_keys=True, separators=(",", ":"), default=_plain, allow_nan=False
+        ).encode()
     except ValueError:
-        return json.dumps(finite_or_null(value), sort_keys=True, separators=(",", ":"), default=_plain).encode()
+        return json.dumps(
+            finite_or_null(value), sort_keys=True, separators=(",", ":"), default=_plain
+        ).encode()
 
 
 def _plain(value: object) -> object:
@@ -58,15 +62,34 @@ def _plain(value: object) -> object:
 
 
 class McapRecorder(Sink):
-    """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized marker)."""
+    """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized
+    marker)."""
 
-    def __init__(self, path: str | Path, config: TwinConfig, run: dict, *, urdf: str, meshes: list[Path] = (),
-                 rate: int = 1, compression: str = "zstd", engine: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        config: TwinConfig,
+        run: dict,
+        *,
+        urdf: str,
+        meshes: list[Path] = (),
+        rate: int = 1,
+        compression: str = "zstd",
+        engine: dict[str, str] | None = None,
+    ) -> None:
         if isinstance(rate, bool) or not isinstance(rate, int) or rate < 1:
-            raise RecordingError(f"recording rate {rate!r} is invalid; expected a whole number of steps >= 1")
-        kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+            raise RecordingError(
+                f"recording rate {rate!r} is invalid; expected a whole number of steps >= 1"
+            )
+        kinds = {
+            "zstd": CompressionType.ZSTD,
+            "lz4": CompressionType.LZ4,
+            "none": CompressionType.NONE,
+        }
         if compression not in kinds:
-            raise RecordingError(f"chunk compression {compression!r} is unknown; expected one of {sorted(kinds)}")
+            raise RecordingError(
+                f"chunk compression {compression!r} is unknown; expected one of {sorted(kinds)}"
+            )
         check_run(run)  # before the file is opened: bad input must not clobber an unfinished file
         mesh_files = _read_meshes(config, meshes)  # likewise an unreadable mesh
         self.path = Path(path)
@@ -81,14 +104,24 @@ class McapRecorder(Sink):
         self.flush_ns = round(FLUSH_S * 1e9)
         self._joint_names = b"".join(wire.str_field(S.NAMES, n) for n in config.profile.joint_names)
         self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
-        self._tf = SceneTransforms(urdf, config.profile.joint_names, tuple(o.name for o in config.objects))
+        self._tf = SceneTransforms(
+            urdf, config.profile.joint_names, tuple(o.name for o in config.objects)
+        )
         self._rows = FrameRows(len(config.profile.joint_names), self.n_objects)
-        self._tf_numbers = _row_struct(self._rows, ("joint_q", "pad_pose", "object_poses")).unpack_from
+        self._tf_numbers = _row_struct(
+            self._rows, ("joint_q", "pad_pose", "object_poses")
+        ).unpack_from
         self._step_time = _row_struct(self._rows, ("step", "t_ns"))
         self._block_bytes = self.block_frames * self._rows.size
         self._block = bytearray()  # the next block's frames, as packed rows
-        self._blocks = BlockEncoder(self._rows, {b: self._joint_names if b == "JointBlock" else self._object_names
-                                                 for b in F.BLOCKS})  # every other block names the objects
+        self._blocks = BlockEncoder(
+            self._rows,
+            {
+                b: self._joint_names if b == "JointBlock" else self._object_names
+                # every other block names the objects
+                for b in F.BLOCKS
+            },
+        )
         self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
         self._last: tuple[bytes, int, int] | None = None  # the last frame seen: (row, step, t_ns)
         self._last_written_step = -1
@@ -98,11 +131,15 @@ class McapRecorder(Sink):
         self._task_error = ""  # the first task_error it saw: such a run is never finalized as ok
         self.closed = False
         if self.path.is_dir():
-            raise RecordingError(f"cannot write recording {str(self.path)!r}: it is a folder; expected an .mcap path")
+            raise RecordingError(
+                f"cannot write recording {str(self.path)!r}: it is a folder; expected an .mcap path"
+            )
         try:
             self._file = open(self.partial, "wb")  # noqa: SIM115 - closed in close() or abandon()
         except OSError as err:
-            raise RecordingError(f"cannot write recording {str(self.path)!r}: {err.strerror or err}") from err
+            raise RecordingError(
+                f"cannot write recording {str(self.path)!r}: {err.strerror or err}"
+            ) from err
         self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, compression=kinds[compression])
         try:
             self._start(config, run, urdf, mesh_files, compression)
@@ -111,20 +148,37 @@ class McapRecorder(Sink):
             self.partial.unlink(missing_ok=True)  # nothing of the run in it yet
             raise
 
-    def _start(self, config: TwinConfig, run: dict, urdf: str, mesh_files: list[tuple[str, str, bytes]],
-               compression: str) -> None:
+    def _start(
+        self,
+        config: TwinConfig,
+        run: dict,
+        urdf: str,
+        mesh_files: list[tuple[str, str, bytes]],
+        compression: str,
+    ) -> None:
         self._writer.start(profile="", library=S.LIBRARY)
         self._channel: dict[str, int] = {}
         for spec in S.CHANNELS:
-            schema_id = self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
-            self._channel[spec.topic] = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id)
+            schema_id = self._writer.register_schema(
+                spec.schema_name, spec.schema_encoding, spec.schema_data()
+            )
+            self._channel[spec.topic] = self._writer.register_channel(
+                spec.topic, spec.message_encoding, schema_id
+            )
         self._tf_channel = self._channel[S.TF.topic]
         self._block_channels = [self._channel[S.BLOCK_TOPICS[b]] for b in F.BLOCKS]
         self._register_cameras(config)
-        extra = {"rate_steps": str(self.rate), "block_frames": str(self.block_frames),
-                 "view_every_steps": str(self.view_every), "flush_s": repr(FLUSH_S), "compression": compression}
+        extra = {
+            "rate_steps": str(self.rate),
+            "block_frames": str(self.block_frames),
+            "view_every_steps": str(self.view_every),
+            "flush_s": repr(FLUSH_S),
+            "compression": compression,
+        }
         # a user URDF by its path relative to the recording: no absolute path in the file
-        for name, record in run_metadata(portable_config(config, self.path), run, extra, self.engine).items():
+        for name, record in run_metadata(
+            portable_config(config, self.path), run, extra, self.engine
+        ).items():
             self._writer.add_metadata(name, record)
         self._writer.add_attachment(0, 0, "robot.urdf", "application/xml", urdf.encode())
         for name, media_type, data in mesh_files:
@@ -140,59 +194,91 @@ class McapRecorder(Sink):
         """Frames packed as rows (the recorder process's feed), each one as on_frame takes it."""
         view = memoryview(buf).cast("B")
         if rows.size != self._rows.size or len(view) % rows.size:
-            raise RecordingError(f"{len(view)} bytes of {rows.size}-byte rows fed to a recorder of "
-                                 f"{self._rows.size}-byte rows")
+            raise RecordingError(
+                f"{len(view)} bytes of {rows.size}-byte rows fed to a recorder of "
+                f"{self._rows.size}-byte rows"
+            )
         if len(view):
             self._take(view)
 
     def _take(self, view: memoryview) -> None:
-        """Frames as rows, one after another in `view`: each one's transforms at the viewing rate, its
-        row into the block at the recording rate. What it keeps it copies (the sender may reuse the
-        memory behind `view` as soon as this returns)."""
-        # locals, not attributes, in this loop over every frame (its bare loop: 0.19 us a frame, 0.22 with attributes)
-        size, n_joints, view_every, rate = self._rows.size, self._rows.n_joints, self.view_every, self.rate
+        """Frames as rows, one after another in `view`: each one's transforms at the viewing rate,
+        its row into the block at the recording rate. What it keeps it copies (the sender may reuse
+        the memory behind `view` as soon as this returns)."""
+        # locals, not attributes, in this loop over every frame (its bare loop: 0.19 us a frame,
+        # 0.22 with attributes)
+        size, n_joints, view_every, rate = (
+            self._rows.size,
+            self._rows.n_joints,
+            self.view_every,
+            self.rate,
+        )
         block, full, far = self._block, self._block_bytes, 2 * self.flush_ns
         at = 0
         for step, t_ns in self._step_time.iter_unpack(view):
             if not step % view_every:
                 numbers = self._tf_numbers(view, at)  # joint values, then the poses
-                self._pending.append((t_ns, self._tf_channel,
-                                      self._tf.message(t_ns, numbers[:n_joints], numbers[n_joints:])))
+                self._pending.append(
+                    (
+                        t_ns,
+                        self._tf_channel,
+                        self._tf.message(t_ns, numbers[:n_joints], numbers[n_joints:]),
+                    )
+                )
             at += size
             if not step % rate:
-                block += view[at - size:at]
+                block += view[at - size : at]
                 if len(block) >= full:
                     self._write_block()
                     continue
             if t_ns - self._last_flush_ns >= far:  # blocks far apart (a high --rate)
                 self._write_pending()
                 self._flush(t_ns)
-        self._last = (bytes(view[at - size:at]), step, t_ns)
+        self._last = (bytes(view[at - size : at]), step, t_ns)
 
     def on_command(self, command: Command) -> None:
         body = _json({"step": command.step, "kind": command.kind, "args": command.args})
-        self._pending.append((command.step * self.config.dt_ns, self._channel[S.COMMANDS.topic], body))
+        self._pending.append(
+            (command.step * self.config.dt_ns, self._channel[S.COMMANDS.topic], body)
+        )
 
     def on_event(self, event: Event) -> None:
         if event.kind == "task_error" and not self._task_error:
             self._task_error = event.message or "task error"
-        full = _json({"step": event.step, "t_ns": event.t_ns, "kind": event.kind, "body": event.body,
-                      "message": event.message, "data": event.data})
+        full = _json(
+            {
+                "step": event.step,
+                "t_ns": event.t_ns,
+                "kind": event.kind,
+                "body": event.body,
+                "message": event.message,
+                "data": event.data,
+            }
+        )
         self._pending.append((event.t_ns, self._channel[S.EVENTS.topic], full))
         self._pending.append((event.t_ns, self._channel[S.LOG.topic], _log_message(event)))
 
     def on_image(self, image: CameraImage) -> None:
-        """A camera's picture as foxglove.CompressedImage, its calibration, and the camera's pose on /tf
-        (world -> its frame_id), all at the picture's time."""
+        """A camera's picture as foxglove.CompressedImage, its calibration, and the camera's pose on
+        /tf (world -> its frame_id), all at the picture's time."""
         channels = self._camera_channels.get(image.camera)
         if channels is None:
-            raise RecordingError(f"a picture from camera {image.camera!r}, which the configuration does not have; "
-                                 f"expected one of {sorted(self._camera_channels)}")
+            raise RecordingError(
+                f"a picture from camera {image.camera!r}, which the configuration does not have; "
+                f"expected one of {sorted(self._camera_channels)}"
+            )
         spec = self._cameras[image.camera]
         picture = CompressedImage(frame_id=spec.frame_id, data=image.data, format=image.format)
-        calibration = CameraCalibration(frame_id=spec.frame_id, width=spec.width_px, height=spec.height_px,
-                                        distortion_model="plumb_bob", D=[0.0] * 5, K=spec.intrinsics(),
-                                        R=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), P=spec.projection())
+        calibration = CameraCalibration(
+            frame_id=spec.frame_id,
+            width=spec.width_px,
+            height=spec.height_px,
+            distortion_model="plumb_bob",
+            D=[0.0] * 5,
+            K=spec.intrinsics(),
+            R=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+            P=spec.projection(),
+        )
         pose = FrameTransforms()
         t = pose.transforms.add(parent_frame_id=WORLD, child_frame_id=spec.frame_id)
         t.translation.x, t.translation.y, t.translation.z = image.pose[:3]
@@ -200,35 +286,50 @@ class McapRecorder(Sink):
         seconds, nanos = divmod(image.t_ns, 1_000_000_000)
         for message in (picture, calibration, t):
             message.timestamp.seconds, message.timestamp.nanos = seconds, nanos
-        for channel_id, message in zip((*channels, self._channel[S.TF.topic]), (picture, calibration, pose),
-                                       strict=True):
-            self._pending.append((image.t_ns, channel_id, message.SerializeToString(deterministic=True)))
+        for channel_id, message in zip(
+            (*channels, self._channel[S.TF.topic]), (picture, calibration, pose), strict=True
+        ):
+            self._pending.append(
+                (image.t_ns, channel_id, message.SerializeToString(deterministic=True))
+            )
 
     def _register_cameras(self, config: TwinConfig) -> None:
-        """Each camera's image and calibration channels, after the fixed ones (none without cameras)."""
+        """Each camera's image and calibration channels, after the fixed ones (none without
+        cameras)."""
         self._cameras = {c.name: c for c in config.cameras}
         self._camera_channels: dict[str, tuple[int, int]] = {}
         if not config.cameras:
             return
         image_schema, calibration_schema = (
             self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data())
-            for spec in (S.image_channel(""), S.calibration_channel("")))
+            for spec in (S.image_channel(""), S.calibration_channel(""))
+        )
         for c in config.cameras:
             self._camera_channels[c.name] = (
-                self._writer.register_channel(S.image_channel(c.name).topic, "protobuf", image_schema),
-                self._writer.register_channel(S.calibration_channel(c.name).topic, "protobuf", calibration_schema))
+                self._writer.register_channel(
+                    S.image_channel(c.name).topic, "protobuf", image_schema
+                ),
+                self._writer.register_channel(
+                    S.calibration_channel(c.name).topic, "protobuf", calibration_schema
+                ),
+            )
 
     # -- writing --------------------------------------------------------------------------------
     def _add(self, topic: str, t_ns: int, data: bytes) -> None:
         self._add_id(self._channel[topic], t_ns, data)
 
     def _add_id(self, channel_id: int, t_ns: int, data: bytes) -> None:
-        if len(data) > S.MAX_MESSAGE_BYTES:  # the readers refuse larger messages (a bound on damaged files)
-            raise RecordingError(f"a message of {len(data):,} bytes exceeds the {S.MAX_MESSAGE_BYTES:,} a recording "
-                                 "may hold (a URDF or scene too large)")
+        # the readers refuse larger messages (a bound on damaged files)
+        if len(data) > S.MAX_MESSAGE_BYTES:
+            raise RecordingError(
+                f"a message of {len(data):,} bytes exceeds the {S.MAX_MESSAGE_BYTES:,} a recording "
+                "may hold (a URDF or scene too large)"
+            )
         seq = self._sequence.get(channel_id, 0)
         self._sequence[channel_id] = seq + 1
-        self._writer.add_message(channel_id, log_time=t_ns, data=data, publish_time=t_ns, sequence=seq)
+        self._writer.add_message(
+            channel_id, log_time=t_ns, data=data, publish_time=t_ns, sequence=seq
+        )
 
     def _write_pending(self) -> None:
         self._pending.sort(key=lambda item: item[0])  # stable: same-time items keep their order
@@ -237,7 +338,8 @@ class McapRecorder(Sink):
         self._pending.clear()
 
     def _write_block(self) -> None:
-        """The buffered frames as one message per block channel (model.fields says which field goes where)."""
+        """The buffered frames as one message per block channel (model.fields says which field goes
+        where)."""
         size = self._rows.size
         last_step, t_last = self._step_time.unpack_from(self._block, len(self._block) - size)
         messages = self._blocks.messages(self._block)
@@ -257,7 +359,8 @@ class McapRecorder(Sink):
     # -- ending ---------------------------------------------------------------------------------
     def abandon(self) -> None:
         """The run died without closing (its process was killed): write out what arrived, leave the
-        .partial file without a summary or finalized marker, as a crash would (twin recover finds it)."""
+        .partial file without a summary or finalized marker, as a crash would (twin recover finds
+        it)."""
         if self.closed:
             return
         self.closed = True
@@ -270,8 +373,8 @@ class McapRecorder(Sink):
             self._file.close()
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Write what is buffered (and the final frame, whatever the rate), the finalized marker, the
-        summary; fsync the file and rename it into place. Idempotent. A run whose task raised is
+        """Write what is buffered (and the final frame, whatever the rate), the finalized marker,
+        the summary; fsync the file and rename it into place. Idempotent. A run whose task raised is
         finalized as error even when its caller went on (twin check records a crashing task)."""
         if self.closed:
             return
@@ -280,30 +383,45 @@ class McapRecorder(Sink):
             outcome, error = "error", self._task_error
         try:
             row, last_step, last_t_ns = self._last or (b"", -1, 0)
-            if self._last is not None and last_step != self._last_written_step and (
-                    not self._block or self._step_time.unpack_from(self._block, len(self._block) - len(row))[0] != last_step):
+            if (
+                self._last is not None
+                and last_step != self._last_written_step
+                and (
+                    not self._block
+                    or self._step_time.unpack_from(self._block, len(self._block) - len(row))[0]
+                    != last_step
+                )
+            ):
                 self._block += row
             if self._block:
                 self._write_block()
             self._write_pending()
             self._writer.flush()
-            self._writer.add_metadata(S.META_FINALIZED, {
-                "outcome": outcome, "error": error,
-                "last_step": str(last_step), "frames": str(self.frames_written),
-                "duration_ns": str(last_t_ns),
-            })
+            self._writer.add_metadata(
+                S.META_FINALIZED,
+                {
+                    "outcome": outcome,
+                    "error": error,
+                    "last_step": str(last_step),
+                    "frames": str(self.frames_written),
+                    "duration_ns": str(last_t_ns),
+                },
+            )
             self._writer.finish()
             self._file.close()
             publish(self.partial, self.path)
         except OSError as err:
-            raise RecordingError(f"cannot finish recording {str(self.path)!r}: {err.strerror or err}") from err
+            raise RecordingError(
+                f"cannot finish recording {str(self.path)!r}: {err.strerror or err}"
+            ) from err
         finally:
             self._file.close()
 
 
 def _row_struct(rows: FrameRows, names: tuple[str, ...]) -> struct.Struct:
-    """A row's struct that unpacks only the named int64 or float64 fields (in row order), as one flat
-    tuple: what the loop over frames and a /tf message need, without a Frame or a numpy array."""
+    """A row's struct that unpacks only the named int64 or float64 fields (in row order), as one
+    flat tuple: what the loop over frames and a /tf message need, without a Frame or a numpy
+    array."""
     form, at = ["<"], 0
     for name in names:
         dtype, offset = rows.dtype.fields[name][:2]
@@ -314,7 +432,9 @@ def _row_struct(rows: FrameRows, names: tuple[str, ...]) -> struct.Struct:
 
 
 def _log_message(event: Event) -> bytes:
-    level = Log.ERROR if event.kind in _ERROR else Log.WARNING if event.kind in _WARNING else Log.INFO
+    level = (
+        Log.ERROR if event.kind in _ERROR else Log.WARNING if event.kind in _WARNING else Log.INFO
+    )
     seconds, nanos = divmod(event.t_ns, 1_000_000_000)
     text = event.message or event.kind
     if event.data:
@@ -325,13 +445,16 @@ def _log_message(event: Event) -> bytes:
 
 
 def _read_meshes(config: TwinConfig, meshes: list[Path]) -> list[tuple[str, str, bytes]]:
-    """(attachment name, media type, bytes) of each mesh file, read before the recording is opened."""
+    """(attachment name, media type, bytes) of each mesh file, read before the recording is
+    opened."""
     out = []
     for mesh, name in _mesh_names(config, meshes):
         try:
             out.append((name, _media_type(mesh), mesh.read_bytes()))
         except OSError as err:
-            raise RecordingError(f"cannot attach mesh {str(mesh)!r}: {err.strerror or err}") from err
+            raise RecordingError(
+                f"cannot attach mesh {str(mesh)!r}: {err.strerror or err}"
+            ) from err
     return out
 
 
@@ -352,4 +475,5 @@ def _mesh_names(config: TwinConfig, meshes: list[Path]) -> list[tuple[Path, str]
 
 def _media_type(path: Path) -> str:
     return {".stl": "model/stl", ".obj": "model/obj", ".dae": "model/vnd.collada+xml"}.get(
-        os.path.splitext(str(path))[1].lower(), "application/octet-stream")
+        os.path.splitext(str(path))[1].lower(), "application/octet-stream"
+    )

@@ -60,7 +60,8 @@ def spawn(cmd: Sequence[str], log: IO[bytes], *, env: dict[str, str] | None = No
         env["TMPDIR"] = str(tmp_dir)
     return subprocess.Popen(list(cmd), stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env,
                             start_new_session=True,
-                            # the only hook that runs in the child before exec; it calls only prctl and getppid
+                            # the only hook that runs in the child before exec; it calls only prctl
+                            # and getppid
                             preexec_fn=_die_with_parent(os.getpid()))  # noqa: PLW1509
 
 
@@ -108,22 +109,27 @@ def loopback_ports(*wanted: tuple[str, int]) -> list[int]:
                 if port:
                     s.listen()  # on Linux only listening proves nobody else listens there
             except OSError as err:
-                raise ViewerError(f"{name} {port}: {LOOPBACK}:{port} is already in use ({err.strerror}); "
-                                  f"expected a free port, or 0 for any free one") from err
+                raise ViewerError(
+                    f"{name} {port}: {LOOPBACK}:{port} is already in use ({err.strerror}); "
+                    f"expected a free port, or 0 for any free one"
+                ) from err
             chosen.append((name, s.getsockname()[1]))
     by_name = dict(chosen)
     return [by_name[name] for name, _ in wanted]
 
 
-def wait_listening(proc: subprocess.Popen, ports: Sequence[int], log: IO[bytes], what: str,
-                   timeout_s: float) -> None:
+def wait_listening(
+    proc: subprocess.Popen, ports: Sequence[int], log: IO[bytes], what: str, timeout_s: float
+) -> None:
     """Wait until the child accepts TCP connections on every port; ViewerError if it exits first
     (with its last log line) or is not up within timeout_s."""
     deadline = time.monotonic() + timeout_s
     pending = list(ports)
     while pending:
         if proc.poll() is not None:
-            raise ViewerError(f"{what} exited with code {proc.returncode}: {last_log_line(log) or 'no output'}")
+            raise ViewerError(
+                f"{what} exited with code {proc.returncode}: {last_log_line(log) or 'no output'}"
+            )
         try:
             with socket.create_connection((LOOPBACK, pending[0]), timeout=1.0):
                 pending.pop(0)
@@ -131,5 +137,7 @@ def wait_listening(proc: subprocess.Popen, ports: Sequence[int], log: IO[bytes],
         except OSError:
             pass
         if time.monotonic() > deadline:
-            raise ViewerError(f"{what} did not listen on {LOOPBACK}:{pending[0]} within {timeout_s:.0f} s")
+            raise ViewerError(
+                f"{what} did not listen on {LOOPBACK}:{pending[0]} within {timeout_s:.0f} s"
+            )
         time.sleep(0.1)

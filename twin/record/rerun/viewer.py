@@ -1,8 +1,10 @@
-"""Showing a recording in Rerun's viewer: the native window, the web viewer, or a headless screenshot.
+"""Showing a recording in Rerun's viewer: the native window, the web viewer, or a headless
+screenshot.
 
 An .mcap recording is drawn into a temporary .rrd first (twin.load + write_rrd); an .rrd is checked
 (magic bytes and `rerun rrd verify`) before any viewer starts. Every viewer is a `rerun` child that
-listens on 127.0.0.1 only, on free ports unless told otherwise, and dies with us (twin.record.rerun.process).
+listens on 127.0.0.1 only, on free ports unless told otherwise, and dies with us
+(twin.record.rerun.process).
 """
 
 from __future__ import annotations
@@ -33,8 +35,17 @@ from twin.record.rerun.process import (
 from twin.record.rerun.rrd_file import file_kind, read_scalars, rerun_executable, verify_rrd
 from twin.record.rerun.writer import write_rrd
 
-__all__ = ["ViewerError", "as_rrd", "holding_time_ns", "mcap_to_rrd", "open_native", "require_display",
-           "screenshot", "serve_web", "web_url"]
+__all__ = [
+    "ViewerError",
+    "as_rrd",
+    "holding_time_ns",
+    "mcap_to_rrd",
+    "open_native",
+    "require_display",
+    "screenshot",
+    "serve_web",
+    "web_url",
+]
 
 DEFAULT_WINDOW_SIZE = "1280x800"
 VIEWER_START_TIMEOUT_S = 30.0
@@ -66,7 +77,9 @@ def as_rrd(path: str | os.PathLike, tmp_dir: str | os.PathLike) -> Path:
 def mcap_to_rrd(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike) -> int:
     """Convert an MCAP recording to an .rrd; returns the frames written."""
     if file_kind(mcap_path) != "mcap":
-        raise RecordingError(f"{str(mcap_path)!r} is already a Rerun .rrd file; expected an MCAP file to convert")
+        raise RecordingError(
+            f"{str(mcap_path)!r} is already a Rerun .rrd file; expected an MCAP file to convert"
+        )
     return write_rrd(load_recording(mcap_path), rrd_path)
 
 
@@ -75,7 +88,10 @@ def require_display() -> None:
     or Wayland display, named by $DISPLAY or $WAYLAND_DISPLAY."""
     if sys.platform in ("darwin", "win32") or any(os.environ.get(v) for v in DISPLAY_VARIABLES):
         return
-    raise ViewerError(f"no display for the native viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); {NO_DISPLAY_HINT}")
+    raise ViewerError(
+        f"no display for the native viewer ($DISPLAY and $WAYLAND_DISPLAY are unset); "
+        f"{NO_DISPLAY_HINT}"
+    )
 
 
 def open_native(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, grpc_port: int = 0) -> int:
@@ -95,46 +111,72 @@ def open_native(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, grpc_por
         finally:
             stop(proc)
         if code != 0:
-            raise ViewerError(f"the native Rerun viewer exited with code {code} ({last_log_line(log) or 'no output'}); "
-                              f"without a working display {NO_DISPLAY_HINT}")
+            raise ViewerError(
+                f"the native Rerun viewer exited with code {code} "
+                f"({last_log_line(log) or 'no output'}); "
+                f"without a working display {NO_DISPLAY_HINT}"
+            )
     return 0
 
 
 def web_url(web_port: int, grpc_port: int) -> str:
-    """The address that opens the recording in the web viewer (without ?url= it shows a welcome page)."""
+    """The address that opens the recording in the web viewer (without ?url= it shows a welcome
+    page)."""
     source = urllib.parse.quote(f"rerun+http://{LOOPBACK}:{grpc_port}/proxy", safe="")
     return f"http://{LOOPBACK}:{web_port}/?url={source}"
 
 
-def serve_web(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, web_port: int = 0, grpc_port: int = 0,
-              on_ready: Callable[[str], None] = print) -> int:
+def serve_web(
+    rrd: str | os.PathLike,
+    work_dir: str | os.PathLike,
+    *,
+    web_port: int = 0,
+    grpc_port: int = 0,
+    on_ready: Callable[[str], None] = print,
+) -> int:
     """Serve the web viewer (bundled in the wheel, works offline) on 127.0.0.1 until interrupted; no
-    browser is opened (`--serve-web`: `--web-viewer` would start the default one, the user opens the URL).
+    browser is opened (`--serve-web`: `--web-viewer` would start the default one, the user opens the
+    URL).
 
     Both ports are the given ones or free ones, so several viewers run side by side. Once both
     listen, on_ready gets the URL that opens the recording. Its log and its temporary files go to
     work_dir (a folder the caller removes). Returns 0 when the server ends by itself."""
     web_port, grpc_port = loopback_ports(("--port", web_port), ("--grpc-port", grpc_port))
-    cmd = [rerun_executable(), str(rrd), "--serve-web", "--web-viewer-port", str(web_port), "--port",
-           str(grpc_port), "--bind", LOOPBACK]
+    cmd = [
+        rerun_executable(),
+        str(rrd),
+        "--serve-web",
+        "--web-viewer-port",
+        str(web_port),
+        "--port",
+        str(grpc_port),
+        "--bind",
+        LOOPBACK,
+    ]
     with open(Path(work_dir) / LOG_NAME, "w+b") as log:
         proc = spawn(cmd, log, tmp_dir=work_dir)
         try:
-            wait_listening(proc, (web_port, grpc_port), log, "the Rerun web viewer", VIEWER_START_TIMEOUT_S)
+            wait_listening(
+                proc, (web_port, grpc_port), log, "the Rerun web viewer", VIEWER_START_TIMEOUT_S
+            )
             on_ready(web_url(web_port, grpc_port))
             code = proc.wait()
         finally:
             stop(proc)
         if code != 0:
-            raise ViewerError(f"the Rerun web viewer exited with code {code}: {last_log_line(log) or 'no output'}")
+            raise ViewerError(
+                f"the Rerun web viewer exited with code {code}: {last_log_line(log) or 'no output'}"
+            )
     return 0
 
 
 def holding_time_ns(rrd: str | os.PathLike) -> int | None:
-    """The last moment of the first hold: the arm is down at the place point with the box still on the
-    pad (while carried, a box can hide under the arm). None if the pad never holds anything."""
+    """The last moment of the first hold: the arm is down at the place point with the box still on
+    the pad (while carried, a box can hide under the arm). None if the pad never holds anything."""
     try:
-        t_ns, held = read_scalars(rrd, f"/{scene.SUCTION_PATH}/holding", timeline=scene.TIME_TIMELINE)
+        t_ns, held = read_scalars(
+            rrd, f"/{scene.SUCTION_PATH}/holding", timeline=scene.TIME_TIMELINE
+        )
     except RecordingError:
         return None
     rows = np.flatnonzero(held > 0.5)
@@ -145,9 +187,15 @@ def holding_time_ns(rrd: str | os.PathLike) -> int | None:
     return int(t_ns[last])
 
 
-def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str | os.PathLike, *,
-               at_s: float | None = None, window_size: str = DEFAULT_WINDOW_SIZE,
-               grpc_port: int = 0) -> tuple[float | None, list[str]]:
+def screenshot(
+    rrd: str | os.PathLike,
+    out_png: str | os.PathLike,
+    work_dir: str | os.PathLike,
+    *,
+    at_s: float | None = None,
+    window_size: str = DEFAULT_WINDOW_SIZE,
+    grpc_port: int = 0,
+) -> tuple[float | None, list[str]]:
     """Render the viewer headless (software Vulkan works) and save a PNG of what a user would see.
 
     The time cursor goes to `at_s` seconds of simulated time, else to the end of the first hold,
@@ -160,11 +208,26 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str
     out = Path(out_png).resolve()
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
     (port,) = loopback_ports(("--grpc-port", grpc_port))
-    env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))  # no notification toasts in the picture
+    # no notification toasts in the picture
+    env = dict(os.environ, RUST_LOG=os.environ.get("RUST_LOG", "error"))
     with open(Path(work_dir) / LOG_NAME, "w+b") as log:
         started = time.monotonic()
-        proc = spawn([rerun_executable(), "--headless", "--bind", LOOPBACK, "--port", str(port),
-                      "--window-size", window_size, "--hide-welcome-screen"], log, env=env, tmp_dir=work_dir)
+        proc = spawn(
+            [
+                rerun_executable(),
+                "--headless",
+                "--bind",
+                LOOPBACK,
+                "--port",
+                str(port),
+                "--window-size",
+                window_size,
+                "--hide-welcome-screen",
+            ],
+            log,
+            env=env,
+            tmp_dir=work_dir,
+        )
         try:
             client = _connect(ViewerClient, f"rerun+http://{LOOPBACK}:{port}/proxy", proc, log)
             try:
@@ -177,16 +240,25 @@ def screenshot(rrd: str | os.PathLike, out_png: str | os.PathLike, work_dir: str
                     at_ns = None
                     client.set_time(play_state="following")
                 elif at_ns is not None and at_ns > end_ns:
-                    raise ViewerError(f"time {at_ns * 1e-9:.3f} s is after the end of the recording "
-                                      f"({end_ns * 1e-9:.3f} s of simulated time)")
+                    raise ViewerError(
+                        f"time {at_ns * 1e-9:.3f} s is after the end of the recording "
+                        f"({end_ns * 1e-9:.3f} s of simulated time)"
+                    )
                 elif at_ns is None:
                     client.set_time(scene.TIME_TIMELINE, play_state="following")
                 else:
-                    client.set_time(scene.TIME_TIMELINE, duration=np.timedelta64(at_ns, "ns"), play_state="paused")
-                client.save_screenshot(str(out))  # blocks until a frame with the new cursor has been painted
+                    client.set_time(
+                        scene.TIME_TIMELINE,
+                        duration=np.timedelta64(at_ns, "ns"),
+                        play_state="paused",
+                    )
+                # blocks until a frame with the new cursor has been painted
+                client.save_screenshot(str(out))
                 problems = [f"{v.name}: {r}" for v in client.get_state().views for r in v.reports]
             except (RuntimeError, ValueError, OSError) as err:
-                raise ViewerError(f"the headless Rerun viewer failed to take the screenshot: {err}") from err
+                raise ViewerError(
+                    f"the headless Rerun viewer failed to take the screenshot: {err}"
+                ) from err
         finally:
             stop(proc)
     if not out.is_file():
@@ -199,16 +271,20 @@ def _connect(client_cls, url: str, proc: subprocess.Popen, log):
     while True:
         if proc.poll() is not None:
             err = last_log_line(log)
-            raise ViewerError(f"the headless Rerun viewer exited with code {proc.returncode}"
-                              f"{': ' + err if err else ''} (needs Vulkan, e.g. Debian's mesa-vulkan-drivers)")
+            raise ViewerError(
+                f"the headless Rerun viewer exited with code {proc.returncode}"
+                f"{': ' + err if err else ''} (needs Vulkan, e.g. Debian's mesa-vulkan-drivers)"
+            )
         try:
             client = client_cls.connect(url)
             client.get_state()
             return client
         except Exception as err:  # the gRPC server is not up yet
             if time.monotonic() > deadline:
-                raise ViewerError(f"the headless Rerun viewer did not answer on {url} within "
-                                  f"{VIEWER_START_TIMEOUT_S:.0f} s: {err}") from err
+                raise ViewerError(
+                    f"the headless Rerun viewer did not answer on {url} within "
+                    f"{VIEWER_START_TIMEOUT_S:.0f} s: {err}"
+                ) from err
             time.sleep(0.1)
 
 
@@ -218,7 +294,11 @@ def _wait_loaded(client, proc: subprocess.Popen) -> dict[str, int]:
     while True:
         state = client.get_state()
         if not state.loading and state.recordings and all(r.timelines for r in state.recordings):
-            return {t.name: t.end for r in state.recordings for t in r.timelines if t.end is not None}
+            return {
+                t.name: t.end for r in state.recordings for t in r.timelines if t.end is not None
+            }
         if time.monotonic() > deadline or proc.poll() is not None:
-            raise ViewerError(f"the Rerun viewer did not finish loading the recording in {LOAD_TIMEOUT_S:.0f} s")
+            raise ViewerError(
+                f"the Rerun viewer did not finish loading the recording in {LOAD_TIMEOUT_S:.0f} s"
+            )
         time.sleep(0.1)

@@ -1,4 +1,5 @@
-"""The Rerun sink: a run drawn as an .rrd file (robot from its URDF, boxes, pad, joint plots, events).
+"""The Rerun sink: a run drawn as an .rrd file (robot from its URDF, boxes, pad, joint plots,
+events).
 
 on_frame only copies into preallocated numpy buffers; every `batch_steps` frames (and at close) the
 buffers go out as columns with `send_columns` — one `rr.log` per step would slow a run ~20x.
@@ -43,7 +44,8 @@ def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStre
 
 
 def finish_file(stream: rr.RecordingStream, partial: Path, target: Path) -> None:
-    """Flush and close a stream saving to `partial`, then put the finished file in place as `target`."""
+    """Flush and close a stream saving to `partial`, then put the finished file in place as
+    `target`."""
     stream.flush()
     stream.disconnect()  # closes the file sink: the .rrd is complete on disk
     try:
@@ -56,7 +58,16 @@ class _Buffers:
     """Preallocated columns (dtypes and shapes from model.fields) for the frames of one batch: the
     fields the view draws."""
 
-    DRAWN = ("step", "t_ns", "joint_q", "joint_target", "suction_on", "held_body", "pad_pose", "object_poses")
+    DRAWN = (
+        "step",
+        "t_ns",
+        "joint_q",
+        "joint_target",
+        "suction_on",
+        "held_body",
+        "pad_pose",
+        "object_poses",
+    )
 
     def __init__(self, capacity: int, n_objects: int) -> None:
         for name in self.DRAWN:
@@ -67,17 +78,31 @@ class _Buffers:
 class RerunRecorder(Sink):
     """A sink (on_frame/on_command/on_event) that writes what it receives to a Rerun recording."""
 
-    def __init__(self, path: str | os.PathLike, config: TwinConfig, urdf_text: str, *,
-                 batch_steps: int = DEFAULT_BATCH_STEPS) -> None:
-        tree = self._prepare(config, urdf_text, batch_steps)  # bad input fails before a file is created
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        config: TwinConfig,
+        urdf_text: str,
+        *,
+        batch_steps: int = DEFAULT_BATCH_STEPS,
+    ) -> None:
+        # bad input fails before a file is created
+        tree = self._prepare(config, urdf_text, batch_steps)
         target = check_target(path, "recording", "a .rrd file path", error=RecordingError)
         self.path = str(path)
         self._start(file_stream(partial_path(target), config), tree)
 
     @classmethod
-    def to_stream(cls, stream: rr.RecordingStream, config: TwinConfig, urdf_text: str, *,
-                  batch_steps: int = DEFAULT_BATCH_STEPS) -> Self:
-        """Log into a stream the caller opened (saved, served or spawned); the caller sends the blueprint."""
+    def to_stream(
+        cls,
+        stream: rr.RecordingStream,
+        config: TwinConfig,
+        urdf_text: str,
+        *,
+        batch_steps: int = DEFAULT_BATCH_STEPS,
+    ) -> Self:
+        """Log into a stream the caller opened (saved, served or spawned); the caller sends the
+        blueprint."""
         self = cls.__new__(cls)
         tree = self._prepare(config, urdf_text, batch_steps)
         self.path = ""
@@ -86,14 +111,24 @@ class RerunRecorder(Sink):
 
     def _prepare(self, config: TwinConfig, urdf_text: str, batch_steps: int) -> rr.urdf.UrdfTree:
         if isinstance(batch_steps, bool) or not isinstance(batch_steps, int) or batch_steps < 1:
-            raise RecordingError(f"batch size {batch_steps!r} is invalid; expected an integer >= 1 steps")
+            raise RecordingError(
+                f"batch size {batch_steps!r} is invalid; expected an integer >= 1 steps"
+            )
         self.config = config
         self.batch_steps = batch_steps
         tree = scene.load_urdf_tree(config, urdf_text)
-        self._joints = [JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, urdf_text)]
-        # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per batch.
-        self._frame_names = [(pa.array([j.parent_frame] * batch_steps, pa.utf8()),
-                              pa.array([j.child_frame] * batch_steps, pa.utf8())) for j in self._joints]
+        self._joints = [
+            JointMotion.from_urdf_joint(j) for j in scene.driven_joints(config, urdf_text)
+        ]
+        # Frame names repeat in every row (see _send_frames): built once as Arrow arrays, sliced per
+        # batch.
+        self._frame_names = [
+            (
+                pa.array([j.parent_frame] * batch_steps, pa.utf8()),
+                pa.array([j.child_frame] * batch_steps, pa.utf8()),
+            )
+            for j in self._joints
+        ]
         self._object_paths = [scene.object_path(o.name) for o in config.objects]
         self._buf = _Buffers(batch_steps, len(config.objects))
         self._n = 0
@@ -130,9 +165,17 @@ class RerunRecorder(Sink):
         while start < total:
             k = min(self.batch_steps - self._n, total - start)
             i, b = self._n, self._buf
-            for name in ("step", "t_ns", "joint_q", "joint_target", "suction_on", "held_body", "pad_pose",
-                         "object_poses"):
-                getattr(b, name)[i:i + k] = getattr(frames, name)[start:start + k]
+            for name in (
+                "step",
+                "t_ns",
+                "joint_q",
+                "joint_target",
+                "suction_on",
+                "held_body",
+                "pad_pose",
+                "object_poses",
+            ):
+                getattr(b, name)[i : i + k] = getattr(frames, name)[start : start + k]
             self._n += k
             start += k
             if self._n == self.batch_steps:
@@ -144,13 +187,24 @@ class RerunRecorder(Sink):
 
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture on its entity (world/cameras/NAME, under its static Pinhole), with the
-        camera's pose at that moment: shown in the camera's own view and as a frustum in the 3D view."""
+        camera's pose at that moment: shown in the camera's own view and as a frustum in the 3D
+        view."""
         times = _event_times([image.step], [image.t_ns])
         path = scene.camera_path(image.camera)
-        self.stream.send_columns(path, indexes=times, columns=rr.EncodedImage.columns(
-            blob=[image.data], media_type=[f"image/{image.format}"]))
-        self.stream.send_columns(path, indexes=times, columns=rr.Transform3D.columns(
-            translation=[image.pose[:3]], quaternion=[image.pose[3:7]]))
+        self.stream.send_columns(
+            path,
+            indexes=times,
+            columns=rr.EncodedImage.columns(
+                blob=[image.data], media_type=[f"image/{image.format}"]
+            ),
+        )
+        self.stream.send_columns(
+            path,
+            indexes=times,
+            columns=rr.Transform3D.columns(
+                translation=[image.pose[:3]], quaternion=[image.pose[3:7]]
+            ),
+        )
 
     def on_command(self, command: Command) -> None:
         self._commands.append(command)
@@ -159,8 +213,8 @@ class RerunRecorder(Sink):
         self._events.append(event)
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
-        """Send what is buffered and finish the file (fsynced and renamed into place); the view keeps no
-        outcome (the MCAP file's finalized record does)."""
+        """Send what is buffered and finish the file (fsynced and renamed into place); the view
+        keeps no outcome (the MCAP file's finalized record does)."""
         if self.closed:
             return
         self.closed = True
@@ -171,8 +225,8 @@ class RerunRecorder(Sink):
             self.stream.flush()
 
     def abandon(self) -> None:
-        """The run died without closing: write out what arrived but leave the file as `NAME.partial`,
-        so an earlier file at the path is not replaced by a cut-short view."""
+        """The run died without closing: write out what arrived but leave the file as
+        `NAME.partial`, so an earlier file at the path is not replaced by a cut-short view."""
         if self.closed:
             return
         self.closed = True
@@ -203,30 +257,63 @@ class RerunRecorder(Sink):
         self._buf = _Buffers(self.batch_steps, len(self._object_paths))
         self._n = 0
         self.frames_written += n
-        times = [rr.TimeColumn(scene.STEP_TIMELINE, sequence=b.step[:n]),
-                 rr.TimeColumn(scene.TIME_TIMELINE, duration=b.t_ns[:n].astype("timedelta64[ns]"))]
+        times = [
+            rr.TimeColumn(scene.STEP_TIMELINE, sequence=b.step[:n]),
+            rr.TimeColumn(scene.TIME_TIMELINE, duration=b.t_ns[:n].astype("timedelta64[ns]")),
+        ]
         send = self.stream.send_columns
         for j, joint in enumerate(self._joints):
             translations, quaternions = joint.transforms(b.joint_q[:n, j])
             parents, children = self._frame_names[j]
-            # Frame names go in every row: the viewer does not join a static frame name to timed poses.
-            send(scene.joint_path(joint.name), indexes=times, columns=rr.Transform3D.columns(
-                translation=translations, quaternion=quaternions,
-                parent_frame=parents.slice(0, n), child_frame=children.slice(0, n)))
+            # Frame names go in every row: the viewer does not join a static frame name to timed
+            # poses.
+            send(
+                scene.joint_path(joint.name),
+                indexes=times,
+                columns=rr.Transform3D.columns(
+                    translation=translations,
+                    quaternion=quaternions,
+                    parent_frame=parents.slice(0, n),
+                    child_frame=children.slice(0, n),
+                ),
+            )
         for k, path in enumerate(self._object_paths):
             poses = b.object_poses[:n, k]
-            send(path, indexes=times, columns=rr.Transform3D.columns(translation=poses[:, :3], quaternion=poses[:, 3:]))
+            send(
+                path,
+                indexes=times,
+                columns=rr.Transform3D.columns(translation=poses[:, :3], quaternion=poses[:, 3:]),
+            )
         sleeve_centres = b.pad_pose[:n, :3] + [0.0, 0.0, 0.5 * self.config.profile.pad_length_m]
-        send(scene.PAD_PATH, indexes=times, columns=rr.Cylinders3D.columns(
-            centers=sleeve_centres, colors=scene.pad_colors(b.suction_on[:n], b.held_body[:n])))
+        send(
+            scene.PAD_PATH,
+            indexes=times,
+            columns=rr.Cylinders3D.columns(
+                centers=sleeve_centres, colors=scene.pad_colors(b.suction_on[:n], b.held_body[:n])
+            ),
+        )
         for j, role in enumerate(scene.ROLES):
             base = scene.Z_PATH if role == "z" else scene.ANGLES_PATH
-            send(f"{base}/{role}", indexes=times, columns=rr.Scalars.columns(scalars=b.joint_q[:n, j]))
-            send(f"{base}/{role}_target", indexes=times, columns=rr.Scalars.columns(scalars=b.joint_target[:n, j]))
-        send(f"{scene.SUCTION_PATH}/on", indexes=times,
-             columns=rr.Scalars.columns(scalars=b.suction_on[:n].astype(np.float64)))
-        send(f"{scene.SUCTION_PATH}/holding", indexes=times,
-             columns=rr.Scalars.columns(scalars=(b.held_body[:n] >= 0).astype(np.float64)))
+            send(
+                f"{base}/{role}",
+                indexes=times,
+                columns=rr.Scalars.columns(scalars=b.joint_q[:n, j]),
+            )
+            send(
+                f"{base}/{role}_target",
+                indexes=times,
+                columns=rr.Scalars.columns(scalars=b.joint_target[:n, j]),
+            )
+        send(
+            f"{scene.SUCTION_PATH}/on",
+            indexes=times,
+            columns=rr.Scalars.columns(scalars=b.suction_on[:n].astype(np.float64)),
+        )
+        send(
+            f"{scene.SUCTION_PATH}/holding",
+            indexes=times,
+            columns=rr.Scalars.columns(scalars=(b.held_body[:n] >= 0).astype(np.float64)),
+        )
 
     def _send_events(self) -> None:
         events, self._events = self._events, []
@@ -237,7 +324,9 @@ class RerunRecorder(Sink):
         self.stream.send_columns(
             scene.EVENTS_PATH,
             indexes=_event_times([e.step for e in events], [e.t_ns for e in events]),
-            columns=rr.TextLog.columns(text=texts, level=[scene.EVENT_LEVELS.get(e.kind, "INFO") for e in events]),
+            columns=rr.TextLog.columns(
+                text=texts, level=[scene.EVENT_LEVELS.get(e.kind, "INFO") for e in events]
+            ),
         )
 
     def _send_commands(self) -> None:
@@ -245,7 +334,9 @@ class RerunRecorder(Sink):
         if not commands:
             return
         commands.sort(key=lambda c: c.step)
-        texts = [f"{c.kind} " + " ".join(f"{k}={c.args[k]!r}" for k in sorted(c.args)) for c in commands]
+        texts = [
+            f"{c.kind} " + " ".join(f"{k}={c.args[k]!r}" for k in sorted(c.args)) for c in commands
+        ]
         steps = [c.step for c in commands]
         self.stream.send_columns(
             scene.COMMANDS_PATH,
@@ -255,12 +346,19 @@ class RerunRecorder(Sink):
 
 
 def _event_times(steps: list[int], t_ns: list[int]) -> list[rr.TimeColumn]:
-    return [rr.TimeColumn(scene.STEP_TIMELINE, sequence=np.asarray(steps, dtype=np.int64)),
-            rr.TimeColumn(scene.TIME_TIMELINE, duration=np.asarray(t_ns, dtype=np.int64).astype("timedelta64[ns]"))]
+    return [
+        rr.TimeColumn(scene.STEP_TIMELINE, sequence=np.asarray(steps, dtype=np.int64)),
+        rr.TimeColumn(
+            scene.TIME_TIMELINE, duration=np.asarray(t_ns, dtype=np.int64).astype("timedelta64[ns]")
+        ),
+    ]
 
 
-def write_rrd(recording: Recording, path: str | os.PathLike, *, batch_steps: int = DEFAULT_BATCH_STEPS) -> int:
-    """Draw a loaded recording (e.g. an MCAP file) as an .rrd through the same sink; returns frames written."""
+def write_rrd(
+    recording: Recording, path: str | os.PathLike, *, batch_steps: int = DEFAULT_BATCH_STEPS
+) -> int:
+    """Draw a loaded recording (e.g. an MCAP file) as an .rrd through the same sink; returns frames
+    written."""
     urdf = recording.urdf or profile_urdf_text(recording.config.profile)
     with RerunRecorder(path, recording.config, urdf, batch_steps=batch_steps) as recorder:
         recorder.on_frames(recording.frames)
@@ -268,8 +366,11 @@ def write_rrd(recording: Recording, path: str | os.PathLike, *, batch_steps: int
             recorder.on_command(command)
         for event in recording.events:
             recorder.on_event(event)
-        for image in recorded_images(recording.config.cameras, recording.cameras, recording.frames.step,
-                                     recording.frames.pad_pose):
+        for image in recorded_images(
+            recording.config.cameras,
+            recording.cameras,
+            recording.frames.step,
+            recording.frames.pad_pose,
+        ):
             recorder.on_image(image)
     return recorder.frames_written
-

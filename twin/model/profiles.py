@@ -28,9 +28,7 @@ CYCLIC_RANGE_RAD = 2.0 * math.pi
 # seeds' own joints; their programs' sleeps assume it), 10 m/s for a prismatic one. The twin keeps
 # 0.5 m/s for Z: every seed's Z move (at most 0.12 m) still ends within its program's shortest sleep
 # (0.5 s). Motor torques are sized so each arm settles (1 mrad) within its program's 0.5 s sleeps
-# (measured: seed000's 0.8 m arm with the MTB's 60 N·m swings torque-saturated for 1.95 s after a
-# 47 deg move; 300 N·m settles it in 0.39 s, the 171 deg move in 0.54 s; seed001/002 at 150 N·m
-# settle in 0.15-0.54 s).
+# (the settle times measured are in CHANGES.md).
 COPPELIASIM_REVOLUTE_RAD_S = 2.0 * math.pi
 
 

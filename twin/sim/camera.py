@@ -5,8 +5,8 @@ to its sinks (on_image).
 The pictures are drawn in a world of their own (a DIRECT client holding the robot and the scene's
 objects, never stepped), posed from the frame's joint positions and object poses: rendering never
 touches the physics of the run, so a run with cameras moves exactly as one without, and the same
-frames give the same pixels. The floor is left out of that world: it fills the picture and cost 12
-of the 15.6 ms a 320x240 picture took; the renderer's background stands for it.
+frames give the same pixels. The floor is left out of that world: it fills the picture and cost
+most of a picture's render time; the renderer's background stands for it.
 """
 
 from __future__ import annotations

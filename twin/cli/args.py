@@ -192,3 +192,32 @@ def port(*, allow_any: bool = False) -> Callable[[str], int]:
         return value
 
     return parse
+
+
+def add_executor_options(
+    p: argparse.ArgumentParser, jobs_default: int = 1, jobs_help: str = ""
+) -> None:
+    """--jobs/-j, --executor and --scheduler, in one wording for every command that spreads runs
+    over worker processes (check, sweep, search)."""
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=whole_number(1),
+        default=jobs_default,
+        metavar="N",
+        help=f"worker processes ({jobs_help or f'default {jobs_default}'})",
+    )
+    p.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local: processes on this machine (default); dask: Dask's distributed scheduler",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or "
+        "tls://HOST:8786 (certificates from Dask's configuration; default: a cluster of --jobs "
+        "workers on 127.0.0.1 that only this run can reach, TLS with a certificate made for it)",
+    )

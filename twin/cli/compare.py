@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from twin.cli.args import whole_number
+from twin.cli.args import add_executor_options, whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.errors import ConfigError, OutputError
 
@@ -251,24 +251,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="with --update: also write a run whose task failed (its outcome stays error)",
     )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=whole_number(1),
-        default=1,
-        metavar="N",
-        help="parallel processes (default 1)",
-    )
-    p.add_argument(
-        "--executor",
-        choices=("local", "dask"),
-        default="local",
-        help="local: processes on this machine (default); dask: Dask's distributed scheduler (a "
-        "LocalCluster of --jobs workers on 127.0.0.1, or --scheduler), for large golden sets",
-    )
-    p.add_argument(
-        "--scheduler", default=None, metavar="ADDR", help="with --executor dask: tcp://HOST:8786"
-    )
+    add_executor_options(p)
     p.add_argument(
         "--verbose",
         "-v",

@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from twin.cli.args import add_param_option, params_dict, whole_number
+from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
 from twin.errors import ConfigError, RecordingError
 from twin.signals import Terminated
 
@@ -82,26 +82,7 @@ def add_search_command(sub) -> None:
         metavar="P",
         help="boundaries and shrinking to P times each key's half-width (default 0.01)",
     )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=whole_number(1),
-        default=1,
-        metavar="N",
-        help="worker processes (default 1)",
-    )
-    p.add_argument(
-        "--executor",
-        choices=("local", "dask"),
-        default="local",
-        help="local: processes on this machine (default); dask: Dask's distributed scheduler",
-    )
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDR",
-        help="with --executor dask: a running cluster, tcp://HOST:8786 or tls://HOST:8786",
-    )
+    add_executor_options(p)
     p.add_argument(
         "--out",
         required=True,

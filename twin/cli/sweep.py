@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from twin.cli.args import add_param_option, params_dict, whole_number
+from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
 from twin.errors import ConfigError, TwinError
 
 # a scenario that gave no result (twin.sweep.guard)
@@ -115,29 +115,7 @@ def add_sweep_command(sub) -> None:
         "stepping) "
         "is ended and fails with that reason",
     )
-    p.add_argument(
-        "--jobs",
-        "-j",
-        type=whole_number(1),
-        default=os.cpu_count() or 1,
-        metavar="N",
-        help=f"worker processes (default: every core, {os.cpu_count()})",
-    )
-    p.add_argument(
-        "--executor",
-        choices=("local", "dask"),
-        default="local",
-        help="local: a process pool on this machine (default); dask: Dask's distributed scheduler",
-    )
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDR",
-        help="with --executor dask: a running cluster's scheduler, tcp://HOST:8786 or "
-        "tls://HOST:8786 "
-        "(certificates from Dask's configuration; default: a cluster of --jobs workers on "
-        "127.0.0.1 that only this sweep can reach, TLS with a certificate made for the run)",
-    )
+    add_executor_options(p, os.cpu_count() or 1, f"default: every core, {os.cpu_count()}")
     p.add_argument(
         "--dashboard",
         action="store_true",

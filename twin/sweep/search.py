@@ -188,6 +188,8 @@ class Search:
             res.stopped = "budget"
         except (KeyboardInterrupt, Terminated):
             res.stopped = "interrupted"
+            if res.nominal is None:  # stopped between its round's end and _start reading it
+                res.nominal = self.cache.get(self._nominal())
             self.executor.close()
             raise
         return res

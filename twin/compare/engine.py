@@ -322,11 +322,12 @@ def compare(
         events_compared=tol.event_window_steps is not None,
         floor=floor,
     )
-    result.first = _first(fields, event_diffs, dt_ns, window)
     result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
     result.first_annotation = next(
         (f.first for f in fields if f.name == "commands.annotations"), None
     )
+    # annotations alone are still a difference, but never ahead of a physical one
+    result.first = _first(fields, event_diffs, dt_ns, window) or result.first_annotation
     if result.first is not None:
         result.likely_cause = likely_cause(
             golden.commands, result.first, golden.config.profile.joint_names
@@ -811,6 +812,7 @@ def _decimation_notes(golden: Recording, candidate: Recording, compared: int) ->
 def _first(
     fields: list[FieldStat], event_diffs: list[EventDiff], dt_ns: int, window_steps: int | None
 ) -> Divergence | None:
+    """The first physical divergence: of the fields (annotations aside) and the events."""
     candidates = [
         f.first for f in fields if f.first is not None and f.name != "commands.annotations"
     ]
@@ -830,12 +832,7 @@ def _first(
                 "steps",
             )
         )
-    if not candidates:  # annotations alone: still a difference, but never ahead of a physical one
-        return next(
-            (f.first for f in fields if f.name == "commands.annotations" and f.first is not None),
-            None,
-        )
-    return min(candidates, key=lambda d: d.step)
+    return min(candidates, key=lambda d: d.step) if candidates else None
 
 
 def run_summary(rec: Recording) -> dict:

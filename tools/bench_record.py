@@ -139,8 +139,11 @@ def recorder_cpu_us_per_frame(
         recorder = make()  # the start (static scene, meshes) is not per frame
         t0 = time.process_time()
         for start in range(0, n, 32):
-            recorder.on_rows(
-                rows, memoryview(packed)[start * rows.size : min(n, start + 32) * rows.size]
+            recorder.on_frames(
+                rows.columns(
+                    memoryview(packed)[start * rows.size : min(n, start + 32) * rows.size],
+                    copy=False,
+                )
             )
         for event in events:
             recorder.on_event(event)

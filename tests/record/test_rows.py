@@ -10,7 +10,7 @@ import pytest
 from twin.model.columns import FrameColumns
 from twin.model.sink import Sink
 from twin.model.types import Frame
-from twin.record.rows import FrameRows
+from twin.record.rows import FrameBatch, FrameRows
 from twin.verify.collectors import FrameCollector
 
 
@@ -44,11 +44,28 @@ def test_rows_give_back_every_frame_and_the_columns_bit_for_bit(n_objects):
         assert columns.object_poses.shape == (5, n_objects, 7)
 
 
-def test_a_sink_without_on_rows_gets_each_frame_in_order():
+def test_a_sink_without_on_frames_gets_each_frame_in_order():
     rows = FrameRows(4, 1)
     frames = [_frame(i, 1) for i in range(3)]
     collector = FrameCollector()
-    Sink.on_rows(collector, rows, b"".join(rows.pack(f) for f in frames))
+    Sink.on_frames(collector, rows.columns(b"".join(rows.pack(f) for f in frames), copy=False))
     assert [f.step for f in collector.frames] == [0, 1, 2] and repr(collector.frames) == repr(
         frames
     )
+
+
+@pytest.mark.parametrize("capacity", [1, 4, 64])
+def test_a_batch_hands_on_every_frame_once_in_order(capacity):
+    """FrameBatch: full batches from add_frame, the rest from take, as views of one reused buffer."""
+    batch = FrameBatch(4, 2, capacity)
+    frames = [_frame(i, 2) for i in range(10)]
+    handed = []
+    for frame in frames:
+        columns = batch.add_frame(frame)
+        if columns is not None:
+            assert len(columns) == capacity
+            handed += [columns.frame(i) for i in range(len(columns))]
+    rest = batch.take()
+    assert (rest is None) == (10 % capacity == 0) and batch.take() is None
+    handed += [rest.frame(i) for i in range(len(rest))] if rest is not None else []
+    assert repr(handed) == repr(frames)

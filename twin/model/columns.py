@@ -14,6 +14,7 @@ from twin.model.types import Frame
 
 # field name -> (dtype, trailing shape given (n_joints, n_objects)), from the one field description
 FIELD_SPECS = {f.name: (f.dtype, f.trailing) for f in FRAME_FIELDS}
+FIELD_NAMES = tuple(FIELD_SPECS)
 
 
 @dataclass
@@ -60,6 +61,10 @@ class FrameColumns:
 
     def slice(self, start: int, stop: int) -> FrameColumns:
         return FrameColumns(**{f.name: getattr(self, f.name)[start:stop] for f in fields(self)})
+
+    def copy(self) -> FrameColumns:
+        """Contiguous copies of every column (of views into memory that will be written over)."""
+        return FrameColumns(**{f.name: np.array(getattr(self, f.name)) for f in fields(self)})
 
     @staticmethod
     def concat(parts: list[FrameColumns]) -> FrameColumns:

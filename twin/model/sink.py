@@ -1,9 +1,14 @@
-"""The one thing every receiver of a run is: a Sink gets each Frame, Command and Event as the run
-produces them, then close(outcome, error) once when it ends. The methods here do nothing: a sink
-overrides what it uses (a recorder all of them, an event log only on_event)."""
+"""The one thing every receiver of a run is: a Sink gets the run's Frames, Commands, Events and
+pictures in the order the run produces them, then close(outcome, error) once when it ends.
+
+Frames come one at a time (on_frame, as the twin steps) or many at once as columns (on_frames, as
+the recorder process and a loaded recording hand them on); a sink that takes columns gathers the
+single Frames into columns itself. The methods here do nothing, but on_frames hands each frame to
+on_frame: a sink overrides what it uses (a writer on_frames, an event log only on_event)."""
 
 from __future__ import annotations
 
+from twin.model.columns import FrameColumns
 from twin.model.images import CameraImage
 from twin.model.types import Command, Event, Frame
 
@@ -16,12 +21,11 @@ class Sink:
     def on_frame(self, frame: Frame) -> None:
         pass
 
-    def on_rows(self, rows, buf) -> None:
-        """Many Frames at once, packed as `rows` (a record.rows.FrameRows) lays them out (the
-        recorder process is fed so): the same as on_frame for each; writers override it to take the
-        rows as columns."""
-        for i in range(rows.count(buf)):
-            self.on_frame(rows.frame(buf, i))
+    def on_frames(self, frames: FrameColumns) -> None:
+        """Many Frames at once, as columns: the same as on_frame for each. The columns may be views
+        of memory that is written over once this returns: a sink copies what it keeps."""
+        for i in range(len(frames)):
+            self.on_frame(frames.frame(i))
 
     def on_command(self, command: Command) -> None:
         pass

@@ -79,11 +79,7 @@ class RecorderProcess(Sink):
         ]
         self._ring = FrameRing(self._rows, capacity, len(writers))
         # what on_frame needs, bound once: it runs every step
-        self._pack, self._row_size, self._memory = (
-            self._rows.pack_into,
-            self._rows.size,
-            self._ring.memory,
-        )
+        self._row_size, self._memory = self._rows.size, self._ring.memory
         # the ring's first and last rows
         self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
@@ -129,7 +125,7 @@ class RecorderProcess(Sink):
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
         at = self._at
-        self._pack(self._memory, at, frame)
+        self._rows.pack_into(self._memory, at, frame)
         self._at = at + self._row_size if at < self._last else self._first
         self._written += 1
         if self._written == self._next_publish:
@@ -399,8 +395,9 @@ class _Feed:
         if not self.failure:
             rows = self.ring.rows
             for run in self.ring.runs(self.read, upto):
+                frames = rows.columns(run, copy=False)  # views into the ring: writers copy
                 for sink in self.sinks:
-                    sink.on_rows(rows, run)
+                    sink.on_frames(frames)
         self.read = upto
 
 

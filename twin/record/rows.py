@@ -1,15 +1,16 @@
 """Frames as packed rows: one fixed-size little-endian record per Frame, laid out from model.fields.
 
-The stepping loop packs each Frame into a preallocated buffer (a struct pack: about a microsecond,
-no per-field work); whoever receives the buffer reads it back as numpy columns without touching a
-row in Python (`columns`), or as Frames where it needs them (`frame`). The recorder process is fed
-this way, and the MCAP writer keeps its block's frames so.
+Rows are how Frames travel inside record/, and nowhere else: the stepping loop packs each Frame
+into a preallocated buffer (one struct pack, about a microsecond, no per-field work), and whoever
+receives the buffer hands it on as FrameColumns, numpy views of its rows, without touching a row in
+Python. The recorder process's ring is fed so (record.ring), and so is a writer that takes Frames
+one at a time (FrameBatch): writers only ever see columns.
 """
 
 from __future__ import annotations
 
-import itertools
 import struct
+from itertools import chain
 
 import numpy as np
 
@@ -18,6 +19,12 @@ from twin.model.fields import FRAME_FIELDS
 from twin.model.types import Frame
 
 _STRUCT_CODE = {np.int64: "q", np.int32: "i", np.float64: "d", np.bool_: "?"}
+# pack_into writes the fields in this order, each as one value or as its values
+_SCALARS = ("step", "t_ns", "suction_on", "sensed_body", "held_body")
+if tuple(f.name for f in FRAME_FIELDS if f.shape == "frame") != _SCALARS or [
+    f.name for f in FRAME_FIELDS if f.shape == "object_pose"
+] != ["object_poses"]:
+    raise ImportError("twin.record.rows: FrameRows.pack_into no longer matches model.fields")
 
 
 class FrameRows:
@@ -25,41 +32,36 @@ class FrameRows:
 
     def __init__(self, n_joints: int, n_objects: int) -> None:
         self.n_joints, self.n_objects = n_joints, n_objects
-        codes, dtype_fields, pack_args, unpack_parts, at = [], [], [], [], 0
+        codes, dtype_fields = [], []
         for f in FRAME_FIELDS:
             shape = f.trailing(n_joints, n_objects)
-            count = int(np.prod(shape, dtype=np.int64))
-            codes.append(f"{count}{_STRUCT_CODE[f.dtype]}")
+            codes.append(f"{int(np.prod(shape, dtype=np.int64))}{_STRUCT_CODE[f.dtype]}")
             dtype_fields.append((f.name, np.dtype(f.dtype).newbyteorder("<"), shape))
-            if f.shape == "frame":
-                pack_args.append(f"f.{f.name}")
-                unpack_parts.append(f"v[{at}]")
-            elif f.shape == "object_pose":
-                pack_args.append(f"*chain(f.{f.name})")
-                width = shape[-1]  # a pose's numbers
-                poses = [f"v[{at + width * k}:{at + width * (k + 1)}], " for k in range(n_objects)]
-                unpack_parts.append(f"({''.join(poses)})")
-            else:
-                pack_args.append(f"*f.{f.name}")
-                unpack_parts.append(f"v[{at}:{at + count}]")
-            at += count
         self._struct = struct.Struct("<" + "".join(codes))
+        self._pack_into = self._struct.pack_into
         self.size = self._struct.size  # bytes per row
         self.dtype = np.dtype(dtype_fields)  # packed: numpy's offsets are the struct's
         if self.dtype.itemsize != self.size:
             raise ImportError("twin.record.rows: the numpy row and the struct row disagree")
-        # The pack and unpack expressions are written out from the field description once: as fast
-        # as hand-written ones, which a loop over the fields is not (about 2.5 against 1.1 us a
-        # frame).
-        scope = {"pack_into": self._struct.pack_into, "unpack": self._struct.unpack_from,
-                 "chain": itertools.chain.from_iterable, "Frame": Frame}
-        self.pack_into = eval(
-            f"lambda buf, offset, f: pack_into(buf, offset, {', '.join(pack_args)})", scope
-        )
-        self._unpack = eval(
-            f"lambda buf, offset: (lambda v: "
-            f"Frame({', '.join(unpack_parts)}))(unpack(buf, offset))",
-            scope,
+
+    def pack_into(self, buf, offset: int, frame: Frame) -> None:
+        """Write `frame` as the row at byte `offset` of `buf`, its fields in model.fields' order."""
+        self._pack_into(
+            buf,
+            offset,
+            frame.step,
+            frame.t_ns,
+            *frame.joint_q,
+            *frame.joint_qd,
+            *frame.joint_effort,
+            *frame.joint_target,
+            frame.suction_on,
+            frame.sensed_body,
+            frame.held_body,
+            *frame.hold_force_n,
+            *frame.hold_torque_nm,
+            *frame.pad_pose,
+            *chain.from_iterable(frame.object_poses),
         )
 
     def pack(self, frame: Frame) -> bytes:
@@ -67,10 +69,6 @@ class FrameRows:
         buf = bytearray(self.size)
         self.pack_into(buf, 0, frame)
         return bytes(buf)
-
-    def frame(self, buf, index: int = 0) -> Frame:
-        """Row `index` of a buffer of rows as a Frame (the same values, bit for bit)."""
-        return self._unpack(buf, index * self.size)
 
     def count(self, buf) -> int:
         """How many rows a buffer holds."""
@@ -82,7 +80,8 @@ class FrameRows:
 
     def columns(self, buf, *, copy: bool = True) -> FrameColumns:
         """A buffer of rows as FrameColumns: each column a contiguous copy, or (copy=False) a
-        strided view into the buffer, for a reader that copies the values out at once."""
+        strided view into the buffer, for a reader that copies what it keeps before the buffer is
+        written again."""
         records = self.records(buf)
         if not copy:
             return FrameColumns(**{f.name: records[f.name] for f in FRAME_FIELDS})
@@ -92,3 +91,33 @@ class FrameRows:
                 for f in FRAME_FIELDS
             }
         )
+
+    def frame(self, buf, index: int = 0) -> Frame:
+        """Row `index` of a buffer of rows as a Frame (the same values, bit for bit)."""
+        return self.columns(buf[index * self.size : (index + 1) * self.size]).frame(0)
+
+
+class FrameBatch:
+    """Frames taken one at a time and handed on as columns, `capacity` at a time: what a writer's
+    on_frame does with the twin's Frames, so that its on_frames is its one way in. The columns are
+    views of a buffer that the next add_frame() writes over: the writer copies what it keeps."""
+
+    def __init__(self, n_joints: int, n_objects: int, capacity: int) -> None:
+        self.rows = FrameRows(n_joints, n_objects)
+        self._buf = bytearray(capacity * self.rows.size)
+        self._end = len(self._buf)
+        self._at = 0  # bytes written
+
+    def add_frame(self, frame: Frame) -> FrameColumns | None:
+        """Keep `frame`; the batch's columns once it is full, else None."""
+        self.rows.pack_into(self._buf, self._at, frame)
+        self._at += self.rows.size
+        return self.take() if self._at == self._end else None
+
+    def take(self) -> FrameColumns | None:
+        """The frames kept so far as columns (None when there are none); the batch starts again."""
+        if not self._at:
+            return None
+        frames = self.rows.columns(memoryview(self._buf)[: self._at], copy=False)
+        self._at = 0
+        return frames

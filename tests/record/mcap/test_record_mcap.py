@@ -337,11 +337,11 @@ def test_every_chunk_compression_loads_the_same(recorded, tmp_path, compression)
 
 
 @pytest.mark.parametrize("rate", [1, 7])
-def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path, rate):
-    """The recorder process hands on_rows runs of rows in a buffer it overwrites once on_rows
-    returns (a shared-memory ring): the writer copies what it keeps, so the file is the one on_frame
-    writes. Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate 7 the last
-    frame is kept only from the last run (the buffer is garbage by then)."""
+def test_columns_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path, rate):
+    """The recorder process hands on_frames columns that are views of a buffer it overwrites once
+    on_frames returns (a shared-memory ring): the writer copies what it keeps, so the file is the
+    one on_frame writes. Runs of 1 to 64 rows, so blocks end inside a run and at its edges; at rate
+    7 the last frame is kept only from the last run (the buffer is garbage by then)."""
     from twin.record.mcap.writer import McapRecorder
     from twin.record.rows import FrameRows
 
@@ -349,7 +349,7 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
     config = TwinConfig()
     rows = FrameRows(len(config.profile.joint_names), len(config.objects))
 
-    def write(path: Path, by_rows: bool) -> bytes:
+    def write(path: Path, by_columns: bool) -> bytes:
         recorder = McapRecorder(path, config, RUN, urdf=urdf_text(config.profile), rate=rate)
         frames, buf, at = collector.frames, bytearray(64 * rows.size), 0
         for size in itertools.cycle((1, 7, 64, 33, 3)):
@@ -357,28 +357,28 @@ def test_rows_from_a_reused_buffer_make_the_bytes_frames_make(recorded, tmp_path
             if not batch:
                 break
             at += size
-            if not by_rows:
+            if not by_columns:
                 for frame in batch:
                     recorder.on_frame(frame)
                 continue
             for k, frame in enumerate(batch):
                 rows.pack_into(buf, k * rows.size, frame)
-            recorder.on_rows(rows, memoryview(buf)[: len(batch) * rows.size])
+            recorder.on_frames(rows.columns(memoryview(buf)[: len(batch) * rows.size], copy=False))
             buf[:] = b"\xff" * len(buf)
         for event in collector.events:
             recorder.on_event(event)
         recorder.close()
         return path.read_bytes()
 
-    assert write(tmp_path / "rows.mcap", by_rows=True) == write(
-        tmp_path / "frames.mcap", by_rows=False
+    assert write(tmp_path / "columns.mcap", by_columns=True) == write(
+        tmp_path / "frames.mcap", by_columns=False
     )
 
 
 def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
-    """The writer gathers its block messages from the rows in one go; field by field from numpy
-    columns (wire.packed, as model.fields describes them) gives the same bytes, whatever the frame
-    count and in whatever order the counts come (the gather's index is kept for the last count)."""
+    """The writer encodes its block messages from columns, contiguous or views of packed rows; field
+    by field as wire.packed encodes a numpy array (model.fields' wire types) gives the same bytes,
+    whatever the frame count."""
     from twin.model import fields as F
     from twin.record.mcap.blocks import BlockEncoder
     from twin.record.rows import FrameRows
@@ -386,7 +386,7 @@ def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
     _, collector = recorded
     rows = FrameRows(4, 1)
     names = {b: wire.str_field(S.NAMES, b) for b in F.BLOCKS}
-    encoder = BlockEncoder(rows, names)
+    encoder = BlockEncoder(names)
     at = 0
     for n in (60, 1, 7, 60, 60, 2):
         block = b"".join(rows.pack(f) for f in collector.frames[at : at + n])
@@ -403,7 +403,8 @@ def test_block_messages_are_each_field_packed_frame_after_frame(recorded):
             )
             for b, fields in ((b, F.block_fields(b)) for b in F.BLOCKS)
         ]
-        assert encoder.messages(block) == expected
+        assert encoder.messages(rows.columns(block, copy=False)) == expected
+        assert encoder.messages(rows.columns(block)) == expected
 
 
 def test_a_user_urdf_travels_with_its_meshes_and_drives_the_transforms(tmp_path, capsys):

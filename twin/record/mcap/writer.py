@@ -9,11 +9,12 @@ fsynced, when it is finalized: a run killed part-way never leaves a broken file 
 
 from __future__ import annotations
 
+import bisect
 import json
 import os
-import struct
 from pathlib import Path
 
+import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
@@ -22,6 +23,7 @@ from mcap.writer import CompressionType, Writer
 
 from twin.errors import RecordingError
 from twin.model import fields as F
+from twin.model.columns import FIELD_NAMES, FrameColumns
 from twin.model.config import TwinConfig
 from twin.model.images import CameraImage
 from twin.model.json_values import finite_or_null
@@ -33,12 +35,13 @@ from twin.record.mcap.blocks import BlockEncoder
 from twin.record.mcap.metadata import check_run, portable_config, run_metadata
 from twin.record.mcap.scene_tf import WORLD, SceneTransforms
 from twin.record.outputs import partial_path, publish
-from twin.record.rows import FrameRows
+from twin.record.rows import FrameBatch
 
 BLOCK_S = 0.25
 FLUSH_S = 0.5
 VIEW_HZ = 30.0
 CHUNK_BYTES = 8 * 1024 * 1024  # chunks end at our flushes, not at a size
+BATCH_FRAMES = 256  # on_frame hands its Frames to on_frames this many at a time at most
 _WARNING = {"out_of_reach", "joint_limit", "settle_timeout", "suction_empty", "key_unknown"}
 _ERROR = {"task_error", "break"}
 
@@ -107,25 +110,27 @@ class McapRecorder(Sink):
         self._tf = SceneTransforms(
             urdf, config.profile.joint_names, tuple(o.name for o in config.objects)
         )
-        self._rows = FrameRows(len(config.profile.joint_names), self.n_objects)
-        self._tf_numbers = _row_struct(
-            self._rows, ("joint_q", "pad_pose", "object_poses")
-        ).unpack_from
-        self._step_time = _row_struct(self._rows, ("step", "t_ns"))
-        self._block_bytes = self.block_frames * self._rows.size
-        self._block = bytearray()  # the next block's frames, as packed rows
+        n_joints = len(config.profile.joint_names)
+        self._n_joints = n_joints
+        # the next block's frames (copied in: what on_frames gets may be written over after it)
+        self._block = FrameColumns.empty(self.block_frames + 1, n_joints, self.n_objects)
+        self._block_count = 0
         self._blocks = BlockEncoder(
-            self._rows,
             {
                 b: self._joint_names if b == "JointBlock" else self._object_names
                 # every other block names the objects
                 for b in F.BLOCKS
             },
         )
+        # on_frame's Frames, gathered into columns for on_frames
+        self._batch = FrameBatch(n_joints, self.n_objects, BATCH_FRAMES)
         self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
-        self._last: tuple[bytes, int, int] | None = None  # the last frame seen: (row, step, t_ns)
+        self._last_step, self._last_t_ns = -1, 0  # the last frame seen
+        # the last frame seen, when the recording rate left it out of the blocks (close writes it)
+        self._last_left_out: FrameColumns | None = None
         self._last_written_step = -1
         self._last_flush_ns = 0
+        self._set_due()
         self._sequence: dict[int, int] = {}
         self.frames_written = 0
         self._task_error = ""  # the first task_error it saw: such a run is never finalized as ok
@@ -188,61 +193,101 @@ class McapRecorder(Sink):
 
     # -- sink -----------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        self._take(memoryview(self._rows.pack(frame)))
+        """One Frame, gathered with the ones before it; they go to on_frames when the batch is full
+        or when this frame is one that makes the file grow (it fills a block, or ends a long gap
+        without one), so the file is written when a Frame at a time would have written it."""
+        frames = self._batch.add_frame(frame)
+        if frames is None and (frame.step >= self._due_step or frame.t_ns >= self._due_ns):
+            frames = self._batch.take()
+        if frames is not None:
+            self.on_frames(frames)
 
-    def on_rows(self, rows: FrameRows, buf) -> None:
-        """Frames packed as rows (the recorder process's feed), each one as on_frame takes it."""
-        view = memoryview(buf).cast("B")
-        if rows.size != self._rows.size or len(view) % rows.size:
-            raise RecordingError(
-                f"{len(view)} bytes of {rows.size}-byte rows fed to a recorder of "
-                f"{self._rows.size}-byte rows"
-            )
-        if len(view):
-            self._take(view)
+    def _take_batch(self) -> None:
+        """The Frames on_frame has gathered, before anything that follows them in the stream."""
+        frames = self._batch.take()
+        if frames is not None:
+            self.on_frames(frames)
 
-    def _take(self, view: memoryview) -> None:
-        """Frames as rows, one after another in `view`: each one's transforms at the viewing rate,
-        its row into the block at the recording rate. What it keeps it copies (the sender may reuse
-        the memory behind `view` as soon as this returns)."""
-        # locals, not attributes, in this loop over every frame (its bare loop: 0.19 us a frame,
-        # 0.22 with attributes)
-        size, n_joints, view_every, rate = (
-            self._rows.size,
-            self._rows.n_joints,
-            self.view_every,
-            self.rate,
-        )
-        block, full, far = self._block, self._block_bytes, 2 * self.flush_ns
-        at = 0
-        for step, t_ns in self._step_time.iter_unpack(view):
-            if not step % view_every:
-                numbers = self._tf_numbers(view, at)  # joint values, then the poses
-                self._pending.append(
-                    (
-                        t_ns,
-                        self._tf_channel,
-                        self._tf.message(t_ns, numbers[:n_joints], numbers[n_joints:]),
-                    )
-                )
-            at += size
-            if not step % rate:
-                block += view[at - size : at]
-                if len(block) >= full:
-                    self._write_block()
-                    continue
-            if t_ns - self._last_flush_ns >= far:  # blocks far apart (a high --rate)
+    def on_frames(self, frames: FrameColumns) -> None:
+        """Frames in time order (steps rising): each one's transforms at the viewing rate, its
+        values into the block at the recording rate; a block is written when it is full, and the
+        file flushed when blocks are far apart (a high --rate). What it keeps it copies."""
+        n = len(frames)
+        if not n:
+            return
+        viewed, kept = _every(frames.step, self.view_every), _every(frames.step, self.rate)
+        transforms = self._transforms(frames, viewed)
+        t_ns, t_end, far = frames.t_ns, int(frames.t_ns[-1]), 2 * self.flush_ns
+        start, next_viewed, next_kept = 0, 0, 0
+        while start < n:
+            # the frame that fills the block, and the first from `start` on that ends a long gap
+            # without a block (n: none of these frames)
+            filling = next_kept + self.block_frames - self._block_count - 1
+            fills = kept[filling] if filling < len(kept) else n
+            gap_ns = self._last_flush_ns + far
+            ends_gap = n if t_end < gap_ns else start + int(np.searchsorted(t_ns[start:], gap_ns))
+            end = min(fills, ends_gap)
+            stop = min(end + 1, n)
+            took = bisect.bisect_left(viewed, stop, next_viewed)
+            self._pending += transforms[next_viewed:took]
+            next_viewed = took
+            took = bisect.bisect_left(kept, stop, next_kept)
+            block = self._keep(frames, kept[next_kept:took])
+            next_kept = took
+            if end == n:
+                break
+            if end == fills:
+                self._write_block(block)
+            else:
                 self._write_pending()
-                self._flush(t_ns)
-        self._last = (bytes(view[at - size : at]), step, t_ns)
+                self._flush(int(t_ns[end]))
+            start = end + 1
+        self._last_step, self._last_t_ns = int(frames.step[-1]), t_end
+        self._set_due()
+        left_out = self._last_step % self.rate != 0
+        self._last_left_out = frames.slice(n - 1, n).copy() if left_out else None
+
+    def _transforms(self, frames: FrameColumns, viewed) -> list[tuple[int, int, bytes]]:
+        """The scene transforms of frames[viewed], as pending /tf messages."""
+        if not len(viewed):
+            return []
+        rows = _index(viewed)
+        times = frames.t_ns[rows].tolist()
+        joint_q = frames.joint_q[rows].tolist()
+        pads = frames.pad_pose[rows].tolist()
+        objects = frames.object_poses[rows].reshape(len(times), -1).tolist()
+        return [
+            (t, self._tf_channel, self._tf.message(t, q, pad + poses))
+            for t, q, pad, poses in zip(times, joint_q, pads, objects, strict=True)
+        ]
+
+    def _keep(self, frames: FrameColumns, rows) -> FrameColumns:
+        """Copy frames[rows] into the block; the block's columns (its first _block_count frames
+        are its own)."""
+        k, block = len(rows), self._block
+        if k:
+            which, at = _index(rows), self._block_count
+            for name in FIELD_NAMES:
+                getattr(block, name)[at : at + k] = getattr(frames, name)[which]
+            self._block_count = at + k
+        return block
+
+    def _set_due(self) -> None:
+        """The step of the frame that will fill the block, and the time that ends a long gap
+        without a block (the frames that on_frame hands on at once)."""
+        next_kept = (self._last_step // self.rate + 1) * self.rate
+        self._due_step = next_kept + (self.block_frames - self._block_count - 1) * self.rate
+        self._due_ns = self._last_flush_ns + 2 * self.flush_ns
 
     def on_command(self, command: Command) -> None:
+        self._take_batch()
         body = _json({"step": command.step, "kind": command.kind, "args": command.args})
         self._pending.append(
             (command.step * self.config.dt_ns, self._channel[S.COMMANDS.topic], body)
         )
 
     def on_event(self, event: Event) -> None:
+        self._take_batch()
         if event.kind == "task_error" and not self._task_error:
             self._task_error = event.message or "task error"
         full = _json(
@@ -261,6 +306,7 @@ class McapRecorder(Sink):
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture as foxglove.CompressedImage, its calibration, and the camera's pose on
         /tf (world -> its frame_id), all at the picture's time."""
+        self._take_batch()
         channels = self._camera_channels.get(image.camera)
         if channels is None:
             raise RecordingError(
@@ -337,14 +383,14 @@ class McapRecorder(Sink):
             self._add_id(channel_id, t_ns, data)
         self._pending.clear()
 
-    def _write_block(self) -> None:
-        """The buffered frames as one message per block channel (model.fields says which field goes
-        where)."""
-        size = self._rows.size
-        last_step, t_last = self._step_time.unpack_from(self._block, len(self._block) - size)
-        messages = self._blocks.messages(self._block)
-        self.frames_written += len(self._block) // size
-        self._block.clear()
+    def _write_block(self, block: FrameColumns) -> None:
+        """The block's frames (its first _block_count) as one message per block channel
+        (model.fields says which field goes where), after every message that comes before them."""
+        n = self._block_count
+        last_step, t_last = int(block.step[n - 1]), int(block.t_ns[n - 1])
+        messages = self._blocks.messages(block, n)
+        self.frames_written += n
+        self._block_count = 0
         self._write_pending()
         for channel_id, data in zip(self._block_channels, messages, strict=True):
             self._add_id(channel_id, t_last, data)
@@ -365,8 +411,9 @@ class McapRecorder(Sink):
             return
         self.closed = True
         try:
-            if self._block:
-                self._write_block()
+            self._take_batch()
+            if self._block_count:
+                self._write_block(self._block)
             self._write_pending()
             self._writer.flush()
         finally:
@@ -382,19 +429,11 @@ class McapRecorder(Sink):
         if outcome == "ok" and self._task_error:
             outcome, error = "error", self._task_error
         try:
-            row, last_step, last_t_ns = self._last or (b"", -1, 0)
-            if (
-                self._last is not None
-                and last_step != self._last_written_step
-                and (
-                    not self._block
-                    or self._step_time.unpack_from(self._block, len(self._block) - len(row))[0]
-                    != last_step
-                )
-            ):
-                self._block += row
-            if self._block:
-                self._write_block()
+            self._take_batch()
+            if self._last_left_out is not None:  # the final frame, whatever the rate
+                self._keep(self._last_left_out, range(1))
+            if self._block_count:
+                self._write_block(self._block)
             self._write_pending()
             self._writer.flush()
             self._writer.add_metadata(
@@ -402,9 +441,9 @@ class McapRecorder(Sink):
                 {
                     "outcome": outcome,
                     "error": error,
-                    "last_step": str(last_step),
+                    "last_step": str(self._last_step),
                     "frames": str(self.frames_written),
-                    "duration_ns": str(last_t_ns),
+                    "duration_ns": str(self._last_t_ns),
                 },
             )
             self._writer.finish()
@@ -418,17 +457,18 @@ class McapRecorder(Sink):
             self._file.close()
 
 
-def _row_struct(rows: FrameRows, names: tuple[str, ...]) -> struct.Struct:
-    """A row's struct that unpacks only the named int64 or float64 fields (in row order), as one
-    flat tuple: what the loop over frames and a /tf message need, without a Frame or a numpy
-    array."""
-    form, at = ["<"], 0
-    for name in names:
-        dtype, offset = rows.dtype.fields[name][:2]
-        form.append(f"{offset - at}x{dtype.itemsize // 8}{'q' if dtype.base.kind == 'i' else 'd'}")
-        at = offset + dtype.itemsize
-    form.append(f"{rows.size - at}x")
-    return struct.Struct("".join(form))
+def _every(steps: np.ndarray, every: int) -> range | list[int]:
+    """Which of the frames with these steps (rising) have a step that is a multiple of `every`: a
+    range where the steps follow one another (the twin's frames), else a list."""
+    first, n = int(steps[0]), len(steps)
+    if int(steps[-1]) - first == n - 1:
+        return range(-first % every, n, every)
+    return np.flatnonzero(steps % every == 0).tolist()
+
+
+def _index(rows: range | list[int]) -> slice | list[int]:
+    """An index of numpy arrays for these rows: a slice (a view) where they are a range."""
+    return slice(rows.start, rows.stop, rows.step) if isinstance(rows, range) else rows
 
 
 def _log_message(event: Event) -> bytes:

@@ -1,8 +1,10 @@
 """The Rerun sink: a run drawn as an .rrd file (robot from its URDF, boxes, pad, joint plots,
 events).
 
-on_frame only copies into preallocated numpy buffers; every `batch_steps` frames (and at close) the
-buffers go out as columns with `send_columns` — one `rr.log` per step would slow a run ~20x.
+Frames come in as columns (on_frames: the recorder process's ring, a loaded recording; on_frame
+gathers the twin's single Frames into columns first) and are copied into preallocated numpy
+buffers; every `batch_steps` frames (and at close) the buffers go out as columns with
+`send_columns` — one `rr.log` per step would slow a run ~20x.
 The output (a file, or any stream the caller opened) is chosen apart from the logging code. A file
 is written as `NAME.partial` and renamed into place, fsynced, at close (see twin.outputs).
 """
@@ -27,7 +29,7 @@ from twin.model.types import Command, Event, Frame
 from twin.record.outputs import check_target, partial_path, publish
 from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
-from twin.record.rows import FrameRows
+from twin.record.rows import FrameBatch
 from twin.robot.urdf import urdf_text as profile_urdf_text
 
 # Each send costs ~0.1 ms of the SDK's Python whatever its length, 16 sends a batch: the recorder
@@ -131,6 +133,8 @@ class RerunRecorder(Sink):
         ]
         self._object_paths = [scene.object_path(o.name) for o in config.objects]
         self._buf = _Buffers(batch_steps, len(config.objects))
+        # on_frame's Frames, gathered into columns for on_frames
+        self._batch = FrameBatch(len(config.profile.joint_names), len(config.objects), 256)
         self._n = 0
         self._events: list[Event] = []
         self._commands: list[Command] = []
@@ -144,46 +148,22 @@ class RerunRecorder(Sink):
 
     # -- sink ---------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
-        i = self._n
-        b = self._buf
-        b.step[i] = frame.step
-        b.t_ns[i] = frame.t_ns
-        b.joint_q[i] = frame.joint_q
-        b.joint_target[i] = frame.joint_target
-        b.suction_on[i] = frame.suction_on
-        b.held_body[i] = frame.held_body
-        b.pad_pose[i] = frame.pad_pose
-        if self._object_paths:  # numpy cannot broadcast an empty tuple into shape (0, 7)
-            b.object_poses[i] = frame.object_poses
-        self._n = i + 1
-        if self._n == self.batch_steps:
-            self._send_frames()
+        frames = self._batch.add_frame(frame)
+        if frames is not None:
+            self.on_frames(frames)
 
     def on_frames(self, frames: FrameColumns) -> None:
-        """Many frames at once (a loaded recording): the same buffers and batches as on_frame."""
+        """Frames as columns, sliced into the buffers the batches are sent from."""
         start, total = 0, len(frames)
         while start < total:
             k = min(self.batch_steps - self._n, total - start)
             i, b = self._n, self._buf
-            for name in (
-                "step",
-                "t_ns",
-                "joint_q",
-                "joint_target",
-                "suction_on",
-                "held_body",
-                "pad_pose",
-                "object_poses",
-            ):
+            for name in _Buffers.DRAWN:
                 getattr(b, name)[i : i + k] = getattr(frames, name)[start : start + k]
             self._n += k
             start += k
             if self._n == self.batch_steps:
                 self._send_frames()
-
-    def on_rows(self, rows: FrameRows, buf) -> None:
-        """Frames packed as rows (the recorder process's feed), copied out as columns."""
-        self.on_frames(rows.columns(buf, copy=False))
 
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture on its entity (world/cameras/NAME, under its static Pinhole), with the
@@ -244,6 +224,9 @@ class RerunRecorder(Sink):
     # -- batches ------------------------------------------------------------------------------
     def _send_buffered(self) -> None:
         """Everything not yet sent: the frames of the open batch, the events, the commands."""
+        frames = self._batch.take()
+        if frames is not None:
+            self.on_frames(frames)
         self._send_frames()
         self._send_events()
         self._send_commands()

@@ -258,7 +258,7 @@ def test_every_picture_is_checked_before_any_work(bad_pictures, tmp_path, capsys
 def test_track_rgb_checks_the_header_first(bad_pictures):
     """CameraTrack.rgb (what diff, replay and check decode with): a RecordingError, never
     Pillow's."""
-    from twin.errors import RecordingError
+    from twin.model.errors import RecordingError
 
     for path, why in bad_pictures.values():
         track = twin_pkg.load(path).cameras["overhead"]

@@ -27,7 +27,7 @@ from twin.compare.metrics import (
 )
 from twin.compare.noise import NoiseFloor, command_number_difference
 from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
-from twin.errors import RecordingError, TwinError
+from twin.model.errors import RecordingError, TwinError
 from twin.model.fields import COMPARED
 from twin.model.recording import Recording
 from twin.model.types import Command

@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.errors import ConfigError, RecordingError
 from twin.export.episodes import NS_PER_S, Episode, nearest
 from twin.export.stats import feature_stats, image_sample, image_stride, sampled_image_stats
+from twin.model.errors import ConfigError, RecordingError
 from twin.model.tables import frame_column_names, suction_command
 from twin.record.outputs import fsync_file
 

@@ -10,7 +10,7 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import RecordingError, TwinError
+from twin.model.errors import RecordingError, TwinError
 from twin.model.recording import Recording
 from twin.model.types import COMMAND_ARGS
 

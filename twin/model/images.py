@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from twin.errors import ConfigError, RecordingError
+from twin.model.errors import ConfigError, RecordingError
 from twin.model.quat import quat_from_axes, rotate
 from twin.pictures import checked_header, decode_rgb
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from twin.errors import TaskError
+from twin.model.errors import TaskError
 from twin.model.types import NO_BODY
 
 POINT_A_M = (0.2, 0.7)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.errors import TaskError
+from twin.model.errors import TaskError
 from twin.model.images import CAMERAS, CameraSpec, camera_view, optical_pose
 from twin.model.quat import rotate
 from twin.model.types import NO_BODY

@@ -16,8 +16,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.errors import RecordingError
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.images import recorded_images, tracks
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin

@@ -17,9 +17,9 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from twin.errors import RecordingError
 from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.images import CameraImage, recorded_images
 from twin.model.recording import Recording
 from twin.model.sink import Sink

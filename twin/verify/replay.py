@@ -18,8 +18,9 @@ from pathlib import Path
 
 from twin.model.config import TwinConfig
 from twin.model.errors import RecordingError
-from twin.model.images import recorded_images, tracks
+from twin.model.images import tracks
 from twin.model.recording import Recording
+from twin.record.images import recorded_images
 from twin.sim.twin import Sink, Twin
 from twin.sim.world import engine_versions
 from twin.verify.collectors import ColumnCollector, FrameCollector

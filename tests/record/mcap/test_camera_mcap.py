@@ -129,8 +129,9 @@ def test_a_pictures_pose_is_read_from_the_files_tf_also_when_decimated(tmp_path)
     """The pad camera's pose on /tf is where it was when the picture was taken; a decimated file
     (rate 3, a picture every 16 steps) holds no frame at most picture steps, and load gives that
     pose exactly."""
-    from twin.model.images import camera, recorded_images
+    from twin.model.images import camera
     from twin.record import open_recorders
+    from twin.record.images import recorded_images
     from twin.sim.world import engine_versions
     from twin.verify.check import record_task
     from twin.verify.collectors import FrameCollector

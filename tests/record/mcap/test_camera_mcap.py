@@ -16,6 +16,7 @@ from PIL import Image
 import twin
 from twin.cli.main import main
 from twin.model.config import TwinConfig
+from twin.pictures import track_rgb
 
 PICTURES = 89  # a pick_place cycle: steps 0..1419, a picture every 16 steps
 
@@ -89,7 +90,7 @@ def test_twin_load_gives_the_pictures(camera_run):
     assert list(track.step[:3]) == [0, 16, 32] and np.array_equal(
         track.t_ns, track.step * rec.config.dt_ns
     )
-    pixels = track.rgb(40)
+    pixels = track_rgb(track, 40)
     assert pixels.shape == (240, 320, 3) and pixels.dtype == np.uint8 and pixels.std() > 10
 
 

@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from twin.errors import TwinError
+from twin.model.errors import TwinError
 from twin.sim.twin import Twin
 from twin.sweep.executors import DaskExecutor, LocalExecutor
 from twin.sweep.keys import apply_values, task_values

@@ -24,8 +24,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import TwinError
 from twin.model.config import SceneObject, SuctionParams, TwinConfig
+from twin.model.errors import TwinError
 from twin.model.profiles import PROFILES
 from twin.record import open_recorders
 from twin.sim.world import engine_versions

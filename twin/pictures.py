@@ -1,7 +1,12 @@
 """Encoded camera pictures: PNG written here (fixed settings: the same pixels give the same bytes),
 JPEG through Pillow, and decoding through Pillow with the header checked first, so a damaged or
 oversized picture is refused by its declared size before anything is decoded. Pillow is imported
-when a picture is encoded as JPEG or decoded, not with the module."""
+when a picture is encoded as JPEG or decoded, not with the module.
+
+A recording's pictures (a model CameraTrack) are decoded by track_rgb and checked by check_track:
+a picture whose header is not the camera's configured format and size costs at most one
+configured-size decode, never a bomb's, and is a RecordingError naming the file, the camera, the
+step and what was expected."""
 
 from __future__ import annotations
 
@@ -11,6 +16,9 @@ import warnings
 import zlib
 
 import numpy as np
+
+from twin.model.errors import RecordingError
+from twin.model.images import CameraTrack
 
 # fixed: identical pixels give identical bytes (level 1: 0.36 ms a picture, level 6: 0.9-1.2)
 PNG_COMPRESS_LEVEL = 1
@@ -124,3 +132,34 @@ def _open(data: bytes, format: str | None, size_px: tuple[int, int] | None = Non
 def _one_line(err: BaseException) -> str:
     text = " ".join(f"{type(err).__name__}: {err}".split())
     return text if len(text) <= 120 else text[:117] + "..."
+
+
+def track_rgb(track: CameraTrack, i: int) -> np.ndarray:
+    """Picture i of a camera track decoded: (height, width, 3) uint8. Its header is checked first
+    (check_track): a picture that is not the camera's format and size is a RecordingError, and is
+    never decoded."""
+    try:
+        return decode_rgb(track.data[i], track.format, (track.width_px, track.height_px))
+    except ValueError as err:
+        raise _bad_picture(track, i, str(err)) from None
+
+
+def check_track(track: CameraTrack, i: int | None = None) -> None:
+    """Picture i's header (every picture's with i None) against the camera: RecordingError
+    unless it is a picture of the camera's format and configured size. Reads headers only:
+    microseconds each."""
+    for k in range(len(track.data)) if i is None else (i,):
+        try:
+            checked_header(track.data[k], track.format, (track.width_px, track.height_px))
+        except ValueError as err:
+            raise _bad_picture(track, k, str(err)) from None
+
+
+def _bad_picture(track: CameraTrack, i: int, why: str) -> RecordingError:
+    where = f"recording {track.source!r}: " if track.source else ""
+    step = f"step {int(track.step[i])}" if i < len(track.step) else f"picture {i}"
+    return RecordingError(
+        f"{where}camera {track.name!r} picture at {step} {why}; expected a "
+        f"{track.format.upper()} picture of {track.width_px}x{track.height_px} px (the camera's "
+        "configured format and size)"
+    )

@@ -8,6 +8,7 @@ from support.server import ServerProcess
 
 import twin
 from twin.cli.main import main
+from twin.pictures import track_rgb
 
 
 def test_teleop_records_the_cameras_pictures(tmp_path, capsys):
@@ -34,7 +35,7 @@ def test_teleop_records_the_cameras_pictures(tmp_path, capsys):
     track = rec.cameras["wrist"]
     assert (track.width_px, track.height_px) == (64, 48) and rec.config.cameras[0].rate_hz == 8.0
     assert list(track.step) == list(range(0, int(rec.frames.step[-1]) + 1, 30))  # 8 Hz at 240 Hz
-    assert track.rgb(0).shape == (48, 64, 3)
+    assert track_rgb(track, 0).shape == (48, 64, 3)
     capsys.readouterr()
     assert main(["replay", str(path)]) == 0
     out = capsys.readouterr().out

@@ -11,14 +11,14 @@ from twin.cli.main import main
 from twin.compare.engine import compare
 from twin.compare.report import render_markdown
 from twin.compare.tolerances import Tolerances
-from twin.pictures import encode
+from twin.pictures import encode, track_rgb
 
 
 def _with_darkened_picture(rec, camera: str, index: int):
     """A copy of rec whose picture `index` of `camera` has a 20x20 black square."""
     out = copy.deepcopy(rec)
     track = out.cameras[camera]
-    pixels = track.rgb(index).copy()
+    pixels = track_rgb(track, index).copy()
     pixels[10:30, 10:30] = 0
     track.data[index] = encode(pixels)
     return out

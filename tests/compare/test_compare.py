@@ -19,9 +19,9 @@ from twin.compare.events import match_events
 from twin.compare.metrics import quat_angle
 from twin.compare.report import render_json, render_junit, render_markdown, render_text
 from twin.compare.tolerances import FIELDS, Tolerances, parse_override
-from twin.errors import ConfigError
 from twin.model.columns import FrameColumns
 from twin.model.config import EngineParams, SceneObject, TwinConfig
+from twin.model.errors import ConfigError
 from twin.model.profiles import PROFILES
 from twin.model.types import Event
 

@@ -32,7 +32,7 @@ from support.cli import TWIN, twin
 
 import twin as twin_pkg
 from twin.export import episodes as episodes_module
-from twin.pictures import png_bytes
+from twin.pictures import png_bytes, track_rgb
 from twin.record.mcap import schemas as S
 from twin.verify.replay import save
 
@@ -256,19 +256,19 @@ def test_every_picture_is_checked_before_any_work(bad_pictures, tmp_path, capsys
 
 
 def test_track_rgb_checks_the_header_first(bad_pictures):
-    """CameraTrack.rgb (what diff, replay and check decode with): a RecordingError, never
+    """pictures.track_rgb (what diff, replay and check decode with): a RecordingError, never
     Pillow's."""
-    from twin.errors import RecordingError
+    from twin.model.errors import RecordingError
 
     for path, why in bad_pictures.values():
         track = twin_pkg.load(path).cameras["overhead"]
         track.source = str(path)
         with pytest.raises(RecordingError) as err:
-            track.rgb(PICTURE_INDEX)
+            track_rgb(track, PICTURE_INDEX)
         assert f"camera 'overhead' picture at step 32 {why}" in str(err.value) and "\n" not in str(
             err.value
         )
-        assert track.rgb(PICTURE_INDEX + 1).shape == (240, 320, 3)  # the others decode
+        assert track_rgb(track, PICTURE_INDEX + 1).shape == (240, 320, 3)  # the others decode
 
 
 # -- 2. --fps --------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ import pytest
 from support.cli import twin
 
 import twin as twin_pkg
+from twin.pictures import track_rgb
 from twin.verify.replay import save
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -219,10 +220,11 @@ def test_video_decodes_one_frame_per_dataset_frame(dataset, camera_run):
     provenance = json.loads((dataset / "meta/twin_provenance.json").read_text())
     step = provenance["sources"][0]["episodes"][1]["first_step"]
     track = rec.cameras["overhead"]
-    shown = track.rgb(int(np.argmin(np.abs(track.step - step)))).astype(np.float64)
+    shown = track_rgb(track, int(np.argmin(np.abs(track.step - step)))).astype(np.float64)
     assert np.abs(frames[first][1].astype(np.float64) - shown).mean() < 4.0
     # not a stale one
-    assert np.abs(frames[first][1].astype(np.float64) - track.rgb(0).astype(np.float64)).mean() > 0
+    first_picture = track_rgb(track, 0).astype(np.float64)
+    assert np.abs(frames[first][1].astype(np.float64) - first_picture).mean() > 0
 
 
 def test_same_input_gives_the_same_bytes(camera_run, tmp_path, capsys):

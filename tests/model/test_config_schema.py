@@ -10,9 +10,9 @@ import math
 import pytest
 
 from twin.cli import main
-from twin.errors import ConfigError
 from twin.model import config as C
 from twin.model.config import TwinConfig, check_camera_view
+from twin.model.errors import ConfigError
 from twin.model.images import CAMERAS, CameraSpec
 from twin.model.json_values import (
     MAX_DEPTH,

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError
 from twin.model.keymaps import BUILTIN, help_lines, keymap_for, load_keymap, parse_keys, quit_keys
 from twin.model.profiles import PROFILES
 from twin.sim.twin import Twin

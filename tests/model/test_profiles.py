@@ -8,8 +8,8 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from twin.errors import ConfigError, TwinError, UnknownName
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, TwinError, UnknownName
 from twin.model.profiles import JOINT_ALIASES, PROFILES, ROLES, RobotProfile
 from twin.robot.profile_files import get_profile
 from twin.robot.urdf import urdf_from_profile

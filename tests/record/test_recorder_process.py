@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from support.runs import record_pick_place
 
-from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, RecordingError
 from twin.record import open_recorders
 from twin.record.mcap import schemas as S
 from twin.record.mcap.reader import load, scan

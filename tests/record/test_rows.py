@@ -56,7 +56,7 @@ def test_a_sink_without_on_frames_gets_each_frame_in_order():
 
 @pytest.mark.parametrize("capacity", [1, 4, 64])
 def test_a_batch_hands_on_every_frame_once_in_order(capacity):
-    """FrameBatch: full batches from add_frame, the rest from take, as views of one reused buffer."""
+    """FrameBatch: full batches from add_frame, the rest from take, views of one reused buffer."""
     batch = FrameBatch(4, 2, capacity)
     frames = [_frame(i, 2) for i in range(10)]
     handed = []

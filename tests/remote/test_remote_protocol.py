@@ -12,8 +12,8 @@ import pytest
 from support.raw_client import RawClient
 from support.server import ServerProcess
 
-from twin.errors import UnknownName
 from twin.model.config import TwinConfig
+from twin.model.errors import UnknownName
 from twin.model.profiles import JOINT_ALIASES, PAD_ALIASES, PROFILES, ROLES
 from twin.remote.session import Scene
 from twin.remote.sim_api import SimApi

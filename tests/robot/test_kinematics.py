@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twin.errors import OutOfReach
+from twin.model.errors import OutOfReach
 from twin.model.profiles import PROFILES
 from twin.robot import kinematics as k
 

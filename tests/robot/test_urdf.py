@@ -20,8 +20,8 @@ from support.user_robot import (
 )
 
 from twin.cli import main
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError
 from twin.robot.profile_files import get_profile
 from twin.robot.urdf import mesh_paths, urdf_text
 from twin.sim.twin import Twin

@@ -9,8 +9,8 @@ import sys
 import pytest
 from support.runs import collect_pick_place, columns_digest
 
-from twin.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.profiles import PROFILES
 from twin.model.types import Command
 from twin.robot.kinematics import wrap_rad

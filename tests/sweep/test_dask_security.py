@@ -26,7 +26,7 @@ from distributed.comm import connect as comm_connect
 from distributed.core import send_recv
 from distributed.security import Security
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep.cluster import connect, start_local
 
 # Dask's default HTTP port: its scheduler served /metrics, /health, /info there
@@ -337,7 +337,7 @@ def _stop(proc: subprocess.Popen) -> None:
 
 CLIENT = """
 import sys
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep.cluster import connect
 try:
     client = connect(sys.argv[1], timeout_s=10)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from twin.cli.main import main
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep import golden as golden_module
 from twin.sweep.golden import check_summary, judge, split_paths
 from twin.sweep.spec import load_spec

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError
 from twin.sweep.keys import apply_values, resolve_key
 from twin.sweep.sampling import RandomSampler
 from twin.sweep.spec import SweepSpec, dump_spec, load_spec, prepare

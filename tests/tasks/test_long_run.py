@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 import twin
-from twin.errors import TaskError
 from twin.model.config import SceneObject, SuctionParams, TwinConfig
+from twin.model.errors import TaskError
 from twin.model.profiles import PROFILES
 from twin.record.mcap import schemas as S
 from twin.sim.twin import Twin

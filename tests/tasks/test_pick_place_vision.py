@@ -10,8 +10,8 @@ import math
 import pytest
 
 from twin.cli.main import main
-from twin.errors import TaskError
 from twin.model.config import TwinConfig
+from twin.model.errors import TaskError
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
 from twin.sim.twin import Twin

@@ -12,7 +12,7 @@ import pytest
 from support.teleop_plan import MAPS, plan
 
 from twin.cli import main
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.keymaps import parse_keys
 from twin.model.profiles import PROFILES
 from twin.record.mcap.reader import load

@@ -12,8 +12,8 @@ from support.runs import record_pick_place
 
 from twin.cli import main
 from twin.compare.engine import compare
-from twin.errors import RecordingError
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.keymaps import builtin_keymap
 from twin.model.types import Command
 from twin.record import open_recorders

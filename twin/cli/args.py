@@ -6,8 +6,8 @@ import argparse
 import math
 from collections.abc import Callable
 
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
+from twin.model.errors import ConfigError
 from twin.model.images import CAMERAS, DEFAULT_RATE_HZ, DEFAULT_SIZE_PX, MAX_SIDE_PX, camera
 from twin.robot.profile_files import get_profile
 from twin.sweep.dists import INT64_MAX, BadValue, read_value

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from twin.cli.args import add_executor_options, whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
-from twin.errors import ConfigError, OutputError
+from twin.model.errors import ConfigError, OutputError
 
 _TOL_HELP = (
     "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: "

@@ -11,8 +11,8 @@ import argparse
 from pathlib import Path
 
 from twin.cli.args import whole_number
-from twin.errors import ConfigError, TwinError
 from twin.export.episodes import MAX_FPS
+from twin.model.errors import ConfigError, TwinError
 
 FORMATS = ("parquet", "csv", "lerobot")
 

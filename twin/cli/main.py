@@ -24,7 +24,7 @@ from twin.cli.search import add_search_command
 from twin.cli.serve import add_serve_command
 from twin.cli.sweep import add_sweep_command
 from twin.cli.view import add_view_command
-from twin.errors import ConfigError, TwinError
+from twin.model.errors import ConfigError, TwinError
 from twin.model.sink import Sink
 from twin.signals import Terminated, stop_signals_raise
 from twin.sim.twin import Twin

@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from twin.cli.args import whole_number
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 from twin.record.outputs import DEFAULT_FOLDER, check_output, partial_path
 
 

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
-from twin.errors import ConfigError, RecordingError
+from twin.model.errors import ConfigError, RecordingError
 from twin.signals import Terminated
 
 RESULT, MINIMAL = "search.json", "minimal.mcap"

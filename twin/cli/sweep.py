@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
-from twin.errors import ConfigError, TwinError
+from twin.model.errors import ConfigError, TwinError
 
 # a scenario that gave no result (twin.sweep.guard)
 NO_RESULT = ("worker died", "killed: ", "timed out: ")

@@ -27,10 +27,11 @@ from twin.compare.metrics import (
 )
 from twin.compare.noise import NoiseFloor, command_number_difference
 from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
-from twin.errors import RecordingError, TwinError
+from twin.model.errors import RecordingError, TwinError
 from twin.model.fields import COMPARED
 from twin.model.recording import Recording
 from twin.model.types import Command
+from twin.pictures import track_rgb
 
 # a joint field's unit for a revolute joint, and for the prismatic Z joint ("rad|m" in model.fields)
 JOINT_UNITS = {c.name: tuple(c.unit.split("|")) for f, c in COMPARED if f.shape == "joint"}
@@ -726,7 +727,7 @@ def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) 
 def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns: int) -> FieldStat:
     """Each camera's pictures, paired by step: the mean absolute difference of their pixels (levels
     0..255), inf for a picture only one run has. Identical bytes are 0 without decoding; others are
-    decoded by the model (CameraTrack.rgb). Not looked at when the tolerance is inf."""
+    decoded by the codec (twin.pictures.track_rgb). Not looked at when the tolerance is inf."""
     unit = FIELDS["images.pixels"][0]
     if tolerance == INF:
         return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
@@ -790,7 +791,7 @@ def _picture_error(g, i: int, c, j: int) -> float:
     sizes)."""
     if g.data[i] == c.data[j]:
         return 0.0
-    a, b = g.rgb(i), c.rgb(j)
+    a, b = track_rgb(g, i), track_rgb(c, j)
     if a.shape != b.shape:
         return INF
     return float(np.mean(np.abs(a.astype(np.int16) - b.astype(np.int16))))

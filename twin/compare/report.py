@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from twin.compare.engine import DiffResult, Divergence, FieldStat
-from twin.errors import ConfigError, OutputError
+from twin.model.errors import ConfigError, OutputError
 
 FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}
 

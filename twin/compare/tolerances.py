@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.fields import COMPARED
 
 INF = math.inf

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.errors import ConfigError, RecordingError
+from twin.model.errors import ConfigError, RecordingError
 from twin.model.recording import Recording
 
 _CYCLE_PHASE = re.compile(r"cycle (\d+):")

@@ -30,10 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.errors import ConfigError, RecordingError
 from twin.export.episodes import NS_PER_S, Episode, nearest
 from twin.export.stats import feature_stats, image_sample, image_stride, sampled_image_stats
+from twin.model.errors import ConfigError, RecordingError
 from twin.model.tables import frame_column_names, suction_command
+from twin.pictures import track_rgb
 from twin.record.outputs import fsync_file
 
 CODEBASE_VERSION = "v3.0"
@@ -388,7 +389,7 @@ def _camera_images(
         for k, i in enumerate(picks):
             if i != shown:
                 # (height, width, 3) as configured, or a RecordingError
-                image, shown = track.rgb(i), i
+                image, shown = track_rgb(track, i), i
             if k in sampled:
                 # a copy: the picture itself is not kept
                 thumbs.append(image[::stride, ::stride].copy())

@@ -6,10 +6,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from twin.errors import ConfigError
 from twin.export.episodes import Episode, episodes
 from twin.export.lerobot import Written, write_dataset
 from twin.export.sources import Source, check_recording, load_source, verify
+from twin.model.errors import ConfigError
 from twin.record.outputs import check_target
 
 

@@ -10,9 +10,10 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import RecordingError, TwinError
+from twin.model.errors import RecordingError, TwinError
 from twin.model.recording import Recording
 from twin.model.types import COMMAND_ARGS
+from twin.pictures import check_track
 
 
 @dataclass
@@ -91,7 +92,7 @@ def check_pictures(rec: Recording) -> None:
     configured size (headers only: nothing is decoded); the tracks name rec's file from now on."""
     for track in rec.cameras.values():
         track.source = track.source or rec.path
-        track.check()
+        check_track(track)
 
 
 def check_recording(rec: Recording, fps: int | None = None) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 
 CODEC = "libsvtav1"
 PIX_FMT = "yuv420p"

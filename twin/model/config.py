@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.images import CameraSpec
 from twin.model.json_values import MAX_DEPTH, all_finite, nesting_depth, shown
 from twin.model.keymaps import validate_keymap

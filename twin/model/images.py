@@ -2,10 +2,8 @@
 what sinks get through on_image) and all of one camera's pictures in a recording (CameraTrack).
 
 A camera is part of the scene's configuration (TwinConfig.cameras), so a replay renders it again.
-Pictures are stored encoded (twin.pictures) and decoded only when asked (CameraTrack.rgb). A picture
-read from a file is checked before it is decoded: its header must declare the camera's configured
-format and size, so a damaged picture costs at most one configured-size decode, never a bomb's
-(CameraTrack.check, a RecordingError naming the file, the camera, the step and what was expected).
+Pictures are stored encoded and decoded only when asked, by the codec (twin.pictures.track_rgb,
+which checks a picture's header against the camera first).
 """
 
 from __future__ import annotations
@@ -16,9 +14,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from twin.errors import ConfigError, RecordingError
+from twin.model.errors import ConfigError
 from twin.model.quat import quat_from_axes, rotate
-from twin.pictures import checked_header, decode_rgb
 
 FORMATS = ("png", "jpeg")
 # eye and target in world axes, or in the pad tip's frame (x along its heading, z up)
@@ -196,34 +193,6 @@ class CameraTrack:
     def __len__(self) -> int:
         return len(self.data)
 
-    def rgb(self, i: int) -> np.ndarray:
-        """Picture i decoded: (height, width, 3) uint8. Its header is checked first (check): a
-        picture that is not the camera's format and size is a RecordingError, and is never
-        decoded."""
-        try:
-            return decode_rgb(self.data[i], self.format, (self.width_px, self.height_px))
-        except ValueError as err:
-            raise self._bad(i, str(err)) from None
-
-    def check(self, i: int | None = None) -> None:
-        """Picture i's header (every picture's with i None) against the camera: RecordingError
-        unless it is a picture of the camera's format and configured size. Reads headers only:
-        microseconds each."""
-        for k in range(len(self.data)) if i is None else (i,):
-            try:
-                checked_header(self.data[k], self.format, (self.width_px, self.height_px))
-            except ValueError as err:
-                raise self._bad(k, str(err)) from None
-
-    def _bad(self, i: int, why: str) -> RecordingError:
-        where = f"recording {self.source!r}: " if self.source else ""
-        step = f"step {int(self.step[i])}" if i < len(self.step) else f"picture {i}"
-        return RecordingError(
-            f"{where}camera {self.name!r} picture at {step} {why}; expected a "
-            f"{self.format.upper()} picture of {self.width_px}x{self.height_px} px (the camera's "
-            "configured format and size)"
-        )
-
     @staticmethod
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
         return CameraTrack(
@@ -244,31 +213,3 @@ def tracks(cameras: tuple[CameraSpec, ...], images: list[CameraImage]) -> dict[s
         spec.name: CameraTrack.from_images(spec, [im for im in images if im.camera == spec.name])
         for spec in cameras
     }
-
-
-def recorded_images(
-    cameras: tuple[CameraSpec, ...],
-    by_name: dict[str, CameraTrack],
-    frame_steps: np.ndarray,
-    pad_poses: np.ndarray,
-) -> list[CameraImage]:
-    """A recording's pictures as CameraImages in step order (camera order within a step), each with
-    the pose its track holds (the file's /tf). A track without poses (a file that holds none) has
-    them worked out from the recorded frame at (or, in a decimated file, just before) its step."""
-    out = []
-    for spec in cameras:
-        track = by_name.get(spec.name)
-        if track is None or not len(frame_steps):
-            continue
-        held = len(track.pose) == len(track)
-        for i in range(len(track)):
-            step = int(track.step[i])
-            if held:
-                pose = tuple(track.pose[i].tolist())
-            else:
-                row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
-                pose = optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))
-            out.append(
-                CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose)
-            )
-    return sorted(out, key=lambda im: im.step)

@@ -14,7 +14,7 @@ import json
 import math
 import tomllib
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 
 MAX_DEPTH = 64  # arrays and tables inside one another, in a JSON or TOML file twin reads
 

@@ -29,7 +29,7 @@ import math
 from pathlib import Path
 from typing import Protocol
 
-from twin.errors import ConfigError, UnknownName
+from twin.model.errors import ConfigError, UnknownName
 from twin.model.json_values import load_json_text, load_toml_text
 from twin.model.profiles import ROLES, RobotProfile
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
-from twin.errors import ConfigError, UnknownName
+from twin.model.errors import ConfigError, UnknownName
 
 ROLES = ("shoulder", "elbow", "z", "wrist")
 

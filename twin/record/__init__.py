@@ -7,8 +7,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.errors import TwinError, exception_text
 from twin.model.config import TwinConfig
+from twin.model.errors import TwinError, exception_text
 from twin.model.sink import close_all
 from twin.robot.urdf import mesh_paths, urdf_text
 from twin.signals import Terminated

@@ -11,7 +11,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from twin.errors import ConfigError, OutputError, TwinError
+from twin.model.errors import ConfigError, OutputError, TwinError
 
 PARTIAL_SUFFIX = ".partial"
 DEFAULT_FOLDER = "runs"  # where runs go by default: created when needed, as no other folder is

@@ -23,9 +23,9 @@ import pickle
 import sys
 from pathlib import Path
 
-from twin.errors import RecordingError
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame

@@ -14,7 +14,7 @@ from typing import Any
 
 import cbor2
 
-from twin.errors import exception_text
+from twin.model.errors import exception_text
 from twin.model.json_values import finite_number
 
 PROTOCOL_VERSION = 2

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import zmq
 from zmq.utils.monitor import parse_monitor_message
 
-from twin.errors import ConfigError, TwinError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, TwinError
 from twin.remote import DEFAULT_STEP_GRACE_S, STEP_GRACE_RANGE_S
 from twin.remote.intake import Intake, wire_bytes
 from twin.remote.protocol import (

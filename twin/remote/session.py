@@ -13,8 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from twin.errors import ConfigError, OutputError, TwinError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, OutputError, TwinError
 from twin.model.images import CameraImage
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from twin.errors import UnknownName
+from twin.model.errors import UnknownName
 from twin.model.profiles import PAD_ALIASES, ROBOT_ALIASES, ROLES
 from twin.model.quat import quat_mul, rotate, yaw_quat
 from twin.remote.protocol import MAX_SIGNALS, Param, RequestError, Signature, brief_value, printable

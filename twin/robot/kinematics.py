@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from twin.errors import OutOfReach
+from twin.model.errors import OutOfReach
 from twin.model.profiles import RobotProfile
 
 

@@ -7,7 +7,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.json_values import load_json_text, load_toml_text
 from twin.model.profiles import DEFAULT_SUCTION_SIGNAL, PROFILES, ROLES, RobotProfile
 from twin.robot.urdf import profile_from_urdf

@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.profiles import RobotProfile
 
 ALUMINIUM_KG_M3 = 2700.0

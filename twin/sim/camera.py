@@ -19,9 +19,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from twin.errors import HelperError
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
+from twin.model.errors import HelperError
 from twin.model.images import CameraImage, CameraSpec, camera_view, optical_pose
 from twin.model.types import Frame
 from twin.pictures import encode

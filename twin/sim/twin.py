@@ -11,8 +11,8 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
-from twin.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.images import CameraImage
 from twin.model.json_values import finite_number
 from twin.model.keymaps import KeyPlayer

@@ -12,8 +12,8 @@ import os
 import sys
 import tempfile
 
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError
 from twin.model.types import NO_BODY
 from twin.robot.urdf import urdf_text
 

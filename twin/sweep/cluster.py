@@ -58,7 +58,7 @@ import logging
 import threading
 from collections.abc import Mapping, Sequence
 
-from twin.errors import ConfigError, exception_text
+from twin.model.errors import ConfigError, exception_text
 
 HOST = "127.0.0.1"
 CONNECT_TIMEOUT_S = 10.0

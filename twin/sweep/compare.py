@@ -12,7 +12,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep import paired
 from twin.sweep.spec import TOLERANCES, SweepSpec, load_spec
 

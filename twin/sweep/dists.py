@@ -11,7 +11,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.json_values import MAX_DEPTH, nesting_depth
 
 _CALL = re.compile(r"^\s*([a-z_]+)\s*\((.*)\)\s*$", re.DOTALL)

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
-from twin.errors import ConfigError, TwinError
+from twin.model.errors import ConfigError, TwinError
 from twin.sweep.guard import GuardedPool, run_batch_guarded
 from twin.sweep.worker import failed_row
 

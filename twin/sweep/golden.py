@@ -28,7 +28,7 @@ from stat import S_IMODE, S_ISREG
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.errors import ConfigError, TwinError
+from twin.model.errors import ConfigError, TwinError
 from twin.model.json_values import load_json_text, load_toml_text
 from twin.sweep import paired
 from twin.sweep.results import summary, summary_text, table

@@ -23,8 +23,8 @@ from collections import deque
 from collections.abc import Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 
-from twin.errors import TwinError
 from twin.helpers import TWINS_SIGNALS
+from twin.model.errors import TwinError
 from twin.sweep.worker import (
     Job,
     confirm_scenario,

@@ -11,7 +11,7 @@ import json
 import os
 from pathlib import Path
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.model.json_values import load_json_text
 from twin.sweep.spec import SweepSpec
 

@@ -14,8 +14,8 @@ import inspect
 import json
 from dataclasses import dataclass
 
-from twin.errors import ConfigError
 from twin.model.config import SUCTION_SCHEMA, TwinConfig
+from twin.model.errors import ConfigError
 from twin.sweep.dists import Dist
 from twin.tasks import TaskFn, task_params
 

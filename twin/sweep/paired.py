@@ -31,7 +31,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep.stats import mcnemar_exact, median_ci, newcombe_paired, newcombe_unpaired, wilson
 
 RESULT_COLUMNS = ("scenario", "outcome", "error", "placement_error_mm")

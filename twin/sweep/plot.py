@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep.paired import Paired, Side
 
 

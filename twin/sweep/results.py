@@ -11,7 +11,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep.spec import SweepSpec, dump_spec
 from twin.sweep.stats import summarize
 from twin.sweep.worker import COUNTED

@@ -15,7 +15,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from twin.errors import ConfigError, RecordingError, TwinError
+from twin.model.errors import ConfigError, RecordingError, TwinError
 from twin.model.json_values import load_json_text
 from twin.sweep.sampling import RandomSampler
 from twin.sweep.search import run_probe

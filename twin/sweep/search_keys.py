@@ -10,7 +10,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from twin.errors import ConfigError
+from twin.model.errors import ConfigError
 from twin.sweep.dists import Dist, parse_dist
 from twin.sweep.keys import Key, check_dist, resolve_key
 from twin.sweep.spec import Prepared, SweepSpec, prepare

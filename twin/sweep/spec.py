@@ -9,8 +9,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
+from twin.model.errors import ConfigError
 from twin.model.json_values import load_toml_text
 from twin.robot.profile_files import get_profile
 from twin.sweep.dists import INT64_MAX, INT64_MIN, Dist, parse_dist

@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.errors import RecordingError, TwinError, exception_text
+from twin.model.errors import RecordingError, TwinError, exception_text
 from twin.model.sink import Sink
 from twin.sim.twin import Twin
 from twin.sim.world import engine_versions

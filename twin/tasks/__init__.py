@@ -9,7 +9,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from twin.errors import ConfigError, TaskError, TaskTimeout, TwinError, exception_text
+from twin.model.errors import ConfigError, TaskError, TaskTimeout, TwinError, exception_text
 from twin.model.sink import Sink
 from twin.tasks import pick_place, pick_place_vision, seed000, seed001, seed002
 

@@ -18,8 +18,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from twin.errors import ConfigError
 from twin.model.config import TwinConfig, dt_ns_from_hz
+from twin.model.errors import ConfigError
 from twin.model.keymaps import WAIT, keymap_for, parse_keys, quit_keys
 from twin.model.sink import Sink
 from twin.model.types import Event

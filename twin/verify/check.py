@@ -20,8 +20,8 @@ from typing import TextIO
 
 from twin.compare.report import allowance_text, first_line, noise_summary, render_text
 from twin.compare.tolerances import Tolerances
-from twin.errors import ConfigError, TwinError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, TwinError
 from twin.model.recording import Recording
 from twin.sim.twin import Sink, Twin
 from twin.sim.world import engine_versions

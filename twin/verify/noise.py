@@ -16,7 +16,7 @@ from collections.abc import Callable
 from twin.compare.engine import DiffResult, compare, error_series, refuse_incomparable
 from twin.compare.noise import measure
 from twin.compare.tolerances import Tolerances
-from twin.errors import TwinError
+from twin.model.errors import TwinError
 from twin.model.recording import Recording
 from twin.record.machine import differences, machine, machine_text
 

@@ -16,10 +16,11 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.errors import RecordingError
 from twin.model.config import TwinConfig
-from twin.model.images import recorded_images, tracks
+from twin.model.errors import RecordingError
+from twin.model.images import tracks
 from twin.model.recording import Recording
+from twin.record.images import recorded_images
 from twin.sim.twin import Sink, Twin
 from twin.sim.world import engine_versions
 from twin.verify.collectors import ColumnCollector, FrameCollector

@@ -36,7 +36,7 @@ import twin.record.mcap.recover
 import twin.record.rerun.viewer  # the CLI imports these lazily: imported here, forks have them
 import twin.verify.check
 from twin.cli import main
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 from twin.record.mcap import schemas as S
 
 pytestmark = pytest.mark.slow  # seconds each: `-m "not slow"` leaves them out

@@ -16,6 +16,7 @@ from PIL import Image
 import twin
 from twin.cli.main import main
 from twin.model.config import TwinConfig
+from twin.pictures import track_rgb
 
 PICTURES = 89  # a pick_place cycle: steps 0..1419, a picture every 16 steps
 
@@ -89,7 +90,7 @@ def test_twin_load_gives_the_pictures(camera_run):
     assert list(track.step[:3]) == [0, 16, 32] and np.array_equal(
         track.t_ns, track.step * rec.config.dt_ns
     )
-    pixels = track.rgb(40)
+    pixels = track_rgb(track, 40)
     assert pixels.shape == (240, 320, 3) and pixels.dtype == np.uint8 and pixels.std() > 10
 
 
@@ -129,8 +130,9 @@ def test_a_pictures_pose_is_read_from_the_files_tf_also_when_decimated(tmp_path)
     """The pad camera's pose on /tf is where it was when the picture was taken; a decimated file
     (rate 3, a picture every 16 steps) holds no frame at most picture steps, and load gives that
     pose exactly."""
-    from twin.model.images import camera, recorded_images
+    from twin.model.images import camera
     from twin.record import open_recorders
+    from twin.record.images import recorded_images
     from twin.sim.world import engine_versions
     from twin.verify.check import record_task
     from twin.verify.collectors import FrameCollector

@@ -79,5 +79,5 @@ def test_bad_input_is_one_clear_line_and_exit_code_2(whole, tmp_path, capsys, co
 
 def test_load_names_the_file_and_the_problem(whole, tmp_path):
     for why, path in _bad_inputs(tmp_path, whole).items():
-        with pytest.raises(twin.errors.RecordingError, match=why):
+        with pytest.raises(twin.model.errors.RecordingError, match=why):
             twin.load(path)

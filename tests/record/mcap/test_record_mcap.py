@@ -18,9 +18,9 @@ from support.runs import collect_pick_place
 
 import twin
 from twin.cli import main
-from twin.errors import RecordingError
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.record.mcap import schemas as S
 from twin.record.mcap import wire
 from twin.record.mcap.reader import decode_frames, scan

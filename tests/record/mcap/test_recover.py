@@ -109,7 +109,7 @@ def test_a_file_cut_anywhere_recovers_to_a_prefix_of_the_run(complete, tmp_path,
     data = path.read_bytes()
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(data[: int(len(data) * fraction)])
-    with pytest.raises(twin.errors.RecordingError, match="twin recover"):
+    with pytest.raises(twin.model.errors.RecordingError, match="twin recover"):
         twin.load(cut)
     report = recover(cut, tmp_path / "fixed.mcap")
     rec = twin.load(tmp_path / "fixed.mcap")
@@ -148,7 +148,7 @@ def test_a_damaged_chunk_is_reported_and_recovery_stops_before_it(complete, tmp_
     data[middle : middle + 64] = bytes(64)
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
-    with pytest.raises(twin.errors.RecordingError, match="damaged"):
+    with pytest.raises(twin.model.errors.RecordingError, match="damaged"):
         twin.load(damaged)
     recover(damaged, tmp_path / "fixed.mcap")
     rec = twin.load(tmp_path / "fixed.mcap")

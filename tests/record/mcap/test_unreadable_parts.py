@@ -22,7 +22,7 @@ from mcap.writer import CompressionType, Writer
 
 import twin
 from twin.cli import main
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 from twin.record.mcap import schemas as S
 from twin.record.mcap.info import read_info
 

@@ -10,8 +10,8 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from twin.errors import RecordingError
 from twin.model.config import SceneObject, TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.profiles import PROFILES
 from twin.model.recording import Recording
 from twin.record.rerun import scene

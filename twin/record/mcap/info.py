@@ -15,8 +15,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from twin.errors import RecordingError
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.types import Event
 from twin.record.machine import machine_text
 from twin.record.mcap import schemas as S

@@ -13,8 +13,8 @@ import sys
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
-from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, RecordingError
 from twin.model.json_values import MAX_DEPTH, nesting_depth, shown
 from twin.record.machine import machine
 from twin.record.mcap import schemas as S

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 from mcap.records import Attachment, Channel, Footer, Header, Metadata, Schema
 
-from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.columns import FrameColumns
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.images import CAMERA_FRAME_PREFIX, CameraTrack
 from twin.model.json_values import shown
 from twin.model.recording import Recording

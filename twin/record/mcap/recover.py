@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from twin.errors import ConfigError, RecordingError
+from twin.model.errors import ConfigError, RecordingError
 from twin.record.mcap import schemas as S
 from twin.record.mcap.metadata import parse_config
 from twin.record.mcap.reader import (

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
 # Fields one message may hold: twin writes each block field once (packed), so a handful; other

@@ -21,10 +21,10 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.Log_pb2 import Log
 from mcap.writer import CompressionType, Writer
 
-from twin.errors import RecordingError
 from twin.model import fields as F
 from twin.model.columns import FIELD_NAMES, FrameColumns
 from twin.model.config import TwinConfig
+from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
 from twin.model.json_values import finite_or_null
 from twin.model.sink import Sink

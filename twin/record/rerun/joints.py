@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 from twin.model.quat import quat_from_rpy, quat_mul_columns, rotate
 from twin.robot.urdf import MOVING_TYPES, UrdfJoint
 

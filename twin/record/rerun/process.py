@@ -22,7 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import IO
 
-from twin.errors import TwinError
+from twin.model.errors import TwinError
 
 LOOPBACK = "127.0.0.1"
 STOP_WAIT_S = 10.0

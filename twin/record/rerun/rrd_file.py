@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow as pa
 from rerun.chunk import RrdReader
 
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 
 RRD_MAGIC = b"RRF2"
 MCAP_MAGIC = b"\x89MCAP"

@@ -15,8 +15,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn
 
-from twin.errors import ConfigError, RecordingError
 from twin.model.config import TwinConfig
+from twin.model.errors import ConfigError, RecordingError
 from twin.robot.urdf import PAD_RADIUS_M, UrdfJoint, urdf_joints
 
 APPLICATION_ID = "twin"

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.errors import RecordingError
+from twin.model.errors import RecordingError
 from twin.model.recording import Recording
 from twin.record.outputs import check_target
 from twin.record.rerun import scene

@@ -19,13 +19,14 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from twin.errors import RecordingError
 from twin.model.columns import FIELD_SPECS, FrameColumns
 from twin.model.config import TwinConfig
-from twin.model.images import CameraImage, recorded_images
+from twin.model.errors import RecordingError
+from twin.model.images import CameraImage
 from twin.model.recording import Recording
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
+from twin.record.images import recorded_images
 from twin.record.outputs import check_target, partial_path, publish
 from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion

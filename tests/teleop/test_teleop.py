@@ -221,7 +221,8 @@ def test_paced_script_runs_in_real_time_with_the_same_commands():
     session.run_scripted(parse_keys("d k wait"), 0.1, pace=session.real_time_pacer())
     wall_s = time.monotonic() - start_s
     twin.close()
-    assert 0.3 <= wall_s < 1.5  # 72 steps of 1/240 s
+    # 72 steps of 1/240 s; the pacer sleeps only when over 2 ms ahead, so it may end 2 ms early
+    assert 0.3 - 0.002 <= wall_s < 1.5
     assert collector.commands == fast.commands and collector.columns().equals(fast.frames)
 
 

@@ -111,7 +111,6 @@ class McapRecorder(Sink):
             urdf, config.profile.joint_names, tuple(o.name for o in config.objects)
         )
         n_joints = len(config.profile.joint_names)
-        self._n_joints = n_joints
         # the next block's frames (copied in: what on_frames gets may be written over after it)
         self._block = FrameColumns.empty(self.block_frames + 1, n_joints, self.n_objects)
         self._block_count = 0

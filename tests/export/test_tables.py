@@ -15,7 +15,7 @@ from support.cli import twin
 
 import twin as twin_pkg
 from twin.model.fields import FRAME_FIELDS
-from twin.model.tables import frame_column_names
+from twin.record.tables import frame_column_names
 
 GOLDEN = str(Path(__file__).resolve().parents[2] / "recordings" / "pick_place_mtb.mcap")
 

@@ -1,4 +1,4 @@
-"""A recording's frames, events or commands as one Parquet or CSV file (columns: model.tables).
+"""A recording's frames, events or commands as one Parquet or CSV file (columns: record.tables).
 
 Written beside the target as NAME.partial and renamed over it when complete, like recordings.
 """

@@ -33,9 +33,9 @@ import numpy as np
 from twin.export.episodes import NS_PER_S, Episode, nearest
 from twin.export.stats import feature_stats, image_sample, image_stride, sampled_image_stats
 from twin.model.errors import ConfigError, RecordingError
-from twin.model.tables import frame_column_names, suction_command
 from twin.pictures import track_rgb
 from twin.record.outputs import fsync_file
+from twin.record.tables import frame_column_names, suction_command
 
 CODEBASE_VERSION = "v3.0"
 CHUNK_FILE = "chunk-{chunk_index:03d}/file-{file_index:03d}"
@@ -67,7 +67,7 @@ def state_names(rec) -> tuple[list[str], list[str]]:
 
 def episode_arrays(ep: Episode, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """observation.state and action of each dataset frame of an episode (float32); command is its
-    recording's suction.command column (model.tables.suction_command)."""
+    recording's suction.command column (record.tables.suction_command)."""
     f, rows = ep.rec.frames, ep.rows
     state = np.column_stack([f.joint_q[rows], f.suction_on[rows], f.held_body[rows] >= 0])
     action = np.column_stack([f.joint_target[rows], command[rows]])

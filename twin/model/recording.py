@@ -19,7 +19,8 @@ META_MACHINE = "twin.machine"  # where it was made: cpu, blas_core, ...; older f
 
 @dataclass
 class Recording:
-    """Everything one run produced, plus how to rebuild it.
+    """Everything one run produced, plus how to rebuild it (twin.load and a replay give it with its
+    tables: record.tables.RecordingWithTables).
 
     run: {"source": "task"|"teleop"|"remote", "task": name or path or "", "params": {...}}
     meta: the rest of the file's metadata (versions, platform, engine, ...), as strings.
@@ -50,31 +51,6 @@ class Recording:
         if outcome == "ok" and any(e.kind == "task_error" for e in self.events):
             outcome = "error"
         return outcome
-
-    def to_arrow(self, table: str = "frames"):
-        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per
-        scalar, units in the names), "events" or "commands"; the columns are described in
-        model.tables."""
-        from twin.model import tables
-
-        builders = {
-            "frames": tables.frames_table,
-            "events": tables.events_table,
-            "commands": tables.commands_table,
-        }
-        if table not in builders:
-            raise ValueError(f"table {table!r} is unknown; expected one of {', '.join(builders)}")
-        return builders[table](self)
-
-    def to_pandas(self, table: str = "frames"):
-        """to_arrow(table) as a pandas DataFrame (pandas is optional: `pip install pandas`)."""
-        try:
-            import pandas  # noqa: F401 - only to say clearly that it is missing
-        except ImportError:
-            raise ImportError(
-                "Recording.to_pandas needs the pandas package: pip install pandas"
-            ) from None
-        return self.to_arrow(table).to_pandas()
 
     @property
     def machine(self) -> dict[str, str]:

@@ -32,16 +32,27 @@ class FrameRows:
 
     def __init__(self, n_joints: int, n_objects: int) -> None:
         self.n_joints, self.n_objects = n_joints, n_objects
-        codes, dtype_fields = [], []
+        # Each field starts at a multiple of its item size (a row at one of 8): the writers copy
+        # columns out of the rows, which numpy does about twice as fast from aligned memory.
+        codes, names, formats, offsets, at = [], [], [], [], 0
         for f in FRAME_FIELDS:
             shape = f.trailing(n_joints, n_objects)
-            codes.append(f"{int(np.prod(shape, dtype=np.int64))}{_STRUCT_CODE[f.dtype]}")
-            dtype_fields.append((f.name, np.dtype(f.dtype).newbyteorder("<"), shape))
+            item = np.dtype(f.dtype).newbyteorder("<")
+            pad = -at % item.itemsize
+            codes.append(f"{pad}x{int(np.prod(shape, dtype=np.int64))}{_STRUCT_CODE[f.dtype]}")
+            at += pad
+            names.append(f.name)
+            formats.append((item, shape))
+            offsets.append(at)
+            at += item.itemsize * int(np.prod(shape, dtype=np.int64))
+        codes.append(f"{-at % 8}x")
         self._struct = struct.Struct("<" + "".join(codes))
         self._pack_into = self._struct.pack_into
         self.size = self._struct.size  # bytes per row
-        self.dtype = np.dtype(dtype_fields)  # packed: numpy's offsets are the struct's
-        if self.dtype.itemsize != self.size:
+        self.dtype = np.dtype(
+            {"names": names, "formats": formats, "offsets": offsets, "itemsize": self.size}
+        )
+        if self.size % 8 or self.dtype.itemsize != self.size:
             raise ImportError("twin.record.rows: the numpy row and the struct row disagree")
 
     def pack_into(self, buf, offset: int, frame: Frame) -> None:
@@ -75,7 +86,8 @@ class FrameRows:
         return len(buf) // self.size
 
     def records(self, buf) -> np.ndarray:
-        """A buffer of rows as a numpy structured array (a view, no copy)."""
+        """A buffer of rows as a numpy structured array (a view, no copy; the pad bytes between
+        fields are zeros)."""
         return np.frombuffer(buf, dtype=self.dtype)
 
     def columns(self, buf, *, copy: bool = True) -> FrameColumns:

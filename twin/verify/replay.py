@@ -21,6 +21,7 @@ from twin.model.errors import RecordingError
 from twin.model.images import tracks
 from twin.model.recording import Recording
 from twin.record.images import recorded_images
+from twin.record.tables import RecordingWithTables
 from twin.sim.twin import Sink, Twin
 from twin.sim.world import engine_versions
 from twin.verify.collectors import ColumnCollector, FrameCollector
@@ -56,9 +57,9 @@ def replay_run(rec: Recording) -> dict:
 
 def collected(
     collector: FrameCollector | ColumnCollector, rec_config, run: dict, *, path: str = ""
-) -> Recording:
+) -> RecordingWithTables:
     """An in-memory Recording of what a collector saw."""
-    return Recording(
+    return RecordingWithTables(
         config=rec_config,
         frames=collector.columns(),
         commands=list(collector.commands),
@@ -71,7 +72,7 @@ def collected(
     )
 
 
-def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> Recording:
+def replay(rec: Recording, *, sinks: Sequence[Sink] = ()) -> RecordingWithTables:
     """Re-run rec's commands on a fresh twin built from rec.config, up to rec's last step."""
     if len(rec.frames) == 0:
         raise RecordingError(f"recording {rec.path or '<memory>'} has no frames to replay")

@@ -28,12 +28,12 @@ from twin.model.config import TwinConfig
 from twin.model.errors import RecordingError
 from twin.model.images import CAMERA_FRAME_PREFIX, CameraTrack
 from twin.model.json_values import shown
-from twin.model.recording import Recording
 from twin.model.types import Command, Event
 from twin.record.mcap import scan as mcap_scan
 from twin.record.mcap import schemas as S
 from twin.record.mcap import strict_json, wire
 from twin.record.mcap.metadata import located_config, parse_config, parse_run
+from twin.record.tables import RecordingWithTables
 
 MAGIC = mcap_scan.MAGIC
 Message = mcap_scan.Message
@@ -212,13 +212,13 @@ def scan(
     return out
 
 
-def load(path: str | Path) -> Recording:
+def load(path: str | Path) -> RecordingWithTables:
     """A finalized (or recovered) recording, as a Recording."""
     builder = RecordingBuilder()
     return builder.recording(scan(path, strict=True, topics=builder.wants, consume=builder.take))
 
 
-def recording_from_scan(s: Scan) -> Recording:
+def recording_from_scan(s: Scan) -> RecordingWithTables:
     """The Recording of a scan that kept every message (scan(path) without topics or consume)."""
     builder = RecordingBuilder()
     for m in s.messages:
@@ -348,7 +348,7 @@ class RecordingBuilder:
             )
         self._pictures.setdefault(topic, []).append((t_ns, picture.format, picture.data))
 
-    def recording(self, s: Scan) -> Recording:
+    def recording(self, s: Scan) -> RecordingWithTables:
         """The Recording, once every message has been taken."""
         config = located_config(self._configured(s), s.path)
         for topic, m in self._early:
@@ -379,7 +379,7 @@ class RecordingBuilder:
             for name, record in sorted(s.metadata.items())
             if name not in (S.META_CONFIG, S.META_RUN)
         }
-        return Recording(
+        return RecordingWithTables(
             config=config,
             frames=frames,
             commands=self.commands,

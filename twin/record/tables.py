@@ -15,8 +15,8 @@ Frame columns, in field order:
                                                   step that made this frame (Commands stamped
                                                   before it)
 
-pyarrow is imported when a table is built, not with the module: importing the model needs only
-numpy.
+What twin.load and a replay return is a RecordingWithTables: the model's Recording, which is data
+only, with to_arrow and to_pandas. pyarrow is imported when a table is built, not with the module.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import numpy as np
 
 from twin.model.fields import FRAME_FIELDS
 from twin.model.profiles import ROLES
+from twin.model.recording import Recording
 
 # The column stem of each Frame field; units and components come from model.fields.
 _STEMS = {
@@ -45,7 +46,7 @@ _STEMS = {
     "object_poses": "",
 }
 if tuple(_STEMS) != tuple(f.name for f in FRAME_FIELDS):
-    raise ImportError("twin.model.tables: give every model.fields.FRAME_FIELDS entry a column stem")
+    raise ImportError("twin.record.tables: give every model.fields.FRAME_FIELDS a column stem")
 _POSE = ("x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
 _XYZ = ("x", "y", "z")
 _PRISMATIC = ROLES.index("z")
@@ -183,3 +184,27 @@ def _signal_writes(command, keymap: dict, first_suction: str):
                 yield action[1], action[2]
             elif action[0] == "suction":
                 yield first_suction, int(action[1])
+
+
+class RecordingWithTables(Recording):
+    """A Recording whose frames, events and commands also come as tables: what twin.load and a
+    replay return."""
+
+    def to_arrow(self, table: str = "frames"):
+        """The recording as a pyarrow Table: "frames" (one row per recorded frame, one column per
+        scalar, units in the names), "events" or "commands"; the columns are described in
+        record.tables."""
+        builders = {"frames": frames_table, "events": events_table, "commands": commands_table}
+        if table not in builders:
+            raise ValueError(f"table {table!r} is unknown; expected one of {', '.join(builders)}")
+        return builders[table](self)
+
+    def to_pandas(self, table: str = "frames"):
+        """to_arrow(table) as a pandas DataFrame (pandas is optional: `pip install pandas`)."""
+        try:
+            import pandas  # noqa: F401 - only to say clearly that it is missing
+        except ImportError:
+            raise ImportError(
+                "Recording.to_pandas needs the pandas package: pip install pandas"
+            ) from None
+        return self.to_arrow(table).to_pandas()

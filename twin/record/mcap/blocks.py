@@ -24,6 +24,7 @@ class BlockEncoder:
         else)."""
         self._names = [names[block] for block in F.BLOCKS]
         self._fields = [F.block_fields(block) for block in F.BLOCKS]  # step and t_ns first
+        self._dtypes = [[np.dtype(f.dtype) for f in fields] for fields in self._fields]
         for f in F.FRAME_FIELDS:
             column, wire = np.dtype(f.dtype), np.dtype(f.wire)
             if column.itemsize != wire.itemsize or column.newbyteorder("<") != column:
@@ -37,10 +38,10 @@ class BlockEncoder:
         out = []
         for b, (fields, names) in enumerate(zip(self._fields, self._names, strict=True)):
             columns = []
-            for f in fields:
+            for f, dtype in zip(fields, self._dtypes[b], strict=True):
                 column = getattr(frames, f.name)[:n]
                 # a column of another type (not one of the twin's) as the wire's values
-                columns.append(column if column.dtype == f.dtype else column.astype(f.wire))
+                columns.append(column if column.dtype == dtype else column.astype(f.wire))
             heads = self._field_heads(b, columns)
             parts = [heads[0], columns[0].tobytes(), heads[1], columns[1].tobytes(), names]
             for head, column in zip(heads[2:], columns[2:], strict=True):

@@ -23,40 +23,40 @@ class BlockEncoder:
         """`names`: each block's encoded names field (joint names for JointBlock, object names
         else)."""
         self._names = [names[block] for block in F.BLOCKS]
-        self._fields = [F.block_fields(block) for block in F.BLOCKS]  # step and t_ns first
-        self._dtypes = [[np.dtype(f.dtype) for f in fields] for fields in self._fields]
+        # each block's fields, step and t_ns first (every block carries those two)
+        self._blocks = [[f.name for f in F.block_fields(block)] for block in F.BLOCKS]
+        self._columns = [(f.name, np.dtype(f.dtype), f.wire) for f in F.FRAME_FIELDS]
+        self._tags = {f.name: tag(f.number, LEN) for f in F.FRAME_FIELDS}
         for f in F.FRAME_FIELDS:
             column, wire = np.dtype(f.dtype), np.dtype(f.wire)
             if column.itemsize != wire.itemsize or column.newbyteorder("<") != column:
                 raise ImportError(f"twin.record.mcap.blocks: {f.name}'s column is not its wire")
-        self._heads: dict[tuple[int, ...], list[bytes]] = {}  # (block, sizes) -> field heads
+        self._heads: dict[tuple[int, ...], dict[str, bytes]] = {}  # byte counts -> field heads
 
     def messages(self, frames: FrameColumns, n: int | None = None) -> list[bytes]:
         """The block messages of the first `n` frames (all of them when None; at least one), from
         columns contiguous or not."""
         n = len(frames) if n is None else n
+        data = {}
+        for name, dtype, wire in self._columns:  # each field's bytes once, for every block
+            column = getattr(frames, name)[:n]
+            # a column of another type (not one of the twin's) as the wire's values
+            data[name] = (column if column.dtype == dtype else column.astype(wire)).tobytes()
+        heads = self._field_heads(data)
         out = []
-        for b, (fields, names) in enumerate(zip(self._fields, self._names, strict=True)):
-            columns = []
-            for f, dtype in zip(fields, self._dtypes[b], strict=True):
-                column = getattr(frames, f.name)[:n]
-                # a column of another type (not one of the twin's) as the wire's values
-                columns.append(column if column.dtype == dtype else column.astype(f.wire))
-            heads = self._field_heads(b, columns)
-            parts = [heads[0], columns[0].tobytes(), heads[1], columns[1].tobytes(), names]
-            for head, column in zip(heads[2:], columns[2:], strict=True):
-                parts += (head, column.tobytes())
+        for fields, names in zip(self._blocks, self._names, strict=True):
+            step, t_ns, *rest = fields
+            parts = [heads[step], data[step], heads[t_ns], data[t_ns], names]
+            for name in rest:
+                parts += (heads[name], data[name])
             out.append(b"".join(parts))
         return out
 
-    def _field_heads(self, block: int, columns: list[np.ndarray]) -> list[bytes]:
-        """Each field's tag and length in block message `block`, for columns of these sizes."""
-        key = (block, *(c.size for c in columns))
+    def _field_heads(self, data: dict[str, bytes]) -> dict[str, bytes]:
+        """Each field's tag and length, for fields of these byte counts."""
+        key = tuple(len(d) for d in data.values())
         heads = self._heads.get(key)
         if heads is None:
-            heads = [
-                tag(f.number, LEN) + varint(c.size * np.dtype(f.wire).itemsize)
-                for f, c in zip(self._fields[block], columns, strict=True)
-            ]
+            heads = {name: self._tags[name] + varint(len(d)) for name, d in data.items()}
             self._heads[key] = heads
         return heads

@@ -4,14 +4,15 @@ which run the same MCAP and Rerun writers (one process each).
 The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
 microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
 events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
-timer (every millisecond while rows come), takes in what was published and says how far it read. The
-twin wakes a recorder through the pipe when it has used half its slack, and waits for it only when
-it has used all of it (the MCAP writer's: 0.4 s of simulated time, which bounds what a kill -9
-loses; the Rerun writer's: the ring). Files are byte-for-byte what the in-process writers make,
-since the same writer code sees the same stream. If the twin's process dies, the recorder sees the
-pipe close, takes in every row that was published and leaves the MCAP file unfinalized (and
-recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it then
-finalizes the files): the recorder ignores them.
+timer (every millisecond while rows come), takes in what was published once it is 2/15 s of
+simulated time or more (the writers take columns: the bigger the batch, the less each frame costs),
+and says how far it read. The twin wakes a recorder through the pipe when it has used half its
+slack, and waits for it only when it has used all of it (the MCAP writer's: 0.4 s of simulated
+time, which bounds what a kill -9 loses; the Rerun writer's: the ring). Files are byte-for-byte what
+the in-process writers make, since the same writer code sees the same stream. If the twin's process
+dies, the recorder sees the pipe close, takes in every row that was published and leaves the MCAP
+file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to
+handle (it then finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
@@ -39,6 +40,10 @@ MAX_AHEAD_S = 0.4
 RING_S = 4096 / 240
 POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
 IDLE_POLL_S = 0.016
+# a recorder takes rows in once this much simulated time is published (or when woken, or when
+# commands, events or pictures wait): the writers take columns, whose cost is per batch as much as
+# per frame
+MIN_TAKE_S = 32 / 240
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
 _OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
 _COMMAND, _EVENT = 0, 1
@@ -210,7 +215,7 @@ class _Child:
         self.conn, self.process = start_helper(
             self,
             _serve,
-            (writer, reader, *args),
+            (writer, reader, ahead, *args),
             name=f"twin-recorder-{writer}",
             other_ends=[s.conn for s in siblings],
         )
@@ -278,6 +283,7 @@ def _serve(
     conn,
     writer: str,
     reader: int,
+    ahead: int,
     ring: FrameRing,
     config: TwinConfig,
     run: dict,
@@ -315,6 +321,8 @@ def _serve(
         os._exit(0)
     conn.send_bytes(b"OK")
     feed = _Feed(ring, sinks)
+    # below half its slack: the twin wakes it at half (and waits at all of it)
+    min_take = max(1, min(_frames(config, MIN_TAKE_S), ahead // 2))
     timeout = POLL_S
     while True:
         conn.poll(timeout)  # a message, or the timer
@@ -325,11 +333,16 @@ def _serve(
             # the twin publishes its last rows before it closes (or has died)
             written = ring.written()
         came = written > feed.read
-        feed.take(written, final=end is not None)
-        ring.release(reader, feed.read)
-        # More rows while it wrote (a block, a burst): at once; rows: the timer; none: a slower one.
+        if end is not None or feed.woken or feed.queue or written - feed.read >= min_take:
+            feed.take(written, final=end is not None)
+            ring.release(reader, feed.read)
+            feed.woken = False
+        # Enough rows while it wrote (a block, a burst): at once; some: the timer; none: slower.
+        waiting = ring.written() - feed.read
         timeout = (
-            0.0 if ring.written() > feed.read else POLL_S if came else min(2 * timeout, IDLE_POLL_S)
+            0.0
+            if waiting >= min_take
+            else POLL_S if waiting or came else min(2 * timeout, IDLE_POLL_S)
         )
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
             if not feed.failure:
@@ -353,6 +366,8 @@ def _take_messages(conn, feed: _Feed):
         tag, body = message[:1], message[1:]
         if tag == _OTHERS:
             feed.queue.extend(marshal.loads(body))
+        elif tag == _WAKE:  # the twin has used half its slack: take in what there is
+            feed.woken = True
         elif tag == _CLOSE:
             return marshal.loads(body)
     return None
@@ -368,6 +383,7 @@ class _Feed:
         # (frames before it, kind, pickle)
         self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
         self.failure = ""
+        self.woken = False  # the twin asked for the rows to be taken in
 
     def take(self, written: int, *, final: bool) -> None:
         """Rows [read, written) and the others that come before row `written` (all of them when

@@ -40,9 +40,8 @@ MAX_AHEAD_S = 0.4
 RING_S = 4096 / 240
 POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
 IDLE_POLL_S = 0.016
-# a recorder takes rows in once this much simulated time is published (or when woken, or when
-# commands, events or pictures wait): the writers take columns, whose cost is per batch as much as
-# per frame
+# a recorder takes rows in once this much simulated time is published (or when woken, or at the
+# end): the writers take columns, whose cost is per batch as much as per frame
 MIN_TAKE_S = 32 / 240
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
 _OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
@@ -333,7 +332,7 @@ def _serve(
             # the twin publishes its last rows before it closes (or has died)
             written = ring.written()
         came = written > feed.read
-        if end is not None or feed.woken or feed.queue or written - feed.read >= min_take:
+        if end is not None or feed.woken or written - feed.read >= min_take:
             feed.take(written, final=end is not None)
             ring.release(reader, feed.read)
             feed.woken = False

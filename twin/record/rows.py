@@ -110,9 +110,10 @@ class FrameRows:
 
 
 class FrameBatch:
-    """Frames taken one at a time and handed on as columns, `capacity` at a time: what a writer's
-    on_frame does with the twin's Frames, so that its on_frames is its one way in. The columns are
-    views of a buffer that the next add_frame() writes over: the writer copies what it keeps."""
+    """Frames taken one at a time and handed on as columns, `capacity` at a time or sooner (take):
+    what a writer's on_frame does with the twin's Frames, so that on_frames is its one way in. The
+    columns are views of a buffer that the next add_frame() writes over: the writer copies what it
+    keeps."""
 
     def __init__(self, n_joints: int, n_objects: int, capacity: int) -> None:
         self.rows = FrameRows(n_joints, n_objects)

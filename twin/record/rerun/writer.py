@@ -36,6 +36,7 @@ from twin.robot.urdf import urdf_text as profile_urdf_text
 # Each send costs ~0.1 ms of the SDK's Python whatever its length, 16 sends a batch: the recorder
 # process's CPU per frame was 3.6 us at 2048 frames, 3.1 at 4096, 2.6 at 8192 (medians of 3).
 DEFAULT_BATCH_STEPS = 8192
+GATHER_FRAMES = 256  # on_frame hands the twin's Frames to on_frames this many at a time
 
 
 def file_stream(path: str | os.PathLike, config: TwinConfig) -> rr.RecordingStream:
@@ -135,7 +136,9 @@ class RerunRecorder(Sink):
         self._object_paths = [scene.object_path(o.name) for o in config.objects]
         self._buf = _Buffers(batch_steps, len(config.objects))
         # on_frame's Frames, gathered into columns for on_frames
-        self._batch = FrameBatch(len(config.profile.joint_names), len(config.objects), 256)
+        self._batch = FrameBatch(
+            len(config.profile.joint_names), len(config.objects), GATHER_FRAMES
+        )
         self._n = 0
         self._events: list[Event] = []
         self._commands: list[Command] = []

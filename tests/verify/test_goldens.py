@@ -93,13 +93,13 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     pytester.makepyfile(test_plugin=PLUGIN_TEST)
     goldens = pytester.path / "goldens"
 
-    first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    first = pytester.runpytest_subprocess("-p", "no:cacheprovider")
     first.assert_outcomes(failed=1)
     assert "did not exist; wrote it" in first.stdout.str() and (goldens / "one_cycle.mcap").exists()
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
 
     monkeypatch.setenv("TWIN_TAMPER", "1")
-    failed = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    failed = pytester.runpytest_subprocess("-p", "no:cacheprovider")
     failed.assert_outcomes(failed=1)
     assert "step 400" in failed.stdout.str()
     assert (goldens / "one_cycle.obtained.mcap").exists() and (
@@ -107,14 +107,14 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     ).exists()
     monkeypatch.setenv("TWIN_TOL", "outcome")
     # lands within 5 mm
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
     monkeypatch.delenv("TWIN_TOL")
 
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+    pytester.runpytest_subprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
         passed=1
     )
     assert not (goldens / "one_cycle.obtained.mcap").exists()
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
 
 
 FAILING_TEST = """
@@ -134,24 +134,24 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     pytester.makepyfile(test_plugin=FAILING_TEST)
     golden = pytester.path / "goldens" / "one_cycle.mcap"
     monkeypatch.setenv("TWIN_FAIL", "1")
-    first = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    first = pytester.runpytest_subprocess("-p", "no:cacheprovider")
     first.assert_outcomes(failed=1)
     assert (
         "this run cannot become it: its task ended error" in first.stdout.str()
         and not golden.exists()
     )
     # still not written
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
+    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     monkeypatch.delenv("TWIN_FAIL")
     # written from the ok run
-    pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
+    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
     assert golden.exists()
     monkeypatch.setenv("TWIN_FAIL", "1")
-    update = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens")
+    update = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--update-goldens")
     update.assert_outcomes(failed=1)
     assert "rerun with --update-goldens" not in update.stdout.str()
     assert "this run cannot become the golden: its task ended error" in update.stdout.str()
     monkeypatch.setenv("TWIN_ALLOW", "1")
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+    pytester.runpytest_subprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
         passed=1
     )

@@ -51,6 +51,8 @@ DEFAULT_WINDOW_SIZE = "1280x800"
 VIEWER_START_TIMEOUT_S = 30.0
 LOAD_TIMEOUT_S = 60.0
 TOAST_FADE_S = 2.0
+SETTLE_S = 0.3  # between the photographs of a screenshot that must agree
+SETTLE_TRIES = 5
 DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")
 NO_DISPLAY_HINT = "use --web, --rrd or --screenshot"
 LOG_NAME = "rerun.log"  # the viewer's own output, in the caller's temporary folder
@@ -254,6 +256,7 @@ def screenshot(
                     )
                 # blocks until a frame with the new cursor has been painted
                 client.save_screenshot(str(out))
+                _settled_screenshot(client, out, Path(work_dir) / "again.png")
                 problems = [f"{v.name}: {r}" for v in client.get_state().views for r in v.reports]
             except (RuntimeError, ValueError, OSError) as err:
                 raise ViewerError(
@@ -264,6 +267,18 @@ def screenshot(
     if not out.is_file():
         raise ViewerError(f"the headless viewer did not write {str(out)!r}")
     return (None if at_ns is None else at_ns * 1e-9), problems
+
+
+def _settled_screenshot(client, out: Path, again: Path) -> None:
+    """Photograph again until two pictures in a row agree (a few tries at most): a camera picture
+    is decoded after the frame that first shows its view is painted, which on a busy machine can be
+    the frame photographed."""
+    for _ in range(SETTLE_TRIES):
+        time.sleep(SETTLE_S)
+        client.save_screenshot(str(again))
+        if again.read_bytes() == out.read_bytes():
+            return
+        again.replace(out)
 
 
 def _connect(client_cls, url: str, proc: subprocess.Popen, log):

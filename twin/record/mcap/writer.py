@@ -105,13 +105,15 @@ class McapRecorder(Sink):
         self.block_frames = max(1, round(BLOCK_S * 1e9 / (dt_ns * rate)))
         self.view_every = max(1, round(1e9 / (VIEW_HZ * dt_ns)))
         self.flush_ns = round(FLUSH_S * 1e9)
+        self._gap_ns = 2 * self.flush_ns  # blocks this far apart (a high --rate): flush between
         self._joint_names = b"".join(wire.str_field(S.NAMES, n) for n in config.profile.joint_names)
         self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
         self._tf = SceneTransforms(
             urdf, config.profile.joint_names, tuple(o.name for o in config.objects)
         )
         n_joints = len(config.profile.joint_names)
-        # the next block's frames (copied in: what on_frames gets may be written over after it)
+        # the next block's frames (copied in: what on_frames gets may be written over after it),
+        # and room for the run's last frame, which close adds whatever the rate
         self._block = FrameColumns.empty(self.block_frames + 1, n_joints, self.n_objects)
         self._block_count = 0
         self._blocks = BlockEncoder(
@@ -216,14 +218,14 @@ class McapRecorder(Sink):
             return
         viewed, kept = _every(frames.step, self.view_every), _every(frames.step, self.rate)
         transforms = self._transforms(frames, viewed)
-        t_ns, t_end, far = frames.t_ns, int(frames.t_ns[-1]), 2 * self.flush_ns
+        t_ns, t_end = frames.t_ns, int(frames.t_ns[-1])
         start, next_viewed, next_kept = 0, 0, 0
         while start < n:
             # the frame that fills the block, and the first from `start` on that ends a long gap
             # without a block (n: none of these frames)
             filling = next_kept + self.block_frames - self._block_count - 1
             fills = kept[filling] if filling < len(kept) else n
-            gap_ns = self._last_flush_ns + far
+            gap_ns = self._last_flush_ns + self._gap_ns
             ends_gap = n if t_end < gap_ns else start + int(np.searchsorted(t_ns[start:], gap_ns))
             end = min(fills, ends_gap)
             stop = min(end + 1, n)
@@ -276,7 +278,7 @@ class McapRecorder(Sink):
         without a block (the frames that on_frame hands on at once)."""
         next_kept = (self._last_step // self.rate + 1) * self.rate
         self._due_step = next_kept + (self.block_frames - self._block_count - 1) * self.rate
-        self._due_ns = self._last_flush_ns + 2 * self.flush_ns
+        self._due_ns = self._last_flush_ns + self._gap_ns
 
     def on_command(self, command: Command) -> None:
         self._take_batch()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +33,9 @@ from twin.model.fields import COMPARED
 from twin.model.recording import Recording
 from twin.model.types import Command
 from twin.pictures import track_rgb
+
+if TYPE_CHECKING:
+    from twin.compare.explain import Explanation
 
 # a joint field's unit for a revolute joint, and for the prismatic Z joint ("rad|m" in model.fields)
 JOINT_UNITS = {c.name: tuple(c.unit.split("|")) for f, c in COMPARED if f.shape == "joint"}
@@ -118,6 +122,8 @@ class DiffResult:
     # False: the tolerances pair no events (outcome); counts still compare
     events_compared: bool = True
     floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
+    # what changed, read from both runs (twin.compare.explain; None until explained)
+    explanation: Explanation | None = None
 
     @property
     def match(self) -> bool:

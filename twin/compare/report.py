@@ -107,12 +107,41 @@ def noise_summary(result: DiffResult) -> str:
     ]
     if not moved:
         return "bit-identical"
+    if result.tolerances.preset == "outcome":
+        return _same_outcome(result)
     worst = max(moved, key=lambda f: f.worst / max(f.floor, f.tolerance, 1e-300))
     unit = worst.unit.split("|")[0]
+    if result.floor is None:  # judged by tolerances alone: no noise was measured
+        return (
+            f"within tolerance (max {fmt(worst.worst, unit)} in {worst.name}; tolerance "
+            f"{fmt(worst.tolerance, unit)})"
+        )
     return (
         f"within numerical noise (max {fmt(worst.worst, unit)} in {worst.name}; noise floor "
         f"{fmt(worst.floor, unit)}, tolerance {fmt(worst.tolerance, unit)})"
     )
+
+
+def _same_outcome(result: DiffResult) -> str:
+    """A match under `outcome`: where the objects ended against where the golden's did."""
+    if not result.final_poses:
+        return "same outcome"
+    far = max(result.final_poses, key=lambda p: p.distance_m)
+    limit = result.tolerances["final.position"]
+    within = f", within {limit * 1e3:g} mm" if math.isfinite(limit) else ""
+    return f"same outcome; {far.name} {far.distance_m * 1e3:.1f} mm from the golden's place{within}"
+
+
+def headline(result: DiffResult) -> str:
+    """The one line a check prints for a golden: on a mismatch what changed, both values and by
+    how much (twin.compare.explain), else how the runs stand (noise_summary)."""
+    if result.first is None:
+        return noise_summary(result)
+    explained = result.explanation.headline if result.explanation is not None else ""
+    text = explained or first_line(result.first)
+    if result.floor is not None and allowance_text(result.first):
+        text += f" [{allowance_text(result.first)}]"
+    return text
 
 
 def _run_line(info: dict) -> str:
@@ -197,11 +226,16 @@ def _cause_lines(result: DiffResult) -> list[str]:
     fc = result.first_command
     if fc is not None and fc is not result.first:
         lines.append(f"first command difference: {first_line(fc)}: {first_detail(fc)}")
-    if result.likely_cause and (fc is None or fc is not result.first):
+    configuration = result.explanation.configuration if result.explanation is not None else []
+    if configuration and result.first is not None:
+        lines.append("likely cause: " + "; ".join(configuration))
+    elif result.likely_cause and (fc is None or fc is not result.first):
         lines.append(
             f"likely cause: the golden's last command at or before step {result.first.step}: "
             f"{result.likely_cause}"
         )
+    elif result.explanation is not None and result.explanation.task_file_changed:
+        lines.append("likely cause: the task file changed since the golden was recorded")
     fa = result.first_annotation
     if fa is not None and fa is result.first:
         lines.append(
@@ -255,6 +289,8 @@ def render_text(result: DiffResult) -> str:
             f"{result.floor.margin:g}"
         )
     lines.append(f"  {noise_summary(result)}")
+    if result.first is not None and result.explanation is not None:
+        lines.append(f"  what changed: {result.explanation.headline}")
     if result.first is None:
         lines.append(f"no divergence over {result.steps_compared} common steps")
     else:
@@ -286,6 +322,8 @@ def render_markdown(result: DiffResult) -> str:
     out += [f"- configuration differs: `{k}` {a} → {b}" for k, a, b in result.config_differences]
     out.append("")
     out += [f"**{noise_summary(result)}**", ""]
+    if result.first is not None and result.explanation is not None:
+        out += [f"What changed: {result.explanation.headline}", ""]
     if result.first is None:
         out.append(f"No divergence over {result.steps_compared} common steps.")
     else:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from twin.compare.report import allowance_text, first_line, noise_summary, render_text
+from twin.compare.report import headline, render_text
 from twin.compare.tolerances import Tolerances
 from twin.model.config import TwinConfig
 from twin.model.errors import ConfigError, TwinError
@@ -162,14 +162,12 @@ def check_one(
                 path,
                 "match",
                 0,
-                noise_summary(result),
+                headline(result),
                 report,
                 len(golden.frames),
                 time.perf_counter() - t0,
             )
-        summary = first_line(result.first)
-        if result.floor is not None and allowance_text(result.first):
-            summary += ": " + allowance_text(result.first)
+        summary = headline(result)
         if update and new.outcome != "ok" and not allow_error:
             why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
             return Outcome(

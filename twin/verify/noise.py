@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable
 
 from twin.compare.engine import DiffResult, compare, error_series, refuse_incomparable
+from twin.compare.explain import explain
 from twin.compare.noise import measure
 from twin.compare.tolerances import Tolerances
 from twin.model.errors import TwinError
@@ -83,8 +84,10 @@ def judge(
 
 
 def _where(result: DiffResult, golden: Recording, candidate: Recording) -> DiffResult:
-    """Notes "recorded on X, checked on Y" when the golden's machine record differs from the
-    candidate's (a run made here has none: it is this machine's)."""
+    """The result explained (what changed, in one line), and a note "recorded on X, checked on Y"
+    when the golden's machine record differs from the candidate's (a run made here has none: it
+    is this machine's)."""
+    result.explanation = explain(golden, candidate, result)
     made, checked = golden.machine, candidate.machine or machine()
     if made and differences(made, checked):
         result.notes.append(f"recorded on {machine_text(made)}, checked on {machine_text(checked)}")

@@ -107,19 +107,54 @@ def test_the_ci_job_passes_then_fails_on_a_changed_task_and_keeps_its_artifacts(
             run.run(block)
     finally:
         run.close()
-    workflow = work / ".github" / "workflows" / "twin.yml"
-    failed, _ = run_workflow(workflow, work, docs_env)
-    assert not failed and "<testsuite" in (work / "twin-check.xml").read_text()
+    workflow = (work / ".github" / "workflows" / "twin.yml").read_text()
+    job = run_workflow(workflow, work, docs_env)
+    assert not job.failed and "<testsuite" in (work / "twin-check.xml").read_text()
     task = work / "carry.py"
     task.write_text(
         task.read_text().replace("place_x_m: float = -0.3,", "place_x_m: float = -0.301,")
     )
-    failed, uploads = run_workflow(workflow, work, docs_env)
-    assert failed and uploads and all(p.exists() for p in uploads), uploads
+    job = run_workflow(workflow, work, docs_env)
+    check = job.step("Check the goldens")
+    assert job.failed and check.code == 1, check.output
+    uploads = [work / path for path in job.artifacts["twin-diff"].paths]
+    assert job.artifacts["twin-diff"].runs and all(p.exists() for p in uploads), uploads
     assert "differ" in (work / "twin-check.txt").read_text()
     assert 'failures="1"' in (work / "twin-check.xml").read_text()
     report = (work / "twin-diff" / "carry.md").read_text()
     assert "carry" in report and (work / "twin-diff" / "carry.rrd").stat().st_size > 10_000
+
+
+HIDDEN = """\
+jobs:
+  job:
+    runs-on: ubuntu-latest
+    steps:
+      - name: twin-like
+        run: false | tee x.txt
+      - name: on failure
+        if: ${{ failure() }}
+        run: touch failure.txt
+      - name: always
+        if: always()
+        run: touch always.txt
+"""
+
+
+def test_the_workflow_harness_runs_steps_under_github_s_shell_rules(tmp_path, docs_env):
+    job = run_workflow(HIDDEN, tmp_path, docs_env)  # no shell: `bash -e`, tee's status wins
+    assert not job.failed and job.step("twin-like").code == 0
+    assert not job.step("on failure").runs and not (tmp_path / "failure.txt").exists()
+    assert (tmp_path / "always.txt").exists()
+    strict = HIDDEN.replace("run: false |", "shell: bash\n        run: false |")
+    job = run_workflow(strict, tmp_path, docs_env)
+    assert job.failed and job.step("twin-like").code == 1
+    assert job.step("on failure").runs and (tmp_path / "failure.txt").exists()
+    pwsh = HIDDEN.replace("run: false |", "shell: pwsh\n        run: false |")
+    with pytest.raises(ValueError, match="pwsh"):
+        run_workflow(pwsh, tmp_path, docs_env)
+    with pytest.raises(ValueError, match="cancelled"):
+        run_workflow(HIDDEN.replace("always()", "cancelled()"), tmp_path, docs_env)
 
 
 def test_a_quoted_output_the_example_does_not_print_fails_the_page(tmp_path, docs_env):

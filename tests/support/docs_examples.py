@@ -26,6 +26,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -110,6 +111,21 @@ class Done:
     output: str
 
 
+def captured(argv: list[str], cwd: Path, env: dict[str, str]) -> Done:
+    """Run to the end; its exit status and its output (stdout and stderr, interleaved)."""
+    done = subprocess.run(
+        argv,
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        timeout=BLOCK_TIMEOUT_S,
+        check=False,
+    )
+    return Done(done.returncode, done.stdout)
+
+
 class PageRun:
     """One page's examples, in order, in one working folder."""
 
@@ -152,17 +168,7 @@ class PageRun:
         )
 
     def _plain(self, b: Block) -> Done:
-        done = subprocess.run(
-            self._argv(b),
-            cwd=self.workdir,
-            env=self.env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            timeout=BLOCK_TIMEOUT_S,
-            check=False,
-        )
-        return Done(done.returncode, done.stdout)
+        return captured(self._argv(b), self.workdir, self.env)
 
     def _start(self, b: Block, ready: str) -> None:
         proc = subprocess.Popen(
@@ -236,23 +242,137 @@ class PageRun:
         proc.stdout.close()
 
 
-def run_workflow(path: Path, workdir: Path, env: dict[str, str]) -> tuple[bool, list[Path]]:
-    """A GitHub Actions workflow's `run` steps, as its runner would take them: in order, skipping
-    `uses:` steps and the install step (twin is installed here), `if: failure()` steps only after a
-    failure. Returns whether the job failed and the paths its failure uploads."""
+def page_file(page: Path, name: str) -> str:
+    """The block a page writes to the file `name` (its `<!-- doctest: file=NAME -->` block)."""
+    found = [b.code for b in blocks(page, page.parent) if b.options.get("file") == name]
+    assert len(found) == 1, f"{page}: {len(found)} blocks write {name}"
+    return found[0]
+
+
+# How GitHub's Linux runners run a `run:` step's script, written to a file ({0}), by its `shell:`
+# (workflow syntax, jobs.<job_id>.steps[*].shell). No `shell:` is not `shell: bash`: no pipefail.
+SHELLS = {
+    None: ("bash", "-e", "{0}"),
+    "bash": ("bash", "--noprofile", "--norc", "-eo", "pipefail", "{0}"),
+    "sh": ("sh", "-e", "{0}"),
+}
+CONDITIONS = ("success()", "failure()", "always()")
+STEP_KEYS = {"name", "id", "if", "run", "shell", "uses", "with"}  # any other is refused
+JOB_KEYS = {"name", "runs-on", "permissions", "defaults", "steps"}
+PASSED_ACTIONS = ("actions/checkout@", "actions/setup-python@")  # the folder; this Python
+TEST_REPORT_ACTIONS = {  # action -> the input that names the report files it reads
+    "mikepenz/action-junit-report": "report_paths",
+    "dorny/test-reporter": "path",
+    "EnricoMi/publish-unit-test-result-action": "files",
+}
+
+
+@dataclass
+class StepRun:
+    name: str
+    when: str  # success(), failure() or always()
+    runs: bool  # its `if:` held: GitHub runs it
+    code: int | None = None  # the exit status of a run step this harness ran
+    output: str = ""  # its stdout and stderr
+
+
+@dataclass
+class Upload:
+    """An actions/upload-artifact step: its paths (relative to the working folder) and whether
+    its `if:` held."""
+
+    paths: list[str]
+    when: str
+    runs: bool
+
+
+@dataclass
+class ReportStep:
+    """A test-report action's step: the report files it reads and whether its `if:` held."""
+
+    uses: str
+    reads: list[str]
+    when: str
+    runs: bool
+
+
+@dataclass
+class JobRun:
+    failed: bool = False
+    steps: list[StepRun] = field(default_factory=list)
+    artifacts: dict[str, Upload] = field(default_factory=dict)
+    reports: list[ReportStep] = field(default_factory=list)
+
+    def step(self, name: str) -> StepRun:
+        return next(s for s in self.steps if s.name == name)
+
+
+def _condition(step: dict, name: str) -> str:
+    """A step's `if:`, bare or as `${{ ... }}`; one this harness cannot decide is refused."""
+    text = str(step.get("if", "success()")).strip()
+    if text.startswith("${{") and text.endswith("}}"):
+        text = text[3:-2].strip()
+    if text not in CONDITIONS:
+        raise ValueError(f"step {name!r}: if: {text!r} is none of {CONDITIONS}")
+    return text
+
+
+def _shell_run(script: str, shell: str | None, workdir: Path, env: dict[str, str]) -> Done:
+    """A step's script as GitHub runs it: written to a file, run by the shell's command line."""
+    if shell not in SHELLS:
+        raise ValueError(f"shell: {shell!r} is not one this harness runs ({list(SHELLS)[1:]})")
+    with tempfile.TemporaryDirectory(prefix="step-") as tmp:  # GitHub's RUNNER_TEMP
+        script_file = Path(tmp) / "step.sh"
+        script_file.write_text(script, encoding="utf-8")
+        argv = [part.replace("{0}", str(script_file)) for part in SHELLS[shell]]
+        return captured(argv, workdir, {**env, "CI": "true", "GITHUB_ACTIONS": "true"})
+
+
+def _uses(step: dict, name: str, when: str, runs: bool, job: JobRun) -> None:
+    """A `uses:` step is not run: an upload is collected, a test report recorded; the checkout
+    and setup-python are what this folder and this Python already are; any other is refused."""
+    uses, inputs = step["uses"], step.get("with") or {}
+    action = uses.partition("@")[0]
+    if action == "actions/upload-artifact":
+        paths = [line.strip() for line in str(inputs["path"]).splitlines() if line.strip()]
+        job.artifacts[inputs.get("name", "artifact")] = Upload(paths, when, runs)
+    elif action in TEST_REPORT_ACTIONS:
+        reads = str(inputs.get(TEST_REPORT_ACTIONS[action], "")).split()
+        job.reports.append(ReportStep(uses, reads, when, runs))
+    elif not uses.startswith(PASSED_ACTIONS):
+        raise ValueError(f"step {name!r}: uses: {uses!r} is not an action this harness knows")
+    job.steps.append(StepRun(name, when, runs))
+
+
+def run_workflow(text: str, workdir: Path, env: dict[str, str]) -> JobRun:
+    """A GitHub Actions workflow's one job, as GitHub's Linux runner takes it: its steps in order,
+    each `run:` script under its `shell:` (no `shell:`: `bash -e`, no pipefail), each step only
+    when its `if:` holds (success() by default, failure() once a step failed, always()). The
+    install step (`run: pip install ...`) is passed over: twin is installed here. What it does
+    not follow (env, working-directory, continue-on-error, matrices, ...) it refuses."""
     import yaml
 
-    failed, uploads = False, []
-    for job in yaml.safe_load(path.read_text(encoding="utf-8"))["jobs"].values():
-        for step in job["steps"]:
-            when = step.get("if", "success()")
-            if when == "failure()" and not failed or when == "success()" and failed:
-                continue
-            if "run" in step and not step["run"].startswith("pip install"):
-                argv = ["bash", "-e", "-o", "pipefail", "-c", step["run"]]  # as GitHub runs it
-                done = subprocess.run(argv, cwd=workdir, env=env, capture_output=True, text=True,
-                                      timeout=BLOCK_TIMEOUT_S, check=False)
-                failed = failed or done.returncode != 0
-            elif "upload-artifact" in step.get("uses", ""):
-                uploads += [workdir / line for line in step["with"]["path"].split()]
-    return failed, uploads
+    workflow = yaml.safe_load(text)
+    (job_spec,) = workflow["jobs"].values()
+    unknown = set(job_spec) - JOB_KEYS
+    assert not unknown, f"job keys this harness does not follow: {sorted(unknown)}"
+    defaults = job_spec.get("defaults") or workflow.get("defaults") or {}
+    assert set(defaults) <= {"run"} and set(defaults.get("run") or {}) <= {"shell"}, defaults
+    default_shell = (defaults.get("run") or {}).get("shell")
+    job = JobRun()
+    for i, step in enumerate(job_spec["steps"]):
+        name = step.get("name") or step.get("uses") or f"step {i + 1}"
+        unknown = set(step) - STEP_KEYS
+        assert not unknown, f"step {name!r}: keys this harness does not follow: {sorted(unknown)}"
+        when = _condition(step, name)
+        runs = when == "always()" or (when == "failure()") == job.failed
+        if "uses" in step:
+            _uses(step, name, when, runs, job)
+            continue
+        if not runs or step["run"].startswith("pip install"):
+            job.steps.append(StepRun(name, when, runs))
+            continue
+        done = _shell_run(step["run"], step.get("shell", default_shell), workdir, env)
+        job.steps.append(StepRun(name, when, True, done.code, done.output))
+        job.failed = job.failed or done.code != 0
+    return job

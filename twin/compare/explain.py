@@ -82,7 +82,7 @@ def si(x: float, unit: str, signed: bool = False) -> str:
 
 def _exact(x: float, diff: float) -> str:
     """A value with enough decimals that a difference of `diff` shows (6 at least)."""
-    if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+    if isinstance(x, bool | int) or not isinstance(x, float) or not math.isfinite(x):
         return repr(x)
     places = 6 if diff == 0 or not math.isfinite(diff) else max(6, 2 - math.floor(math.log10(diff)))
     return f"{x:.{min(places, 17)}f}"
@@ -100,11 +100,21 @@ def _joint_unit(rec: Recording, joint: object) -> str:
 
 
 def _arg_unit(rec: Recording, command: Command, name: str) -> str:
+    """A command argument's unit: a joint's for its q and v, else what the name ends in."""
     if name in ("q", "v") and "joint" in command.args:
         unit = _joint_unit(rec, command.args["joint"])
         return unit + "/s" if name == "v" and unit else unit
-    suffix = name.rsplit("_", 1)[-1]
-    return {"m": "m", "rad": "rad", "s": "s", "kg": "kg", "n": "N"}.get(suffix, "")
+    return _NAMED_UNITS.get(name.rsplit("_", 1)[-1], "")
+
+
+_NAMED_UNITS = {"m": "m", "rad": "rad", "s": "s", "kg": "kg", "n": "N"}  # error_m, hold_s, ...
+
+
+def _number_change(subject: str, name: str, x: float, y: float, unit: str) -> str:
+    """`subject name x -> y unit (+d unit)`, with as many decimals as the difference needs."""
+    diff = abs(y - x)
+    text = f"{subject} {name} {_exact(x, diff)} -> {_exact(y, diff)} {unit}".rstrip()
+    return f"{text} ({si(y - x, unit, signed=True)})"
 
 
 def _command_change(golden: Recording, candidate: Recording, d: Divergence) -> str:
@@ -132,13 +142,7 @@ def _command_change(golden: Recording, candidate: Recording, d: Divergence) -> s
         return f"{_subject(a)} at step {a.step} -> {b.step} ({later:+d} {_steps(later)})"
     moved = _moved_number(a, b)
     if a.kind == b.kind and a.step == b.step and moved is not None:
-        name, x, y = moved
-        unit = _arg_unit(golden, a, name)
-        diff = abs(y - x)
-        return (
-            f"{_subject(a)} {name} {_exact(x, diff)} -> {_exact(y, diff)} {unit} "
-            f"({si(y - x, unit, signed=True)})".replace("  ", " ")
-        )
+        return _number_change(_subject(a), *moved, _arg_unit(golden, a, moved[0]))
     return f"{d.expected[0]} -> {d.actual[0]}"
 
 
@@ -173,13 +177,7 @@ def _annotation_change(a: Command, b: Command, nth: int = 0) -> str:
         Command(b.step, "data", b.args.get("data") or {}),
     )
     if moved is not None:
-        name, x, y = moved
-        unit = {"m": "m", "rad": "rad", "s": "s"}.get(name.rsplit("_", 1)[-1], "")
-        diff = abs(y - x)
-        return (
-            f"{subject} {name} {_exact(x, diff)} -> {_exact(y, diff)} {unit} "
-            f"({si(y - x, unit, signed=True)})".replace("  ", " ")
-        )
+        return _number_change(subject, *moved, _NAMED_UNITS.get(moved[0].rsplit("_", 1)[-1], ""))
     if a.args.get("message") != b.args.get("message"):
         return f"{subject} {a.args.get('message')!r} -> {b.args.get('message')!r}"
     return ""
@@ -192,12 +190,9 @@ def _frame_change(d: Divergence) -> str:
         x, y = d.expected[0], d.actual[0]
         if isinstance(x, bool) or isinstance(y, bool) or not isinstance(x, int | float):
             return f"{d.name}{element} {x!r} -> {y!r}"
-        unit = d.unit
-        signed = y - x if math.isfinite(y - x) else d.difference
-        return (
-            f"{d.name}{element} {_exact(x, d.difference)} -> {_exact(y, d.difference)} {unit} "
-            f"({si(signed, unit, signed=True)})"
-        )
+        if isinstance(x, int) and isinstance(y, int):  # a body id, a count
+            return f"{d.name}{element} {x} -> {y}"
+        return _number_change(d.name, d.element, x, y, d.unit).replace("  ", " ")
     if d.unit == "rad":  # an orientation: the angle between the two
         return f"{d.name}{element} turned {si(d.difference, 'rad')}"
     return (

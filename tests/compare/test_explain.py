@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -149,3 +153,34 @@ def test_a_moved_box_is_named_as_the_scene_change_and_the_likely_cause(tmp_path,
 )
 def test_differences_read_in_their_unit(value, unit, text):
     assert si(value, unit, signed=True) == text
+
+
+def test_a_pick_point_moved_2_mm_in_the_built_in_task_shows_both_commanded_values(tmp_path):
+    """The built-in pick_place with its pick point 2 mm further along x (a copy of the package,
+    edited, imported ahead of the installed one) checked against the committed golden."""
+    package = Path(__file__).resolve().parents[2] / "twin"
+    shutil.copytree(package, tmp_path / "edited" / "twin", ignore=shutil.ignore_patterns("*.pyc"))
+    task = tmp_path / "edited" / "twin" / "tasks" / "pick_place.py"
+    source = task.read_text()
+    assert "POINT_A_M = (0.2, 0.7)\n" in source
+    task.write_text(source.replace("POINT_A_M = (0.2, 0.7)\n", "POINT_A_M = (0.202, 0.7)\n"))
+    done = subprocess.run(
+        [sys.executable, "-m", "twin.cli", "check", str(GOLDEN)],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(tmp_path / "edited")},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    line = next(x for x in done.stdout.splitlines() if "pick_place_mtb.mcap" in x)
+    assert done.returncode == 1 and " differ " in line, done.stdout + done.stderr
+    golden = load(GOLDEN)
+    first = next(c for c in golden.commands if c.kind == "joint_target" and c.step > 0)
+    assert re.search(
+        rf"step {first.step}: joint_target {first.args['joint']} q {first.args['q']:.6f} -> "
+        r"-?[0-9.]+ rad \([+-][0-9.]+ mrad\)",
+        line,
+    ), line
+    assert "placed box #1 error_m 0.000000 -> 0.002000 m (+2 mm)" in line
+    assert line.rstrip().endswith("task file changed")

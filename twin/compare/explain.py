@@ -23,7 +23,7 @@ from twin.model.types import Command
 # a shifted run's motion is "the same motion" when it stays this close to the golden's, shifted
 SAME_MOTION_M = 2.5e-4  # the physical preset's position tolerance (m, and rad for joints)
 SAME_COMMAND = 1e-9  # the numbers of a shifted command agree this closely (tight's tolerance)
-MOST_ANNOTATIONS = 3  # changed annotations named in the headline
+MOST_ANNOTATIONS = 2  # changed annotations named in the headline
 
 
 @dataclass
@@ -285,11 +285,13 @@ def _shifted_motion(
 
 # -- annotations and configuration -----------------------------------------------------------
 def changed_annotations(golden: Recording, candidate: Recording) -> list[str]:
-    """The annotations (task start aside) that say something else in the candidate: paired in
-    order, as the engine pairs them."""
+    """The annotations (task start aside) that say something else in the candidate, paired in
+    order as the engine pairs them: those whose data holds a number that moved (a placement's
+    error) first, then those whose message alone changed (a phase's wording)."""
     g = [c for c in golden.commands if c.kind == "event"]
     c = [c for c in candidate.commands if c.kind == "event"]
-    out, seen = [], {}
+    out: list[str] = []
+    seen: dict[tuple, int] = {}
     for a, b in zip(g, c, strict=False):
         key = (a.args.get("kind"), a.args.get("body"))
         seen[key] = seen.get(key, 0) + 1
@@ -298,7 +300,7 @@ def changed_annotations(golden: Recording, candidate: Recording) -> list[str]:
         text = _annotation_change(a, b, seen[key])
         if text:
             out.append(text)
-    return out
+    return sorted(out, key=lambda text: not text.endswith(")"))  # numbers end in "(+d unit)"
 
 
 def task_file_changed(golden: Recording, candidate: Recording) -> bool:

@@ -141,18 +141,17 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from twin.sweep.executors import make_executor
-    from twin.sweep.golden import check_sweep, split_paths
-    from twin.verify.check import Progress, check_all, exit_code, golden_paths, summary_table
+    from twin.sweep.golden import check_sweep
+    from twin.sweep.search_golden import check_search
+    from twin.verify.check import Progress, check_all, exit_code, find_goldens, summary_table
 
     tol = _tolerances(args)
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
-    from twin.sweep.search_golden import check_search, split_search
-
-    searches, rest = split_search(args.paths)  # recordings/search/NAME.toml with NAME.expect.json
-    recordings, sweeps = split_paths(rest)
-    paths = golden_paths(recordings) if recordings or not (sweeps or searches) else []
-    progress = Progress(len(paths) + len(sweeps) + len(searches))
+    goldens = find_goldens(args.paths)
+    paths, sweeps, searches = goldens.recordings, goldens.sweeps, goldens.searches
+    print(goldens.count_line(), flush=True)
+    progress = Progress(len(goldens))
     executor = (
         make_executor(args.executor, args.jobs, args.scheduler)
         if sweeps or args.executor == "dask"
@@ -232,14 +231,15 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "check",
-        help="re-run every golden recording and compare (default: recordings/*.mcap); "
-        "sweep goldens (NAME.toml) are judged by statistics",
+        help="re-run every golden and compare (default: every golden under recordings/): "
+        "recordings field by field, sweep goldens by statistics, search goldens by outcome",
     )
     p.add_argument(
         "paths",
         nargs="*",
-        help="golden .mcap files or folders (default: recordings/), sweep definitions "
-        "NAME.toml with NAME.summary.json beside them, or folders of them (recordings/sweeps)",
+        help="golden .mcap files, sweep goldens (NAME.toml with NAME.summary.json beside it), "
+        "search goldens (NAME.toml with NAME.expect.json), or folders: every golden under a "
+        "folder, sub-folders included (default: recordings/)",
     )
     p.add_argument(
         "--update",

@@ -21,7 +21,6 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from stat import S_IMODE, S_ISREG
 
@@ -90,37 +89,19 @@ def _read_results(path: Path) -> tuple[paired.Side, dict]:
     return side, meta
 
 
-def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
-    """The arguments of `twin check` split into what verify.check expands (.mcap files and folders
-    of them) and sweep definitions: a named .toml file (which must be one) and the .toml files of a
-    folder that are (task, scenarios and seed; a robot profile kept beside the goldens is not). A
-    folder without definitions goes to the first list as it is (so an empty one is still reported
-    there). A folder's .toml with NAME.summary.json beside it is a golden: one that is not a
-    definition is an error, never skipped."""
-    recordings, sweeps = [], []
-    for p in paths:
-        path = Path(p)
-        if p.endswith(".toml"):
-            problem = _not_a_definition(path)
-            if problem is not None:
-                raise ConfigError(f"sweep definition {p!r} {problem}")
-            sweeps.append(p)
-        elif path.is_dir():
-            found = []
-            for t in sorted(path.glob("*.toml")):
-                problem = _not_a_definition(t)
-                if problem is None:
-                    found.append(str(t))
-                elif summary_path(t).exists():
-                    raise ConfigError(
-                        f"sweep golden {str(t)!r} (beside {summary_path(t).name}) {problem}"
-                    )
-            sweeps += found
-            if not found or any(path.glob("*.mcap")):
-                recordings.append(p)
-        else:
-            recordings.append(p)
-    return recordings, sweeps
+def is_sweep_golden(path: str, *, named: bool) -> bool:
+    """Whether a .toml file is a sweep golden's definition (task, scenarios and seed). A file named
+    on the command line must be one: ConfigError saying why not. One found in a folder that is not
+    is skipped (a robot profile kept beside the goldens), unless NAME.summary.json beside it says
+    it is a golden: then it is an error, never skipped."""
+    problem = _not_a_definition(Path(path))
+    if problem is None:
+        return True
+    if named:
+        raise ConfigError(f"sweep definition {path!r} {problem}")
+    if summary_path(path).exists():
+        raise ConfigError(f"sweep golden {path!r} (beside {summary_path(path).name}) {problem}")
+    return False
 
 
 def _not_a_definition(path: Path) -> str | None:

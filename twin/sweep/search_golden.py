@@ -12,7 +12,6 @@ import json
 import os
 import re
 import time
-from collections.abc import Sequence
 from pathlib import Path
 
 from twin.model.errors import ConfigError, RecordingError, TwinError
@@ -93,34 +92,9 @@ def _write(path: Path, text: str) -> None:
 
 
 def is_search_golden(path: Path) -> bool:
+    """A NAME.toml with NAME.expect.json beside it, wherever it lies (`twin check` takes it as a
+    search golden, and the NAME.mcap beside it as part of it)."""
     return path.suffix == ".toml" and expect_path(path).is_file()
-
-
-def split_search(paths: Sequence[str]) -> tuple[list[str], list[str]]:
-    """The arguments of `twin check` split into search goldens (a NAME.toml with NAME.expect.json
-    beside it, or a folder of them, such as recordings/search) and the rest, left as they were."""
-    searches, rest = [], []
-    for p in paths:
-        path = Path(p)
-        if path.is_file() and is_search_golden(path):
-            searches.append(p)
-        elif path.is_dir() and any(path.glob("*" + EXPECT_SUFFIX)):
-            found = sorted(str(t) for t in path.glob("*.toml") if is_search_golden(t))
-            names = {Path(t).stem for t in found}
-            others = [
-                f.name
-                for f in path.iterdir()
-                if f.suffix in (".toml", ".mcap") and f.stem not in names
-            ]
-            if others:
-                raise ConfigError(
-                    f"folder {p!r} holds search goldens and {others[0]!r}; expected search goldens "
-                    "in a folder of their own (or name each file)"
-                )
-            searches += found
-        else:
-            rest.append(p)
-    return searches, rest
 
 
 def read_expectation(definition: str) -> dict:

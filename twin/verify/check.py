@@ -14,7 +14,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
@@ -212,34 +212,113 @@ def _task_sha256_now(golden: Recording) -> str | None:
     return source_sha256(path) if path.is_file() else "missing"
 
 
-def golden_paths(paths: Sequence[str]) -> list[str]:
-    """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped), each file
-    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden
-    would race on its temporary file."""
+@dataclass
+class Goldens:
+    """The goldens one `twin check` takes, by kind, each in the order found, and the folders it
+    walked."""
+
+    recordings: list[str] = field(default_factory=list)  # .mcap goldens
+    sweeps: list[str] = field(default_factory=list)  # NAME.toml (NAME.summary.json beside it)
+    searches: list[str] = field(default_factory=list)  # NAME.toml with NAME.expect.json beside it
+    folders: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.recordings) + len(self.sweeps) + len(self.searches)
+
+    def count_line(self) -> str:
+        """`checking 15 goldens: 13 recordings, 1 sweep, 1 search` (kinds with none left out)."""
+        kinds = [
+            (len(self.recordings), "recording", "recordings"),
+            (len(self.sweeps), "sweep", "sweeps"),
+            (len(self.searches), "search", "searches"),
+        ]
+        parts = [f"{n} {one if n == 1 else many}" for n, one, many in kinds if n]
+        noun = "golden" if len(self) == 1 else "goldens"
+        return f"checking {len(self)} {noun}: " + ", ".join(parts)
+
+
+def find_goldens(paths: Sequence[str]) -> Goldens:
+    """The goldens named: a file as it is (a NAME.toml is a search golden when NAME.expect.json is
+    beside it, else a sweep definition, which it must be; anything else an .mcap golden), a folder
+    for every golden under it (walk_folder). None: recordings/. Each file once however it is named
+    (`G`, `./G`, a folder holding it, a link): two checks of one golden would race on its temporary
+    file."""
+    from twin.sweep.golden import is_sweep_golden
+    from twin.sweep.search_golden import is_search_golden
+
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
             raise ConfigError(
-                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap "
-                f"files or folders"
+                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass goldens (.mcap files, "
+                f"NAME.toml sweep or search goldens) or folders of them"
             )
         paths = [DEFAULT_DIR]
-    out: list[str] = []
+    out = Goldens()
     for p in paths:
         path = Path(p)
         if path.is_dir():
-            found = sorted(
-                str(f) for f in path.glob("*.mcap") if not f.name.endswith(".obtained.mcap")
-            )
-            if not found:
-                raise ConfigError(f"folder {p!r} holds no .mcap recordings")
-            out += found
+            found = walk_folder(p)
+            if not len(found):
+                raise ConfigError(
+                    f"folder {p!r} holds no goldens; expected .mcap recordings, sweep goldens "
+                    "(NAME.toml with NAME.summary.json) or search goldens (NAME.toml with "
+                    "NAME.expect.json) in it or a sub-folder"
+                )
+            out.recordings += found.recordings
+            out.sweeps += found.sweeps
+            out.searches += found.searches
+            out.folders.append(p)
+        elif p.endswith(".toml"):
+            if is_search_golden(path):
+                out.searches.append(p)
+            elif is_sweep_golden(p, named=True):  # else ConfigError: why it is no definition
+                out.sweeps.append(p)
         elif path.exists():
-            out.append(str(path))
+            out.recordings.append(p)
         else:
             raise ConfigError(
-                f"golden {p!r} does not exist; expected an .mcap file or a folder of them"
+                f"golden {p!r} does not exist; expected an .mcap file, a NAME.toml sweep or "
+                "search golden, or a folder of them"
             )
-    return _each_file_once(out)
+    out.recordings = _each_file_once(out.recordings)
+    out.sweeps, out.searches = _each_file_once(out.sweeps), _each_file_once(out.searches)
+    return out
+
+
+def walk_folder(folder: str) -> Goldens:
+    """Every golden under folder, sub-folders included (linked ones once; hidden ones and hidden
+    files skipped), sorted: .mcap recordings but `*.obtained.mcap` and the NAME.mcap of a search
+    golden; NAME.toml with NAME.expect.json beside it (a search golden); and the other sweep
+    definitions (a .toml with task, scenarios and seed; another .toml, such as a robot profile, is
+    skipped, unless NAME.summary.json beside it says it is a golden: an error). Leftovers of an
+    interrupted write (`.partial`, `.tmp`) are no .mcap or .toml files."""
+    from twin.sweep.golden import is_sweep_golden
+    from twin.sweep.search_golden import is_search_golden
+
+    out, seen = Goldens(), set()
+    for top, dirs, files in os.walk(folder, onerror=_unreadable, followlinks=True):
+        st = os.stat(top)
+        if (st.st_dev, st.st_ino) in seen:  # a link back up the tree: walked already
+            dirs[:] = []
+            continue
+        seen.add((st.st_dev, st.st_ino))
+        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+        for name in sorted(f for f in files if not f.startswith(".")):
+            path = Path(top) / name
+            if name.endswith(".toml"):
+                if is_search_golden(path):
+                    out.searches.append(str(path))
+                elif is_sweep_golden(str(path), named=False):
+                    out.sweeps.append(str(path))
+            elif name.endswith(".mcap") and not name.endswith(".obtained.mcap"):
+                beside = path.with_suffix(".toml")
+                if not (beside.is_file() and is_search_golden(beside)):
+                    out.recordings.append(str(path))
+    return out
+
+
+def _unreadable(err: OSError) -> None:
+    raise ConfigError(f"cannot read folder {err.filename!r}: {err.strerror or err}")
 
 
 def _each_file_once(paths: list[str]) -> list[str]:

@@ -87,6 +87,26 @@ def test_a_moved_statistic_is_exit_1_naming_it_and_by_how_much(golden, tmp_path,
     )
 
 
+def test_keep_writes_the_report_and_the_new_summary_of_a_moved_sweep(golden, tmp_path, capsys):
+    definition = _copy(
+        golden,
+        tmp_path,
+        summary=lambda d: d["placement_error_mm"].update(p95=d["placement_error_mm"]["p95"] - 0.4),
+    )
+    keep = tmp_path / "K"
+    capsys.readouterr()
+    assert main(["check", str(definition), "--keep", str(keep)]) == 1
+    assert f"kept: {keep}/g.md, {keep}/g.summary.json" in capsys.readouterr().out
+    assert sorted(os.listdir(keep)) == ["g.md", "g.summary.json"]  # no results: not paired
+    # the new run's summary: the one the module's golden was written with
+    assert json.loads((keep / "g.summary.json").read_text()) == json.loads(
+        (golden / "small.summary.json").read_text()
+    )
+    report = (keep / "g.md").read_text()
+    assert report.startswith("# sweep golden g: differ\n")
+    assert "placement_error_mm.p95 moved +0.400 mm" in report and "success_rate" in report
+
+
 def test_judge_allows_moves_within_tolerance():
     golden = {
         "scenarios": 100,

@@ -179,9 +179,12 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
     return problems
 
 
-def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
+def check_sweep(
+    definition: str, executor, *, update: bool = False, keep: str | None = None
+) -> Outcome:
     """Re-run one sweep golden on executor and judge it; an Outcome as verify.check gives for a
-    recording. Paired when the golden keeps its results, else by its summary."""
+    recording. Paired when the golden keeps its results, else by its summary. keep (DIR/NAME): a
+    golden that differs leaves its report and the new run's summary (and results) there."""
     t0 = time.perf_counter()
     expected_path, scenarios_path = summary_path(definition), results_path(definition)
     try:
@@ -208,38 +211,59 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
         else:
             problems, report, within = ["no golden summary yet"], _report(golden, new), ""
         seconds = time.perf_counter() - t0
-        if update:
-            wrote = []
-            if new != golden:
-                _write_atomically(expected_path, new)
-                wrote.append(expected_path.name)
-            if (
-                reference is None
-                or reference[1] != _meta(spec)
-                or not reference[0].table.equals(paired.side_from_table(new_table, "now").table)
-            ):
-                _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
-                wrote.append(scenarios_path.name)
-            if wrote:
-                was = "; ".join(problems) or "within tolerance"
-                return Outcome(
-                    definition,
-                    "updated",
-                    0,
-                    f"rewrote {', '.join(wrote)}; was: {was}",
-                    report,
-                    spec.scenarios,
-                    seconds,
-                )
-        if problems:
-            return Outcome(
-                definition, "differ", 1, "; ".join(problems), report, spec.scenarios, seconds
-            )
-        return Outcome(definition, "match", 0, within or "matches", report, spec.scenarios, seconds)
+        wrote = _update(spec, golden, new, reference, new_table, definition) if update else []
+        if wrote:
+            was = "; ".join(problems) or "within tolerance"
+            line = f"rewrote {', '.join(wrote)}; was: {was}"
+            return Outcome(definition, "updated", 0, line, report, spec.scenarios, seconds)
+        if not problems:
+            line = within or "matches"
+            return Outcome(definition, "match", 0, line, report, spec.scenarios, seconds)
+        line = "; ".join(problems)
+        outcome = Outcome(definition, "differ", 1, line, report, spec.scenarios, seconds)
+        if keep is not None:
+            outcome.kept = _keep(keep, outcome, new, new_table if reference is not None else None)
+        return outcome
     except TwinError as err:
         return Outcome(
             definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
         )
+
+
+def _update(spec, golden, new, reference, new_table, definition) -> list[str]:
+    """--update: the names of the golden's files rewritten, the summary and the results, each when
+    it changed at all."""
+    expected_path, scenarios_path = summary_path(definition), results_path(definition)
+    wrote = []
+    if new != golden:
+        _write_atomically(expected_path, new)
+        wrote.append(expected_path.name)
+    if (
+        reference is None
+        or reference[1] != _meta(spec)
+        or not reference[0].table.equals(paired.side_from_table(new_table, "now").table)
+    ):
+        _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
+        wrote.append(scenarios_path.name)
+    return wrote
+
+
+def _keep(base: str, outcome: Outcome, new: dict, new_table: pa.Table | None) -> list[str]:
+    """--keep for a sweep golden that differs: DIR/NAME.md (the report), the new run's
+    DIR/NAME.summary.json and, for a paired golden, DIR/NAME.results.parquet."""
+    from twin.verify.keep import outcome_markdown, staging
+
+    with staging(base) as staged:
+        staged.write_text(".md", outcome_markdown(outcome, f"sweep golden {Path(base).name}"))
+        staged.write_text(".summary.json", _summary_text(Path(base).name + ".summary.json", new))
+        if new_table is not None:
+            try:
+                pq.write_table(new_table, staged.temp(".results.parquet"))
+            except (OSError, pa.ArrowException) as err:
+                why = getattr(err, "strerror", None) or err
+                where = base + ".results.parquet"
+                raise ConfigError(f"cannot write {where!r}: {why}") from err
+        return staged.publish()
 
 
 def _judge_paired(
@@ -357,19 +381,25 @@ def _finite(value: object) -> bool:
 def _write_atomically(path: Path, data: dict) -> None:
     """Write the summary to a temporary file beside path and rename it into place: an interrupted
     --update leaves the old golden or the new one, never half of one."""
+    text = _summary_text(path.name, data)
+    _publish_atomically(path, lambda p: Path(p).write_text(text))
+
+
+def _summary_text(name: str, data: dict) -> str:
+    """A new summary's text, refused (ConfigError) with a non-finite number or over MAX_BYTES."""
     try:
         text = summary_text(data)
     except ValueError as err:  # a NaN or infinity from the task's placements
         raise ConfigError(
-            f"the new summary of {path.name} holds a non-finite number ({err}); not written"
+            f"the new summary of {name} holds a non-finite number ({err}); not written"
         ) from err
     if len(text.encode()) > MAX_BYTES:
         raise ConfigError(
-            f"the new summary of {path.name} would hold {len(text.encode())} bytes; "
+            f"the new summary of {name} would hold {len(text.encode())} bytes; "
             f"expected at most "
             f"{MAX_BYTES}; not written"
         )
-    _publish_atomically(path, lambda p: Path(p).write_text(text))
+    return text
 
 
 def _publish_atomically(path: Path, write) -> None:

@@ -136,8 +136,9 @@ def verdict(expected: dict, outcome: str, error: str) -> tuple[str, str]:
     return "match", f"fails the same way: {error}"
 
 
-def check_search(definition: str, *, update: bool = False) -> Outcome:
-    """Run a search golden's scenario again and judge it against its expectation."""
+def check_search(definition: str, *, update: bool = False, keep: str | None = None) -> Outcome:
+    """Run a search golden's scenario again and judge it against its expectation. keep
+    (DIR/NAME): one that differs leaves its scenario recorded again and its report there."""
     t0 = time.perf_counter()
     try:
         spec = load_spec(definition)
@@ -170,16 +171,23 @@ def check_search(definition: str, *, update: bool = False) -> Outcome:
                 1,
                 time.perf_counter() - t0,
             )
-        return Outcome(
-            definition,
-            status,
-            0 if status == "match" else 1,
-            line,
-            report,
-            1,
-            time.perf_counter() - t0,
-        )
+        outcome = Outcome(definition, status, 0 if status == "match" else 1, line, report, 1)
+        if status == "differ" and keep is not None:
+            outcome.kept = _keep(keep, spec, outcome)
+        outcome.seconds = time.perf_counter() - t0
+        return outcome
     except TwinError as err:
         return Outcome(
             definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
         )
+
+
+def _keep(base: str, spec: SweepSpec, outcome: Outcome) -> list[str]:
+    """--keep for a search golden that differs: DIR/NAME.mcap (the scenario run and recorded once
+    more, as --update records it) and DIR/NAME.md (expected and now)."""
+    from twin.verify.keep import outcome_markdown, staging
+
+    with staging(base) as staged:
+        record_scenario(spec, staged.temp(".mcap"))
+        staged.write_text(".md", outcome_markdown(outcome, f"search golden {Path(base).name}"))
+        return staged.publish()

@@ -120,86 +120,101 @@ class Outcome:
     report: str  # the full text report ("" on error)
     frames: int = 0
     seconds: float = 0.0
+    kept: list[str] = field(default_factory=list)  # the files --keep wrote for it
 
 
 def check_one(
-    path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False
+    path: str,
+    tolerances: Tolerances,
+    update: bool = False,
+    allow_error: bool = False,
+    keep: str | None = None,
 ) -> Outcome:
     """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a
-    run whose task failed unless allow_error (a crash is not a new golden)."""
-    from twin.record import open_recorders
+    run whose task failed unless allow_error (a crash is not a new golden). keep (DIR/NAME, from
+    verify.keep.plan_keep): a golden that differs or is refused leaves its re-run, report and diff
+    view there; one that matches leaves nothing."""
     from twin.record.mcap.reader import load
+    from twin.verify.keep import KEPT, keep_recording, staging
 
     t0 = time.perf_counter()
     tmp = Path(path).with_name(Path(path).name + ".tmp")
-    try:
-        golden = load(path)
-        recorded_sha, sha_now = (golden.run or {}).get("task_sha256"), _task_sha256_now(golden)
-        if update:
-            run = dict(golden.run or {})
-            if sha_now not in (None, "missing"):
-                # the rewrite holds the task file's source as it is now
-                run["task_sha256"] = sha_now
-            with open_recorders(
-                golden.config,
-                run,
-                mcap_path=str(tmp),
-                rate=golden.rate_steps,
-                engine=engine_versions(),
-            ) as sinks:
-                new, kinds = rerun(golden, sinks=sinks)
-        else:
-            new, kinds = rerun(golden)
-        result = judge(golden, new, tolerances, remade, source=golden, event_kinds=kinds)
-        if sha_now is not None and sha_now != recorded_sha:
-            result.notes.append(
-                f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
-                f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)"
-            )
-        report = render_text(result)
-        if result.match:
-            return Outcome(
-                path,
-                "match",
-                0,
-                noise_summary(result),
-                report,
-                len(golden.frames),
-                time.perf_counter() - t0,
-            )
-        summary = first_line(result.first)
-        if result.floor is not None and allowance_text(result.first):
-            summary += ": " + allowance_text(result.first)
-        if update and new.outcome != "ok" and not allow_error:
-            why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
-            return Outcome(
-                path,
-                "refused",
-                1,
-                f"not rewritten: the re-run's task failed ({why}); the golden is "
-                "left as it was (--allow-error writes it anyway)",
-                report,
-                len(golden.frames),
-                time.perf_counter() - t0,
-            )
-        if update:
-            os.replace(tmp, path)
-            return Outcome(
-                path,
-                "updated",
-                0,
-                "rewritten; was: " + summary,
-                report,
-                len(golden.frames),
-                time.perf_counter() - t0,
-            )
-        return Outcome(
-            path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0
+    with staging(keep) as staged:
+        try:
+            golden = load(path)
+            record_to = tmp if update else staged.temp(".mcap") if staged is not None else None
+            new, result = _rerun_and_judge(golden, tolerances, record_to)
+            outcome = _verdict(path, golden, new, result, update=update, allow_error=allow_error)
+            if outcome.status == "updated":
+                os.replace(tmp, path)
+            elif staged is not None and outcome.status in KEPT:
+                outcome.kept = keep_recording(staged, golden, new, result, record_to)
+            outcome.seconds = time.perf_counter() - t0
+            return outcome
+        except TwinError as err:
+            return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+        finally:
+            tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+
+
+def _rerun_and_judge(golden: Recording, tolerances: Tolerances, record_to: Path | None):
+    """The golden re-run (recorded to record_to when given, as --update writes a golden) and the
+    verdict on it."""
+    from twin.record import open_recorders
+
+    recorded_sha, sha_now = (golden.run or {}).get("task_sha256"), _task_sha256_now(golden)
+    if record_to is not None:
+        run = dict(golden.run or {})
+        if sha_now not in (None, "missing"):
+            # the rewrite holds the task file's source as it is now
+            run["task_sha256"] = sha_now
+        with open_recorders(
+            golden.config,
+            run,
+            mcap_path=str(record_to),
+            rate=golden.rate_steps,
+            # the writer in this process: cheaper here than a recorder process of its own
+            # (recordings/README.md, Checking), and a Dask worker (daemonic) may start none
+            background=False,
+            engine=engine_versions(),
+        ) as sinks:
+            new, kinds = rerun(golden, sinks=sinks)
+    else:
+        new, kinds = rerun(golden)
+    result = judge(golden, new, tolerances, remade, source=golden, event_kinds=kinds)
+    if sha_now is not None and sha_now != recorded_sha:
+        result.notes.append(
+            f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
+            f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)"
         )
-    except TwinError as err:
-        return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
-    finally:
-        tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+    return new, result
+
+
+def _verdict(
+    path: str, golden: Recording, new: Recording, result, *, update: bool, allow_error: bool
+) -> Outcome:
+    """The Outcome of a judged re-run (its time is set by the caller)."""
+    report = render_text(result)
+    frames = len(golden.frames)
+    if result.match:
+        return Outcome(path, "match", 0, noise_summary(result), report, frames)
+    summary = first_line(result.first)
+    if result.floor is not None and allowance_text(result.first):
+        summary += ": " + allowance_text(result.first)
+    if update and new.outcome != "ok" and not allow_error:
+        why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
+        return Outcome(
+            path,
+            "refused",
+            1,
+            f"not rewritten: the re-run's task failed ({why}); the golden is "
+            "left as it was (--allow-error writes it anyway)",
+            report,
+            frames,
+        )
+    if update:
+        return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, frames)
+    return Outcome(path, "differ", 1, summary, report, frames)
 
 
 def _task_sha256_now(golden: Recording) -> str | None:
@@ -368,16 +383,20 @@ def check_all(
     progress: Callable[[Outcome], None] | None = None,
     allow_error: bool = False,
     run_many: Callable | None = None,
+    keep: dict[str, str] | None = None,
 ) -> list[Outcome]:
     """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which
     yields (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order
-    of paths."""
+    of paths. keep: DIR/NAME by golden (verify.keep.plan_keep), written by the process that checks
+    it."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     if run_many is None:
         run_many = _in_turn if jobs == 1 or len(paths) <= 1 else functools.partial(_in_pool, jobs)
     results: dict[str, Outcome] = {}
-    for i, outcome in run_many(check_one, [(p, tolerances, update, allow_error) for p in paths]):
+    keep = keep or {}
+    items = [(p, tolerances, update, allow_error, keep.get(p)) for p in paths]
+    for i, outcome in run_many(check_one, items):
         results[paths[i]] = outcome
         if progress:
             progress(outcome)

@@ -16,9 +16,10 @@ import pytest
 from twin.cli.main import main
 from twin.model.errors import ConfigError
 from twin.sweep import golden as golden_module
-from twin.sweep.golden import check_summary, judge, split_paths
+from twin.sweep.golden import check_summary, judge
 from twin.sweep.spec import load_spec
 from twin.sweep.stats import wilson
+from twin.verify.check import find_goldens
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
 DEFINITION = """\
@@ -84,6 +85,26 @@ def test_a_moved_statistic_is_exit_1_naming_it_and_by_how_much(golden, tmp_path,
     assert json.loads((tmp_path / "moved.summary.json").read_text()) == json.loads(
         (golden / "small.summary.json").read_text()
     )
+
+
+def test_keep_writes_the_report_and_the_new_summary_of_a_moved_sweep(golden, tmp_path, capsys):
+    definition = _copy(
+        golden,
+        tmp_path,
+        summary=lambda d: d["placement_error_mm"].update(p95=d["placement_error_mm"]["p95"] - 0.4),
+    )
+    keep = tmp_path / "K"
+    capsys.readouterr()
+    assert main(["check", str(definition), "--keep", str(keep)]) == 1
+    assert f"kept: {keep}/g.md, {keep}/g.summary.json" in capsys.readouterr().out
+    assert sorted(os.listdir(keep)) == ["g.md", "g.summary.json"]  # no results: not paired
+    # the new run's summary: the one the module's golden was written with
+    assert json.loads((keep / "g.summary.json").read_text()) == json.loads(
+        (golden / "small.summary.json").read_text()
+    )
+    report = (keep / "g.md").read_text()
+    assert report.startswith("# sweep golden g: differ\n")
+    assert "placement_error_mm.p95 moved +0.400 mm" in report and "success_rate" in report
 
 
 def test_judge_allows_moves_within_tolerance():
@@ -335,9 +356,9 @@ def test_a_fifo_is_refused_not_waited_on(golden, tmp_path):
     )
     os.mkfifo(tmp_path / "pipe.toml")
     with pytest.raises(ConfigError, match="'.*pipe.toml' is not a regular file"):
-        split_paths([str(tmp_path / "pipe.toml")])
+        find_goldens([str(tmp_path / "pipe.toml")])
     # a folder's FIFO is no definition: skipped
-    assert split_paths([str(tmp_path)]) == ([], [str(definition)])
+    assert _found(tmp_path) == ([], [str(definition)])
 
 
 def test_an_oversized_summary_is_refused(golden, tmp_path, capsys, monkeypatch):
@@ -423,35 +444,41 @@ base = "j1"
 """
 
 
+def _found(path) -> tuple[list[str], list[str]]:
+    """The .mcap and sweep goldens `twin check PATH` takes."""
+    goldens = find_goldens([str(path)])
+    return goldens.recordings, goldens.sweeps
+
+
 def test_a_folder_takes_only_its_sweep_definitions(golden, tmp_path, capsys):
     shutil.copytree(ROOT / "recordings" / "sweeps", tmp_path / "sweeps")
     (tmp_path / "sweeps" / "arm.toml").write_text(PROFILE)
     shipped = str(tmp_path / "sweeps" / "pick_place_jitter.toml")
     # the profile: skipped, silently
-    assert split_paths([str(tmp_path / "sweeps")]) == ([], [shipped])
+    assert _found(tmp_path / "sweeps") == ([], [shipped])
     (tmp_path / "recs").mkdir()
     # beside .mcap goldens: `twin check recordings`
     (tmp_path / "recs" / "arm.toml").write_text(PROFILE)
     (tmp_path / "recs" / "a.mcap").write_bytes(b"")
-    assert split_paths([str(tmp_path / "recs")]) == ([str(tmp_path / "recs")], [])
+    assert _found(tmp_path / "recs") == ([str(tmp_path / "recs" / "a.mcap")], [])
     with pytest.raises(
         ConfigError,
         match=r"^sweep definition '.*arm.toml' lacks task, scenarios, seed; expected a "
         r"sweep definition with task, scenarios, seed$",
     ):
-        split_paths([str(tmp_path / "recs" / "arm.toml")])  # named: must be one
+        find_goldens([str(tmp_path / "recs" / "arm.toml")])  # named: must be one
     (tmp_path / "sweeps" / "old.toml").write_text('task = "pick_place"\nscenarios = 3\n')
     (tmp_path / "sweeps" / "old.summary.json").write_text("{}")
     with pytest.raises(
         ConfigError, match=r"old.toml' \(beside old.summary.json\) lacks seed; expected"
     ):
         # a golden (its summary beside it) that is no definition: never skipped
-        split_paths([str(tmp_path / "sweeps")])
+        find_goldens([str(tmp_path / "sweeps")])
     (tmp_path / "sweeps" / "old.toml").write_text("task = \n")
     with pytest.raises(ConfigError, match="old.toml' .* is not valid TOML"):
-        split_paths([str(tmp_path / "sweeps")])
+        find_goldens([str(tmp_path / "sweeps")])
     (tmp_path / "sweeps" / "old.summary.json").unlink()
-    assert split_paths([str(tmp_path / "sweeps")]) == ([], [shipped])
+    assert _found(tmp_path / "sweeps") == ([], [shipped])
 
     # what the CLI does with it: the profile is not a golden, exit 0 (2 before)
     folder = tmp_path / "mixed"

@@ -6,6 +6,7 @@ the same whatever the executor or job count."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 
 import pyarrow as pa
@@ -121,6 +122,18 @@ def test_flips_both_ways_at_the_same_rate_are_named_and_fail_under_strict(golden
         == 0
     )  # the re-run the verdict names: that scenario, recorded
     assert (tmp_path / "again" / "failures" / f"scenario-{became_failed}.mcap").exists()
+
+
+def test_keep_writes_a_paired_sweep_s_results_too(golden, tmp_path, capsys):
+    definition, _, _ = _swap_two(golden, tmp_path, strict=True)
+    keep = tmp_path / "K"
+    assert main(["check", str(definition), "--keep", str(keep)]) == 1
+    assert sorted(os.listdir(keep)) == ["g.md", "g.results.parquet", "g.summary.json"]
+    # the new run's results: those the module's golden was written with, not the swapped ones
+    assert pq.read_table(keep / "g.results.parquet").equals(
+        pq.read_table(golden / "small.results.parquet")
+    )
+    assert "2 scenarios flipped" in (keep / "g.md").read_text()
 
 
 def test_the_significant_rule_names_the_flips_and_passes_a_balanced_change(

@@ -7,9 +7,11 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -236,3 +238,28 @@ def test_a_search_of_the_seeing_task_finds_a_wider_boundary(reach, tmp_path, cap
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([os.path.abspath(__file__), "-q"]))
+
+
+def test_keep_records_a_search_golden_that_now_behaves_otherwise(tmp_path, capsys):
+    """The shipped search golden, expected to pass: it differs (it still fails), and --keep leaves
+    its scenario recorded again and its report; the golden's own files stay as they were."""
+    shipped = Path(__file__).resolve().parents[2] / "recordings" / "search"
+    folder = tmp_path / "search"
+    folder.mkdir()
+    for suffix in (".toml", ".expect.json", ".mcap"):
+        shutil.copy(shipped / ("pick_place_reach" + suffix), folder)
+    expect = folder / "pick_place_reach.expect.json"
+    expect.write_text(json.dumps({**json.loads(expect.read_text()), "outcome": "ok"}))
+    before = {f: f.read_bytes() for f in folder.iterdir()}
+    keep = tmp_path / "K"
+    capsys.readouterr()
+    assert main(["check", str(folder), "--keep", str(keep)]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("checking 1 golden: 1 search\n") and "now fails: cycle 1:" in out
+    assert sorted(os.listdir(keep)) == ["pick_place_reach.mcap", "pick_place_reach.md"]
+    assert {f: f.read_bytes() for f in folder.iterdir()} == before
+    assert main(["info", str(keep / "pick_place_reach.mcap")]) == 0
+    assert "finalized: yes (run outcome error: cycle 1: suction on" in capsys.readouterr().out
+    report = (keep / "pick_place_reach.md").read_text()
+    assert report.startswith("# search golden pick_place_reach: differ\n")
+    assert "expected: ok" in report and "now:      error 'cycle 1: suction on" in report

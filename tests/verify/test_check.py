@@ -225,6 +225,6 @@ def test_check_bad_input(capsys, tmp_path):
     code, _, err = twin(capsys, "check", tmp_path / "none.mcap")
     assert code == 2 and "does not exist" in err
     code, _, err = twin(capsys, "check", tmp_path)
-    assert code == 2 and "holds no .mcap recordings" in err
+    assert code == 2 and "holds no goldens; expected .mcap recordings" in err
     code, _, err = twin(capsys, "check", tmp_path, "--jobs", "0")
     assert code == 2 and "--jobs/-j: '0' is not a whole number >= 1" in err

@@ -92,7 +92,9 @@ def test_goldens_made_here_are_bit_identical_without_numpys_simd_dispatch(local_
 def test_the_committed_goldens_pass_the_default_check_on_other_machines(machine):
     done = twin_cli("check", "-j", "2", cwd=ROOT, env=MACHINES[machine])
     assert done.returncode == 0, done.stdout + done.stderr
-    assert f"{len(GOLDENS)} match" in done.stdout
+    # every golden under recordings/: the .mcap files, the sweep and the search golden
+    assert done.stdout.startswith(f"checking {len(GOLDENS) + 2} goldens: {len(GOLDENS)} recordings")
+    assert f"\n{len(GOLDENS) + 2} match\n" in done.stdout
 
 
 # -- sensitivity: a user's task file, recorded on one machine, changed, checked on another ---------

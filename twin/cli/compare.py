@@ -6,6 +6,7 @@ Exit codes: 0 match, 1 mismatch, 2 unreadable or bad input, 3 runs not comparabl
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, whole_number
@@ -140,50 +141,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from twin.sweep.executors import make_executor
-    from twin.sweep.golden import check_sweep, split_paths
-    from twin.verify.check import Progress, check_all, exit_code, golden_paths, summary_table
+    from twin.verify.check import exit_code, find_goldens, summary_table
 
     tol = _tolerances(args)
     if args.junit and not args.junit.endswith(".xml"):
         raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
-    from twin.sweep.search_golden import check_search, split_search
+    if args.force and not args.keep:
+        raise ConfigError("--force replaces files in the --keep folder; expected --keep DIR too")
+    goldens = find_goldens(args.paths)
+    keep = None
+    if args.keep:
+        from twin.verify.keep import plan_keep
 
-    searches, rest = split_search(args.paths)  # recordings/search/NAME.toml with NAME.expect.json
-    recordings, sweeps = split_paths(rest)
-    paths = golden_paths(recordings) if recordings or not (sweeps or searches) else []
-    progress = Progress(len(paths) + len(sweeps) + len(searches))
-    executor = (
-        make_executor(args.executor, args.jobs, args.scheduler)
-        if sweeps or args.executor == "dask"
-        else None
-    )
-    try:
-        run_many = executor.map_unordered if args.executor == "dask" else None
-        outcomes = (
-            check_all(
-                paths,
-                tol,
-                update=args.update,
-                jobs=args.jobs,
-                progress=progress,
-                allow_error=args.allow_error,
-                run_many=run_many,
-            )
-            if paths
-            else []
-        )
-        # statistical goldens: each sweep spread over the executor's workers
-        for definition in sweeps:
-            outcomes.append(check_sweep(definition, executor, update=args.update))
-            progress(outcomes[-1])
-        # a failure found by `twin search`: does it still fail that way?
-        for definition in searches:
-            outcomes.append(check_search(definition, update=args.update))
-            progress(outcomes[-1])
-    finally:
-        if executor is not None:
-            executor.close()
+        keep = plan_keep(args.keep, goldens, force=args.force)  # before any work
+    print(goldens.count_line(), flush=True)
+    outcomes = _check_goldens(args, goldens, tol, keep)
     if args.junit:
         from twin.compare.report import render_check_junit
 
@@ -198,7 +170,56 @@ def cmd_check(args: argparse.Namespace) -> int:
     updated = [o.path for o in outcomes if o.status == "updated"]
     if updated:
         print("rewrote: " + ", ".join(updated))
+    kept = [os.path.join(args.keep, Path(f).name) for o in outcomes for f in o.kept]
+    if kept:
+        print("kept: " + ", ".join(kept))
     return exit_code(outcomes)
+
+
+def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep) -> list:
+    """Every golden checked: the recordings in --jobs processes (or on Dask), then each sweep
+    spread over the executor's workers, then each search golden; outcomes in that order."""
+    from twin.sweep.executors import make_executor
+    from twin.sweep.golden import check_sweep
+    from twin.sweep.search_golden import check_search
+    from twin.verify.check import Progress, check_all
+
+    keep = keep or {}
+    progress = Progress(len(goldens))
+    executor = (
+        make_executor(args.executor, args.jobs, args.scheduler)
+        if goldens.sweeps or args.executor == "dask"
+        else None
+    )
+    try:
+        outcomes = (
+            check_all(
+                goldens.recordings,
+                tol,
+                update=args.update,
+                jobs=args.jobs,
+                progress=progress,
+                allow_error=args.allow_error,
+                run_many=executor.map_unordered if args.executor == "dask" else None,
+                keep=keep,
+            )
+            if goldens.recordings
+            else []
+        )
+        # statistical goldens: each sweep spread over the executor's workers
+        for definition in goldens.sweeps:
+            outcomes.append(
+                check_sweep(definition, executor, update=args.update, keep=keep.get(definition))
+            )
+            progress(outcomes[-1])
+        # a failure found by `twin search`: does it still fail that way?
+        for definition in goldens.searches:
+            outcomes.append(check_search(definition, update=args.update, keep=keep.get(definition)))
+            progress(outcomes[-1])
+    finally:
+        if executor is not None:
+            executor.close()
+    return outcomes
 
 
 def add_compare_commands(sub: argparse._SubParsersAction) -> None:
@@ -230,16 +251,21 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)
 
+    _add_check_command(sub)
+
+
+def _add_check_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "check",
-        help="re-run every golden recording and compare (default: recordings/*.mcap); "
-        "sweep goldens (NAME.toml) are judged by statistics",
+        help="re-run every golden and compare (default: every golden under recordings/): "
+        "recordings field by field, sweep goldens by statistics, search goldens by outcome",
     )
     p.add_argument(
         "paths",
         nargs="*",
-        help="golden .mcap files or folders (default: recordings/), sweep definitions "
-        "NAME.toml with NAME.summary.json beside them, or folders of them (recordings/sweeps)",
+        help="golden .mcap files, sweep goldens (NAME.toml with NAME.summary.json beside it), "
+        "search goldens (NAME.toml with NAME.expect.json), or folders: every golden under a "
+        "folder, sub-folders included (default: recordings/)",
     )
     p.add_argument(
         "--update",
@@ -250,6 +276,23 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
         "--allow-error",
         action="store_true",
         help="with --update: also write a run whose task failed (its outcome stays error)",
+    )
+    p.add_argument(
+        "--keep",
+        default=None,
+        metavar="DIR",
+        help="for each golden that differs (or is refused), keep in DIR what shows why: an .mcap "
+        "golden's re-run DIR/NAME.mcap (the file --update would write), its report DIR/NAME.md "
+        "and diff view DIR/NAME.rrd; a sweep's report and new DIR/NAME.summary.json (and "
+        "NAME.results.parquet); a search golden's re-run and report. Nothing for a golden that "
+        "matches. NAME: the golden's stem (a__x, b__x for a/x.mcap and b/x.mcap). DIR is made if "
+        "missing, and may not lie in a folder being checked",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace files in the --keep folder (without it, a file --keep would write that "
+        "exists already is refused before any work)",
     )
     add_executor_options(p)
     p.add_argument(

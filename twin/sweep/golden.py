@@ -21,7 +21,6 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from stat import S_IMODE, S_ISREG
 
@@ -90,37 +89,19 @@ def _read_results(path: Path) -> tuple[paired.Side, dict]:
     return side, meta
 
 
-def split_paths(paths: Sequence[str]) -> tuple[list[str], list[str]]:
-    """The arguments of `twin check` split into what verify.check expands (.mcap files and folders
-    of them) and sweep definitions: a named .toml file (which must be one) and the .toml files of a
-    folder that are (task, scenarios and seed; a robot profile kept beside the goldens is not). A
-    folder without definitions goes to the first list as it is (so an empty one is still reported
-    there). A folder's .toml with NAME.summary.json beside it is a golden: one that is not a
-    definition is an error, never skipped."""
-    recordings, sweeps = [], []
-    for p in paths:
-        path = Path(p)
-        if p.endswith(".toml"):
-            problem = _not_a_definition(path)
-            if problem is not None:
-                raise ConfigError(f"sweep definition {p!r} {problem}")
-            sweeps.append(p)
-        elif path.is_dir():
-            found = []
-            for t in sorted(path.glob("*.toml")):
-                problem = _not_a_definition(t)
-                if problem is None:
-                    found.append(str(t))
-                elif summary_path(t).exists():
-                    raise ConfigError(
-                        f"sweep golden {str(t)!r} (beside {summary_path(t).name}) {problem}"
-                    )
-            sweeps += found
-            if not found or any(path.glob("*.mcap")):
-                recordings.append(p)
-        else:
-            recordings.append(p)
-    return recordings, sweeps
+def is_sweep_golden(path: str, *, named: bool) -> bool:
+    """Whether a .toml file is a sweep golden's definition (task, scenarios and seed). A file named
+    on the command line must be one: ConfigError saying why not. One found in a folder that is not
+    is skipped (a robot profile kept beside the goldens), unless NAME.summary.json beside it says
+    it is a golden: then it is an error, never skipped."""
+    problem = _not_a_definition(Path(path))
+    if problem is None:
+        return True
+    if named:
+        raise ConfigError(f"sweep definition {path!r} {problem}")
+    if summary_path(path).exists():
+        raise ConfigError(f"sweep golden {path!r} (beside {summary_path(path).name}) {problem}")
+    return False
 
 
 def _not_a_definition(path: Path) -> str | None:
@@ -198,9 +179,12 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
     return problems
 
 
-def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
+def check_sweep(
+    definition: str, executor, *, update: bool = False, keep: str | None = None
+) -> Outcome:
     """Re-run one sweep golden on executor and judge it; an Outcome as verify.check gives for a
-    recording. Paired when the golden keeps its results, else by its summary."""
+    recording. Paired when the golden keeps its results, else by its summary. keep (DIR/NAME): a
+    golden that differs leaves its report and the new run's summary (and results) there."""
     t0 = time.perf_counter()
     expected_path, scenarios_path = summary_path(definition), results_path(definition)
     try:
@@ -227,38 +211,59 @@ def check_sweep(definition: str, executor, *, update: bool = False) -> Outcome:
         else:
             problems, report, within = ["no golden summary yet"], _report(golden, new), ""
         seconds = time.perf_counter() - t0
-        if update:
-            wrote = []
-            if new != golden:
-                _write_atomically(expected_path, new)
-                wrote.append(expected_path.name)
-            if (
-                reference is None
-                or reference[1] != _meta(spec)
-                or not reference[0].table.equals(paired.side_from_table(new_table, "now").table)
-            ):
-                _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
-                wrote.append(scenarios_path.name)
-            if wrote:
-                was = "; ".join(problems) or "within tolerance"
-                return Outcome(
-                    definition,
-                    "updated",
-                    0,
-                    f"rewrote {', '.join(wrote)}; was: {was}",
-                    report,
-                    spec.scenarios,
-                    seconds,
-                )
-        if problems:
-            return Outcome(
-                definition, "differ", 1, "; ".join(problems), report, spec.scenarios, seconds
-            )
-        return Outcome(definition, "match", 0, within or "matches", report, spec.scenarios, seconds)
+        wrote = _update(spec, golden, new, reference, new_table, definition) if update else []
+        if wrote:
+            was = "; ".join(problems) or "within tolerance"
+            line = f"rewrote {', '.join(wrote)}; was: {was}"
+            return Outcome(definition, "updated", 0, line, report, spec.scenarios, seconds)
+        if not problems:
+            line = within or "matches"
+            return Outcome(definition, "match", 0, line, report, spec.scenarios, seconds)
+        line = "; ".join(problems)
+        outcome = Outcome(definition, "differ", 1, line, report, spec.scenarios, seconds)
+        if keep is not None:
+            outcome.kept = _keep(keep, outcome, new, new_table if reference is not None else None)
+        return outcome
     except TwinError as err:
         return Outcome(
             definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
         )
+
+
+def _update(spec, golden, new, reference, new_table, definition) -> list[str]:
+    """--update: the names of the golden's files rewritten, the summary and the results, each when
+    it changed at all."""
+    expected_path, scenarios_path = summary_path(definition), results_path(definition)
+    wrote = []
+    if new != golden:
+        _write_atomically(expected_path, new)
+        wrote.append(expected_path.name)
+    if (
+        reference is None
+        or reference[1] != _meta(spec)
+        or not reference[0].table.equals(paired.side_from_table(new_table, "now").table)
+    ):
+        _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
+        wrote.append(scenarios_path.name)
+    return wrote
+
+
+def _keep(base: str, outcome: Outcome, new: dict, new_table: pa.Table | None) -> list[str]:
+    """--keep for a sweep golden that differs: DIR/NAME.md (the report), the new run's
+    DIR/NAME.summary.json and, for a paired golden, DIR/NAME.results.parquet."""
+    from twin.verify.keep import outcome_markdown, staging
+
+    with staging(base) as staged:
+        staged.write_text(".md", outcome_markdown(outcome, f"sweep golden {Path(base).name}"))
+        staged.write_text(".summary.json", _summary_text(Path(base).name + ".summary.json", new))
+        if new_table is not None:
+            try:
+                pq.write_table(new_table, staged.temp(".results.parquet"))
+            except (OSError, pa.ArrowException) as err:
+                why = getattr(err, "strerror", None) or err
+                where = base + ".results.parquet"
+                raise ConfigError(f"cannot write {where!r}: {why}") from err
+        return staged.publish()
 
 
 def _judge_paired(
@@ -376,19 +381,25 @@ def _finite(value: object) -> bool:
 def _write_atomically(path: Path, data: dict) -> None:
     """Write the summary to a temporary file beside path and rename it into place: an interrupted
     --update leaves the old golden or the new one, never half of one."""
+    text = _summary_text(path.name, data)
+    _publish_atomically(path, lambda p: Path(p).write_text(text))
+
+
+def _summary_text(name: str, data: dict) -> str:
+    """A new summary's text, refused (ConfigError) with a non-finite number or over MAX_BYTES."""
     try:
         text = summary_text(data)
     except ValueError as err:  # a NaN or infinity from the task's placements
         raise ConfigError(
-            f"the new summary of {path.name} holds a non-finite number ({err}); not written"
+            f"the new summary of {name} holds a non-finite number ({err}); not written"
         ) from err
     if len(text.encode()) > MAX_BYTES:
         raise ConfigError(
-            f"the new summary of {path.name} would hold {len(text.encode())} bytes; "
+            f"the new summary of {name} would hold {len(text.encode())} bytes; "
             f"expected at most "
             f"{MAX_BYTES}; not written"
         )
-    _publish_atomically(path, lambda p: Path(p).write_text(text))
+    return text
 
 
 def _publish_atomically(path: Path, write) -> None:

@@ -12,7 +12,6 @@ import json
 import os
 import re
 import time
-from collections.abc import Sequence
 from pathlib import Path
 
 from twin.model.errors import ConfigError, RecordingError, TwinError
@@ -93,34 +92,9 @@ def _write(path: Path, text: str) -> None:
 
 
 def is_search_golden(path: Path) -> bool:
+    """A NAME.toml with NAME.expect.json beside it, wherever it lies (`twin check` takes it as a
+    search golden, and the NAME.mcap beside it as part of it)."""
     return path.suffix == ".toml" and expect_path(path).is_file()
-
-
-def split_search(paths: Sequence[str]) -> tuple[list[str], list[str]]:
-    """The arguments of `twin check` split into search goldens (a NAME.toml with NAME.expect.json
-    beside it, or a folder of them, such as recordings/search) and the rest, left as they were."""
-    searches, rest = [], []
-    for p in paths:
-        path = Path(p)
-        if path.is_file() and is_search_golden(path):
-            searches.append(p)
-        elif path.is_dir() and any(path.glob("*" + EXPECT_SUFFIX)):
-            found = sorted(str(t) for t in path.glob("*.toml") if is_search_golden(t))
-            names = {Path(t).stem for t in found}
-            others = [
-                f.name
-                for f in path.iterdir()
-                if f.suffix in (".toml", ".mcap") and f.stem not in names
-            ]
-            if others:
-                raise ConfigError(
-                    f"folder {p!r} holds search goldens and {others[0]!r}; expected search goldens "
-                    "in a folder of their own (or name each file)"
-                )
-            searches += found
-        else:
-            rest.append(p)
-    return searches, rest
 
 
 def read_expectation(definition: str) -> dict:
@@ -162,8 +136,9 @@ def verdict(expected: dict, outcome: str, error: str) -> tuple[str, str]:
     return "match", f"fails the same way: {error}"
 
 
-def check_search(definition: str, *, update: bool = False) -> Outcome:
-    """Run a search golden's scenario again and judge it against its expectation."""
+def check_search(definition: str, *, update: bool = False, keep: str | None = None) -> Outcome:
+    """Run a search golden's scenario again and judge it against its expectation. keep
+    (DIR/NAME): one that differs leaves its scenario recorded again and its report there."""
     t0 = time.perf_counter()
     try:
         spec = load_spec(definition)
@@ -196,16 +171,23 @@ def check_search(definition: str, *, update: bool = False) -> Outcome:
                 1,
                 time.perf_counter() - t0,
             )
-        return Outcome(
-            definition,
-            status,
-            0 if status == "match" else 1,
-            line,
-            report,
-            1,
-            time.perf_counter() - t0,
-        )
+        outcome = Outcome(definition, status, 0 if status == "match" else 1, line, report, 1)
+        if status == "differ" and keep is not None:
+            outcome.kept = _keep(keep, spec, outcome)
+        outcome.seconds = time.perf_counter() - t0
+        return outcome
     except TwinError as err:
         return Outcome(
             definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
         )
+
+
+def _keep(base: str, spec: SweepSpec, outcome: Outcome) -> list[str]:
+    """--keep for a search golden that differs: DIR/NAME.mcap (the scenario run and recorded once
+    more, as --update records it) and DIR/NAME.md (expected and now)."""
+    from twin.verify.keep import outcome_markdown, staging
+
+    with staging(base) as staged:
+        record_scenario(spec, staged.temp(".mcap"))
+        staged.write_text(".md", outcome_markdown(outcome, f"search golden {Path(base).name}"))
+        return staged.publish()

@@ -14,7 +14,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
@@ -120,84 +120,99 @@ class Outcome:
     report: str  # the full text report ("" on error)
     frames: int = 0
     seconds: float = 0.0
+    kept: list[str] = field(default_factory=list)  # the files --keep wrote for it
 
 
 def check_one(
-    path: str, tolerances: Tolerances, update: bool = False, allow_error: bool = False
+    path: str,
+    tolerances: Tolerances,
+    update: bool = False,
+    allow_error: bool = False,
+    keep: str | None = None,
 ) -> Outcome:
     """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a
-    run whose task failed unless allow_error (a crash is not a new golden)."""
-    from twin.record import open_recorders
+    run whose task failed unless allow_error (a crash is not a new golden). keep (DIR/NAME, from
+    verify.keep.plan_keep): a golden that differs or is refused leaves its re-run, report and diff
+    view there; one that matches leaves nothing."""
     from twin.record.mcap.reader import load
+    from twin.verify.keep import KEPT, keep_recording, staging
 
     t0 = time.perf_counter()
     tmp = Path(path).with_name(Path(path).name + ".tmp")
-    try:
-        golden = load(path)
-        recorded_sha, sha_now = (golden.run or {}).get("task_sha256"), _task_sha256_now(golden)
-        if update:
-            run = dict(golden.run or {})
-            if sha_now not in (None, "missing"):
-                # the rewrite holds the task file's source as it is now
-                run["task_sha256"] = sha_now
-            with open_recorders(
-                golden.config,
-                run,
-                mcap_path=str(tmp),
-                rate=golden.rate_steps,
-                engine=engine_versions(),
-            ) as sinks:
-                new, kinds = rerun(golden, sinks=sinks)
-        else:
-            new, kinds = rerun(golden)
-        result = judge(golden, new, tolerances, remade, source=golden, event_kinds=kinds)
-        if sha_now is not None and sha_now != recorded_sha:
-            result.notes.append(
-                f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
-                f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)"
-            )
-        report = render_text(result)
-        if result.match:
-            return Outcome(
-                path,
-                "match",
-                0,
-                headline(result),
-                report,
-                len(golden.frames),
-                time.perf_counter() - t0,
-            )
-        summary = headline(result)
-        if update and new.outcome != "ok" and not allow_error:
-            why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
-            return Outcome(
-                path,
-                "refused",
-                1,
-                f"not rewritten: the re-run's task failed ({why}); the golden is "
-                "left as it was (--allow-error writes it anyway)",
-                report,
-                len(golden.frames),
-                time.perf_counter() - t0,
-            )
-        if update:
-            os.replace(tmp, path)
-            return Outcome(
-                path,
-                "updated",
-                0,
-                "rewritten; was: " + summary,
-                report,
-                len(golden.frames),
-                time.perf_counter() - t0,
-            )
-        return Outcome(
-            path, "differ", 1, summary, report, len(golden.frames), time.perf_counter() - t0
+    with staging(keep) as staged:
+        try:
+            golden = load(path)
+            record_to = tmp if update else staged.temp(".mcap") if staged is not None else None
+            new, result = _rerun_and_judge(golden, tolerances, record_to)
+            outcome = _verdict(path, golden, new, result, update=update, allow_error=allow_error)
+            if outcome.status == "updated":
+                os.replace(tmp, path)
+            elif staged is not None and outcome.status in KEPT:
+                outcome.kept = keep_recording(staged, golden, new, result, record_to)
+            outcome.seconds = time.perf_counter() - t0
+            return outcome
+        except TwinError as err:
+            return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+        finally:
+            tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+
+
+def _rerun_and_judge(golden: Recording, tolerances: Tolerances, record_to: Path | None):
+    """The golden re-run (recorded to record_to when given, as --update writes a golden) and the
+    verdict on it."""
+    from twin.record import open_recorders
+
+    recorded_sha, sha_now = (golden.run or {}).get("task_sha256"), _task_sha256_now(golden)
+    if record_to is not None:
+        run = dict(golden.run or {})
+        if sha_now not in (None, "missing"):
+            # the rewrite holds the task file's source as it is now
+            run["task_sha256"] = sha_now
+        with open_recorders(
+            golden.config,
+            run,
+            mcap_path=str(record_to),
+            rate=golden.rate_steps,
+            # the writer in this process: cheaper here than a recorder process of its own
+            # (recordings/README.md, Checking), and a Dask worker (daemonic) may start none
+            background=False,
+            engine=engine_versions(),
+        ) as sinks:
+            new, kinds = rerun(golden, sinks=sinks)
+    else:
+        new, kinds = rerun(golden)
+    result = judge(golden, new, tolerances, remade, source=golden, event_kinds=kinds)
+    if sha_now is not None and sha_now != recorded_sha:
+        result.notes.append(
+            f"the task file {golden.run.get('task')!r} changed since the golden was recorded "
+            f"(sha256 {recorded_sha[:12]}... then, {sha_now[:12]}... now)"
         )
-    except TwinError as err:
-        return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
-    finally:
-        tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+    return new, result
+
+
+def _verdict(
+    path: str, golden: Recording, new: Recording, result, *, update: bool, allow_error: bool
+) -> Outcome:
+    """The Outcome of a judged re-run (its time is set by the caller)."""
+    report = render_text(result)
+    frames = len(golden.frames)
+    if result.match:
+        return Outcome(path, "match", 0, headline(result), report, frames)
+    summary = headline(result)
+    if update and new.outcome != "ok" and not allow_error:
+        why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
+        return Outcome(
+            path,
+            "refused",
+            1,
+            f"not rewritten: the re-run's task failed ({why}); the golden is "
+            "left as it was (--allow-error writes it anyway)",
+            report,
+            frames,
+        )
+    if update:
+        return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, frames)
+    return Outcome(path, "differ", 1, summary, report, frames)
 
 
 def _task_sha256_now(golden: Recording) -> str | None:
@@ -210,34 +225,113 @@ def _task_sha256_now(golden: Recording) -> str | None:
     return source_sha256(path) if path.is_file() else "missing"
 
 
-def golden_paths(paths: Sequence[str]) -> list[str]:
-    """Expand files and directories into .mcap goldens (sorted; *.obtained.mcap skipped), each file
-    once however it is named (`G`, `./G`, a folder holding it, a link): two checks of one golden
-    would race on its temporary file."""
+@dataclass
+class Goldens:
+    """The goldens one `twin check` takes, by kind, each in the order found, and the folders it
+    walked."""
+
+    recordings: list[str] = field(default_factory=list)  # .mcap goldens
+    sweeps: list[str] = field(default_factory=list)  # NAME.toml (NAME.summary.json beside it)
+    searches: list[str] = field(default_factory=list)  # NAME.toml with NAME.expect.json beside it
+    folders: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.recordings) + len(self.sweeps) + len(self.searches)
+
+    def count_line(self) -> str:
+        """`checking 15 goldens: 13 recordings, 1 sweep, 1 search` (kinds with none left out)."""
+        kinds = [
+            (len(self.recordings), "recording", "recordings"),
+            (len(self.sweeps), "sweep", "sweeps"),
+            (len(self.searches), "search", "searches"),
+        ]
+        parts = [f"{n} {one if n == 1 else many}" for n, one, many in kinds if n]
+        noun = "golden" if len(self) == 1 else "goldens"
+        return f"checking {len(self)} {noun}: " + ", ".join(parts)
+
+
+def find_goldens(paths: Sequence[str]) -> Goldens:
+    """The goldens named: a file as it is (a NAME.toml is a search golden when NAME.expect.json is
+    beside it, else a sweep definition, which it must be; anything else an .mcap golden), a folder
+    for every golden under it (walk_folder). None: recordings/. Each file once however it is named
+    (`G`, `./G`, a folder holding it, a link): two checks of one golden would race on its temporary
+    file."""
+    from twin.sweep.golden import is_sweep_golden
+    from twin.sweep.search_golden import is_search_golden
+
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
             raise ConfigError(
-                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass golden .mcap "
-                f"files or folders"
+                f"no {DEFAULT_DIR}/ directory in {os.getcwd()!r}; pass goldens (.mcap files, "
+                f"NAME.toml sweep or search goldens) or folders of them"
             )
         paths = [DEFAULT_DIR]
-    out: list[str] = []
+    out = Goldens()
     for p in paths:
         path = Path(p)
         if path.is_dir():
-            found = sorted(
-                str(f) for f in path.glob("*.mcap") if not f.name.endswith(".obtained.mcap")
-            )
-            if not found:
-                raise ConfigError(f"folder {p!r} holds no .mcap recordings")
-            out += found
+            found = walk_folder(p)
+            if not len(found):
+                raise ConfigError(
+                    f"folder {p!r} holds no goldens; expected .mcap recordings, sweep goldens "
+                    "(NAME.toml with NAME.summary.json) or search goldens (NAME.toml with "
+                    "NAME.expect.json) in it or a sub-folder"
+                )
+            out.recordings += found.recordings
+            out.sweeps += found.sweeps
+            out.searches += found.searches
+            out.folders.append(p)
+        elif p.endswith(".toml"):
+            if is_search_golden(path):
+                out.searches.append(p)
+            elif is_sweep_golden(p, named=True):  # else ConfigError: why it is no definition
+                out.sweeps.append(p)
         elif path.exists():
-            out.append(str(path))
+            out.recordings.append(p)
         else:
             raise ConfigError(
-                f"golden {p!r} does not exist; expected an .mcap file or a folder of them"
+                f"golden {p!r} does not exist; expected an .mcap file, a NAME.toml sweep or "
+                "search golden, or a folder of them"
             )
-    return _each_file_once(out)
+    out.recordings = _each_file_once(out.recordings)
+    out.sweeps, out.searches = _each_file_once(out.sweeps), _each_file_once(out.searches)
+    return out
+
+
+def walk_folder(folder: str) -> Goldens:
+    """Every golden under folder, sub-folders included (linked ones once; hidden ones and hidden
+    files skipped), sorted: .mcap recordings but `*.obtained.mcap` and the NAME.mcap of a search
+    golden; NAME.toml with NAME.expect.json beside it (a search golden); and the other sweep
+    definitions (a .toml with task, scenarios and seed; another .toml, such as a robot profile, is
+    skipped, unless NAME.summary.json beside it says it is a golden: an error). Leftovers of an
+    interrupted write (`.partial`, `.tmp`) are no .mcap or .toml files."""
+    from twin.sweep.golden import is_sweep_golden
+    from twin.sweep.search_golden import is_search_golden
+
+    out, seen = Goldens(), set()
+    for top, dirs, files in os.walk(folder, onerror=_unreadable, followlinks=True):
+        st = os.stat(top)
+        if (st.st_dev, st.st_ino) in seen:  # a link back up the tree: walked already
+            dirs[:] = []
+            continue
+        seen.add((st.st_dev, st.st_ino))
+        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+        for name in sorted(f for f in files if not f.startswith(".")):
+            path = Path(top) / name
+            if name.endswith(".toml"):
+                if is_search_golden(path):
+                    out.searches.append(str(path))
+                elif is_sweep_golden(str(path), named=False):
+                    out.sweeps.append(str(path))
+            elif name.endswith(".mcap") and not name.endswith(".obtained.mcap"):
+                beside = path.with_suffix(".toml")
+                if not (beside.is_file() and is_search_golden(beside)):
+                    out.recordings.append(str(path))
+    return out
+
+
+def _unreadable(err: OSError) -> None:
+    raise ConfigError(f"cannot read folder {err.filename!r}: {err.strerror or err}")
 
 
 def _each_file_once(paths: list[str]) -> list[str]:
@@ -287,16 +381,20 @@ def check_all(
     progress: Callable[[Outcome], None] | None = None,
     allow_error: bool = False,
     run_many: Callable | None = None,
+    keep: dict[str, str] | None = None,
 ) -> list[Outcome]:
     """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which
     yields (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order
-    of paths."""
+    of paths. keep: DIR/NAME by golden (verify.keep.plan_keep), written by the process that checks
+    it."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     if run_many is None:
         run_many = _in_turn if jobs == 1 or len(paths) <= 1 else functools.partial(_in_pool, jobs)
     results: dict[str, Outcome] = {}
-    for i, outcome in run_many(check_one, [(p, tolerances, update, allow_error) for p in paths]):
+    keep = keep or {}
+    items = [(p, tolerances, update, allow_error, keep.get(p)) for p in paths]
+    for i, outcome in run_many(check_one, items):
         results[paths[i]] = outcome
         if progress:
             progress(outcome)

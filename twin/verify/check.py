@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
+from twin.compare.identity import identity_summary
 from twin.compare.report import allowance_text, first_line, noise_summary, render_text
 from twin.compare.tolerances import Tolerances
 from twin.model.config import TwinConfig
@@ -162,7 +163,7 @@ def check_one(
                 path,
                 "match",
                 0,
-                noise_summary(result),
+                noise_summary(result) + identity_summary(result),
                 report,
                 len(golden.frames),
                 time.perf_counter() - t0,

@@ -112,15 +112,16 @@ def test_any_other_annotation_change_still_fails(carry, capsys):
 @pytest.mark.slow  # seconds: a copy of the package, `twin check` twice in child processes
 def test_a_comment_added_to_the_built_in_pick_place_passes_every_preset_but_exact(tmp_path):
     """`twin/tasks/pick_place.py` with a comment more, in a copy of the package (first on the
-    child's sys.path: its working directory), checks recordings/pick_place_mtb.mcap green (the
-    built-in task is resolved by name), and red under exact."""
+    child's sys.path: its working directory), checks recordings/pick_place_mtb.mcap green under
+    noise and tight (the built-in task is resolved by name), and red under exact."""
     shutil.copytree(ROOT / "twin", tmp_path / "twin", ignore=shutil.ignore_patterns("__pycache__"))
     task = tmp_path / "twin" / "tasks" / "pick_place.py"
     task.write_text(task.read_text() + "\n# one comment more: the same motion\n")
     shutil.copy(GOLDEN, tmp_path / GOLDEN.name)
-    done = twin_child("check", GOLDEN.name, cwd=tmp_path)
-    assert done.returncode == 0, done.stdout + done.stderr
-    assert "bit-identical; task source changed, behaviour identical" in done.stdout
+    for preset in ("noise", "tight"):
+        done = twin_child("check", "--tolerance", preset, GOLDEN.name, cwd=tmp_path)
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert "bit-identical; task source changed, behaviour identical" in done.stdout
     done = twin_child("check", "-v", "--tolerance", "exact", GOLDEN.name, cwd=tmp_path)
     assert done.returncode == 1, done.stdout + done.stderr
     assert "note: task source changed: task_start names the task" in done.stdout

@@ -121,7 +121,8 @@ def test_a_comment_added_to_the_built_in_pick_place_passes_every_preset_but_exac
     for preset in ("noise", "tight"):
         done = twin_child("check", "--tolerance", preset, GOLDEN.name, cwd=tmp_path)
         assert done.returncode == 0, done.stdout + done.stderr
-        assert "bit-identical; task source changed, behaviour identical" in done.stdout
+        # bit-identical here; within the noise floor on another libm
+        assert "; task source changed, behaviour identical\n" in done.stdout
     done = twin_child("check", "-v", "--tolerance", "exact", GOLDEN.name, cwd=tmp_path)
     assert done.returncode == 1, done.stdout + done.stderr
     assert "note: task source changed: task_start names the task" in done.stdout

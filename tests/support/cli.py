@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import socket
+import subprocess
 import sys
+from pathlib import Path
 
 from twin.cli import main
 
@@ -29,6 +32,23 @@ def twin(capsys, *argv) -> tuple[int, str, str]:
     code = main([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err
+
+
+def twin_child(
+    *args, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.CompletedProcess:
+    """`python -m twin ARGS` in a child process, with env added to this one's (one BLAS thread);
+    in cwd, which `-m` puts first on sys.path."""
+    full = {**os.environ, "OPENBLAS_NUM_THREADS": "1", **(env or {})}
+    return subprocess.run(
+        [sys.executable, "-m", "twin", *map(str, args)],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=full,
+        cwd=cwd,
+        timeout=600,
+    )
 
 
 def free_port() -> int:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.cli import twin_child as twin_cli
 from twin.record.mcap.reader import load
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,21 +28,6 @@ GOLDENS = sorted(
 BLAS_CORES = ("Prescott", "Haswell", "SkylakeX", "Zen")
 NO_FMA = {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA"}
 MACHINES = {"here": {}, "no-fma libm": NO_FMA, "SkylakeX BLAS": {"OPENBLAS_CORETYPE": "SkylakeX"}}
-
-
-def twin_cli(
-    *args, env: dict[str, str] | None = None, cwd: Path | None = None
-) -> subprocess.CompletedProcess:
-    full = {**os.environ, "OPENBLAS_NUM_THREADS": "1", **(env or {})}
-    return subprocess.run(
-        [sys.executable, "-m", "twin", *map(str, args)],
-        check=False,
-        capture_output=True,
-        text=True,
-        env=full,
-        cwd=cwd,
-        timeout=600,
-    )
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.compare.events import EventDiff, match_events
+from twin.compare.identity import IdentityDifference, identity_notes, set_identity_apart
 from twin.compare.metrics import (
     REVOLUTE,
     abs_error,
@@ -124,6 +125,7 @@ class DiffResult:
     floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
     # what changed, read from both runs (twin.compare.explain; None until explained)
     explanation: Explanation | None = None
+    identity: list[IdentityDifference] = field(default_factory=list)  # task_start's, apart
 
     @property
     def match(self) -> bool:
@@ -273,16 +275,9 @@ def compare(
     annotations_tol = tol["commands.annotations"]
     if floor is not None:
         annotations_tol = max(annotations_tol, floor.commands)
-    fields.append(
-        _command_stat(
-            g_parts[1],
-            c_parts[1],
-            annotations_tol,
-            dt_ns,
-            commands_until,
-            name="commands.annotations",
-        )
-    )
+    said, identities = set_identity_apart(g_parts[1], c_parts[1], tol["commands.annotations"] == 0)
+    fields.append(_command_stat(g_parts[1], said, annotations_tol, dt_ns, commands_until,
+                                name="commands.annotations"))
     task_tol = INF if floor is not None and floor.outcome_differs else tol["outcome.task"]
     fields.append(_task_stat(golden, candidate, task_tol, max(length), dt_ns))
     fields.extend(_count_stats(golden.events, candidate.events, scalar, max(length), dt_ns))
@@ -328,6 +323,7 @@ def compare(
         notes=notes,
         events_compared=tol.event_window_steps is not None,
         floor=floor,
+        identity=identities,
     )
     result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
     result.first_annotation = next(
@@ -335,6 +331,7 @@ def compare(
     )
     # annotations alone are still a difference, but never ahead of a physical one
     result.first = _first(fields, event_diffs, dt_ns, window) or result.first_annotation
+    result.notes += identity_notes(result.identity, result)
     if result.first is not None:
         result.likely_cause = likely_cause(
             golden.commands, result.first, golden.config.profile.joint_names

@@ -39,7 +39,8 @@ FIELDS: dict[str, tuple[str, str]] = {
         (
             "every annotation (an `event` Command: what the task said, such as "
             "task_start naming the task by its content's sha256), judged like commands.sequence "
-            "but reported apart from the first physical divergence"
+            "but reported apart from the first physical divergence; the task's identity in "
+            "task_start only at a tolerance of 0 (exact), with a note under the other presets"
         ),
     ),
     "outcome.task": (

@@ -1,0 +1,121 @@
+"""The task's identity in `task_start`, judged apart from what the task says.
+
+A task run says `task_start` first, and its message names the task: now the sha256 of its
+source file (`sha256:<hex>`, twin.tasks.task_identity); releases up to 2ffeb44 wrote the task's
+module instead (`twin.tasks.pick_place`, `twin_user_task_carry` for a file `carry.py`). So an
+edited comment changes that message, and so does an upgrade, while the robot does exactly the
+same. Only a tolerance of 0 on commands.annotations (`--tolerance exact`) judges the identity;
+every other verdict excuses it, with a note, and judges the rest of task_start (its step, its
+parameters) and every other annotation as before.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from twin.model.types import Command
+
+if TYPE_CHECKING:
+    from twin.compare.engine import DiffResult
+
+_SHA = re.compile(r"sha256:[0-9a-f]{64}")
+# a module (an earlier release), or module.qualname (a task function without a source file)
+_NAME = re.compile(r"[A-Za-z_]\w*(\.(<locals>|[A-Za-z_]\w*))*")
+
+
+@dataclass(frozen=True)
+class IdentityDifference:
+    """One task_start whose identity alone differs: annotation #index at step, as each run names
+    the task; judged: the verdict counts it (a tolerance of 0 on commands.annotations)."""
+
+    index: int
+    step: int
+    golden: str
+    candidate: str
+    judged: bool
+
+    @property
+    def cause(self) -> str:
+        g, c = (bool(_SHA.fullmatch(x)) for x in (self.golden, self.candidate))
+        if g and c:
+            return "task source changed"
+        if c:
+            return "recorded by an earlier release"
+        if g:
+            return "the candidate was recorded by an earlier release"
+        return "the task is named otherwise"
+
+    def describe(self) -> str:
+        return (
+            f"task_start names the task {_short(self.golden)} in the golden, "
+            f"{_short(self.candidate)} in the candidate"
+        )
+
+
+def is_identity(message: object) -> bool:
+    """Whether a task_start message is a task's identity, as some release wrote it."""
+    return isinstance(message, str) and bool(_SHA.fullmatch(message) or _NAME.fullmatch(message))
+
+
+def set_identity_apart(
+    golden: list[Command], candidate: list[Command], judged: bool
+) -> tuple[list[Command], list[IdentityDifference]]:
+    """The candidate's annotations, with the identity of each task_start paired (by index, as the
+    annotations are) with a golden task_start of another identity made the golden's, unless
+    judged; and those differences. Nothing else of a task_start changes: its step, body and
+    parameters compare as before."""
+    out, diffs = list(candidate), []
+    for i, (g, c) in enumerate(zip(golden, candidate, strict=False)):
+        if not (_task_start(g) and _task_start(c)):
+            continue
+        a, b = g.args.get("message"), c.args.get("message")
+        if a == b or not (is_identity(a) and is_identity(b)):
+            continue
+        diffs.append(IdentityDifference(i, g.step, a, b, judged))
+        if not judged:
+            out[i] = dataclasses.replace(c, args={**c.args, "message": a})
+    return out, diffs
+
+
+def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[str]:
+    """The report's note on each identity difference: why it differs, and whether the verdict
+    counted it."""
+    notes = []
+    for d in diffs:
+        if d.judged:
+            notes.append(
+                f"{d.cause}: {d.describe()}; a tolerance of 0 on commands.annotations (exact) "
+                "judges the task's identity, the other presets leave it out"
+            )
+        elif result.match:
+            how = "bit for bit" if _bit_identical(result) else "within the verdict"
+            notes.append(f"{d.cause}, behaviour identical ({how}): {d.describe()}")
+        else:
+            notes.append(f"{d.cause} (not judged; the differences reported are others): "
+                         f"{d.describe()}")
+    return notes
+
+
+def identity_summary(result: DiffResult) -> str:
+    """What a one-line summary of a match adds ("; recorded by an earlier release, behaviour
+    identical"), or ""."""
+    causes = dict.fromkeys(d.cause for d in result.identity if not d.judged)
+    return "".join(f"; {c}, behaviour identical" for c in causes) if result.match else ""
+
+
+def _task_start(c: Command) -> bool:
+    return c.kind == "event" and c.args.get("kind") == "task_start"
+
+
+def _short(identity: str) -> str:
+    if _SHA.fullmatch(identity):
+        return f"by its source's sha256 {identity[7:19]}..."
+    return f"{identity!r}"
+
+
+def _bit_identical(result: DiffResult) -> bool:
+    """Every frame field bit for bit the same (what the report's summary calls bit-identical)."""
+    return all(f.identical or not f.worst > 0 for f in result.fields if f.unit)

@@ -52,3 +52,25 @@ def test_free_text_and_other_annotations_are_what_a_task_says():
     other = Command(9, "event", {**placed.args, "message": "twin.b"})
     said, diffs = set_identity_apart([placed], [other], False)
     assert said == [other] and not diffs
+
+
+def _placed(message: str, error_m: float, step: int = 9) -> Command:
+    args = {"kind": "placed", "body": "box", "message": message}
+    return Command(step, "event", {**args, "data": {"cycle": 1, "error_m": error_m}})
+
+
+def test_an_earlier_release_s_wording_is_excused_but_not_its_numbers_or_steps():
+    """A golden of 2ffeb44 worded `placed` '0.00 mm' where this release says '0.000 mm': the
+    message is taken as the golden's; its data, step, kind and body still compare."""
+    golden = [_start("twin.tasks.pick_place"), _placed("placed 0.00 mm", 1e-7)]
+    now = [_start(SHA_B), _placed("placed 0.000 mm", 2e-3, step=10)]
+    said, diffs = set_identity_apart(golden, now, False)
+    assert said[1].args["message"] == "placed 0.00 mm"
+    assert said[1].args["data"]["error_m"] == 2e-3 and said[1].step == 10
+    assert diffs[0].reworded == 1 and "1 other annotation message worded" in diffs[0].describe()
+    # a source edited in this release: what the task says is judged as it is worded
+    said, diffs = set_identity_apart([_start(SHA_A), golden[1]], now, False)
+    assert said[1].args["message"] == "placed 0.000 mm" and diffs[0].reworded == 0
+    # exact judges everything
+    said, diffs = set_identity_apart(golden, now, True)
+    assert said == now and diffs[0].reworded == 0

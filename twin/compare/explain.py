@@ -176,7 +176,7 @@ def _annotation_change(a: Command, b: Command, nth: int = 0) -> str:
         Command(a.step, "data", a.args.get("data") or {}),
         Command(b.step, "data", b.args.get("data") or {}),
     )
-    if moved is not None:
+    if moved is not None and abs(moved[2] - moved[1]) > SAME_COMMAND:  # not last-bit noise
         return _number_change(subject, *moved, _NAMED_UNITS.get(moved[0].rsplit("_", 1)[-1], ""))
     if a.args.get("message") != b.args.get("message"):
         return f"{subject} {a.args.get('message')!r} -> {b.args.get('message')!r}"
@@ -373,9 +373,10 @@ def explain(golden: Recording, candidate: Recording, result: DiffResult) -> Expl
     parts = [change]
     if shift is not None:
         parts.append(("then " if shift.from_step > result.first.step else "") + shift.text())
-    parts += annotations[:MOST_ANNOTATIONS]
-    if len(annotations) > MOST_ANNOTATIONS:
-        parts.append(f"{len(annotations) - MOST_ANNOTATIONS} more annotations changed")
+    others = [a for a in annotations if a not in change]  # the first divergence says its own
+    parts += others[:MOST_ANNOTATIONS]
+    if len(others) > MOST_ANNOTATIONS:
+        parts.append(f"{len(others) - MOST_ANNOTATIONS} more annotations changed")
     if task_changed:
         parts.append("task file changed")
     parts += configuration

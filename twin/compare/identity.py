@@ -21,6 +21,7 @@ from twin.model.types import Command
 if TYPE_CHECKING:
     from twin.compare.engine import DiffResult
 
+EARLIER_RELEASE = "recorded by an earlier release"
 _SHA = re.compile(r"sha256:[0-9a-f]{64}")
 # a module (an earlier release), or module.qualname (a task function without a source file)
 _NAME = re.compile(r"[A-Za-z_]\w*(\.(<locals>|[A-Za-z_]\w*))*")
@@ -36,6 +37,7 @@ class IdentityDifference:
     golden: str
     candidate: str
     judged: bool
+    reworded: int = 0  # other annotations whose message the earlier release worded otherwise
 
     @property
     def cause(self) -> str:
@@ -43,16 +45,22 @@ class IdentityDifference:
         if g and c:
             return "task source changed"
         if c:
-            return "recorded by an earlier release"
+            return EARLIER_RELEASE
         if g:
             return "the candidate was recorded by an earlier release"
         return "the task is named otherwise"
 
     def describe(self) -> str:
-        return (
+        text = (
             f"task_start names the task {_short(self.golden)} in the golden, "
             f"{_short(self.candidate)} in the candidate"
         )
+        if self.reworded:
+            text += (
+                f"; {self.reworded} other annotation message{'s' if self.reworded > 1 else ''} "
+                "worded as that release did (their kind, step and data compared)"
+            )
+        return text
 
 
 def is_identity(message: object) -> bool:
@@ -66,7 +74,9 @@ def set_identity_apart(
     """The candidate's annotations, with the identity of each task_start paired (by index, as the
     annotations are) with a golden task_start of another identity made the golden's, unless
     judged; and those differences. Nothing else of a task_start changes: its step, body and
-    parameters compare as before."""
+    parameters compare as before. A golden an earlier release recorded also worded what its task
+    said in that release's words: then every annotation's message is the golden's too (its kind,
+    body, step and data still compare)."""
     out, diffs = list(candidate), []
     for i, (g, c) in enumerate(zip(golden, candidate, strict=False)):
         if not (_task_start(g) and _task_start(c)):
@@ -77,7 +87,24 @@ def set_identity_apart(
         diffs.append(IdentityDifference(i, g.step, a, b, judged))
         if not judged:
             out[i] = dataclasses.replace(c, args={**c.args, "message": a})
+    if not judged and any(d.cause == EARLIER_RELEASE for d in diffs):
+        out, reworded = _messages_as_the_golden_words_them(golden, out)
+        diffs = [dataclasses.replace(d, reworded=reworded) for d in diffs]
     return out, diffs
+
+
+def _messages_as_the_golden_words_them(
+    golden: list[Command], candidate: list[Command]
+) -> tuple[list[Command], int]:
+    """candidate with each annotation's message replaced by the golden's where the two are the
+    same annotation (index, kind and body) worded otherwise; and how many were."""
+    out, reworded = list(candidate), 0
+    for i, (g, c) in enumerate(zip(golden, candidate, strict=False)):
+        same = (g.args.get("kind"), g.args.get("body")) == (c.args.get("kind"), c.args.get("body"))
+        if same and not _task_start(g) and g.args.get("message") != c.args.get("message"):
+            out[i] = dataclasses.replace(c, args={**c.args, "message": g.args.get("message")})
+            reworded += 1
+    return out, reworded
 
 
 def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[str]:

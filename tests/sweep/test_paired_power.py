@@ -1,18 +1,26 @@
 """The power of the paired verdict (twin.sweep.power) against values computed another way: the
 verdict itself (paired.pair and paired.problems) over every outcome of a few scenarios, weighted by
 exact multinomial probabilities; McNemar's exact test (stats.mcnemar_exact) for the critical
-counts; a normal approximation at 100k scenarios; random draws."""
+counts; exact integer binomial sums for the one-way case; a normal approximation at 100k
+scenarios; random draws. Then what a user sees: `twin sweep compare` of 150 scenarios where 4 went
+ok -> failed, and the definition's success_drop_pct."""
 
 from __future__ import annotations
 
 import functools
+import json
 import math
+from fractions import Fraction
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 
+from twin.cli.main import main
+from twin.model.errors import ConfigError
 from twin.sweep import paired, power
+from twin.sweep.spec import SweepSpec
 from twin.sweep.stats import mcnemar_exact
 
 
@@ -84,6 +92,64 @@ def test_the_critical_counts_are_mcnemars():
     assert power.MIN_FLIPS == 6 and mcnemar_exact(6, 0) < 0.05 <= mcnemar_exact(5, 0)
 
 
+def one_way_exact(n: int, drop: Fraction) -> Fraction:
+    """P(Binomial(n, drop) >= 6) in fractions: 6 one-way flips are significant, 5 are not."""
+    return 1 - sum(math.comb(n, k) * drop**k * (1 - drop) ** (n - k) for k in range(6))
+
+
+def test_150_scenarios_cannot_see_a_drop_of_4_one_way_flips(tmp_path, capsys):
+    pct = power.detectable_drop_pct(150, 4)
+    assert pct > 100 * 4 / 150  # 2.67 points: below what 150 scenarios detect
+    drop = Fraction(pct).limit_denominator(10**12) / 100
+    assert one_way_exact(150, drop + Fraction(1, 10**8)) >= Fraction(4, 5)
+    assert one_way_exact(150, drop - Fraction(1, 10**8)) < Fraction(4, 5)
+    a, b = _folders(tmp_path, 150, 4, "[tolerance]\nsuccess_drop_pct = 2.67\n")
+    capsys.readouterr()
+    assert main(["sweep", "compare", str(a), str(b), "--report", str(tmp_path / "r.json"),
+                 "--fail-if-worse"]) == 0  # p = 0.125: not significant, so not failed
+    out = capsys.readouterr().out
+    assert "ok->failed 4, failed->ok 0" in out and "McNemar exact p = 0.125" in out
+    assert "detects drops of 5.3 points or more at 80 % power (150 scenarios, alpha 0.05)" in out
+    needed = power.scenarios_to_detect(2.67, 4 / 150)
+    assert (f"warning: success_drop_pct 2.67 is below the detectable drop (5.3 points at 80 % "
+            f"power with 150 scenarios): about {needed} scenarios would detect a 2.67-point drop"
+            in out)
+    assert "warning: the measured drop, 2.67 points, is beyond success_drop_pct 2.67" not in out
+    # a 2.67-point drop with no more flips than that (all one-way): its scenarios, exactly
+    assert one_way_exact(needed, Fraction(267, 10000)) >= Fraction(4, 5)
+    assert one_way_exact(needed - 1, Fraction(267, 10000)) < Fraction(4, 5)
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["detectable_drop_pct"] == pct and len(report["warnings"]) == 1
+    assert main(["sweep", "compare", str(a), str(b), "--report", str(tmp_path / "r.md")]) == 0
+    markdown = (tmp_path / "r.md").read_text()
+    assert "The verdict detects drops of 5.3 points or more at 80 % power" in markdown
+    assert "- warning: success_drop_pct 2.67 is below the detectable drop" in markdown
+
+
+def test_a_measured_drop_beyond_the_threshold_is_named_but_fails_only_if_significant(
+        tmp_path, capsys):
+    a, b = _folders(tmp_path, 150, 4, "[tolerance]\nsuccess_drop_pct = 2\n")
+    capsys.readouterr()
+    assert main(["sweep", "compare", str(a), str(b), "--fail-if-worse"]) == 0
+    assert ("warning: the measured drop, 2.67 points, is beyond success_drop_pct 2 but not "
+            "significant (McNemar exact p = 0.125): it does not fail the significant rule"
+            in capsys.readouterr().out)
+    a, b = _folders(tmp_path / "six", 150, 6, "[tolerance]\nsuccess_drop_pct = 2\n")
+    assert main(["sweep", "compare", str(a), str(b), "--fail-if-worse"]) == 1  # p = 0.031
+    assert "success rate dropped significantly" in capsys.readouterr().err
+
+
+def _folders(folder, n: int, worse: int, tolerance: str):
+    """Result folders a (reference) and b (new) of n scenarios, `worse` of them ok -> failed."""
+    for name, ok in (("a", [True] * n), ("b", [i >= worse for i in range(n)])):
+        (folder / name).mkdir(parents=True)
+        pq.write_table(_side(name, ok).table, folder / name / "results.parquet")
+        (folder / name / "sweep.toml").write_text(
+            f'task = "pick_place"\nseed = 1\nscenarios = {n}\n\n[vary]\n'
+            f'"box.x_m" = "normal(0.2, 0.012)"\n\n{tolerance}')
+    return folder / "a", folder / "b"
+
+
 def test_100k_scenarios_agree_with_the_normal_approximation_and_stay_fast():
     # 1 % of 100k flipped either way: (z 0.975 + z 0.8) sqrt(psi / n), about 0.0886 points
     pct = power.detectable_drop_pct(100_000, 1_000)
@@ -100,3 +166,23 @@ def test_random_draws_fail_the_verdict_as_often_as_the_power_says():
     draws = rng.multinomial(n, [(share + drop) / 2, (share - drop) / 2, 1 - share], size=4000)
     failed = [w > b and mcnemar_exact(int(w), int(b)) < 0.05 for w, b, _ in draws]
     assert np.mean(failed) == pytest.approx(0.8, abs=3 * math.sqrt(0.8 * 0.2 / 4000))
+
+
+def test_strict_detects_one_flip_and_the_threshold_warns_below_it():
+    p = _flipped(150, 0, 0)
+    assert power.detectable_text(150, p.detectable_drop_pct, "strict") == (
+        "detects a drop of one flip, 0.67 points (150 scenarios; strict: any flip fails)")
+    assert paired.warnings(p, "strict", 1.0) == []
+    [warning] = paired.warnings(p, "strict", 0.5)
+    assert warning == ("success_drop_pct 0.5 is below the detectable drop (one flip, 0.67 points "
+                       "with 150 scenarios): 200 scenarios would make one flip a 0.5-point drop")
+
+
+@pytest.mark.parametrize("value", [0, -1, 100.5, float("nan"), float("inf"), True, "3"])
+def test_success_drop_pct_is_points_above_0(value):
+    with pytest.raises(ConfigError) as err:
+        SweepSpec(task="pick_place", scenarios=10, tolerance={"success_drop_pct": value})
+    assert str(err.value).startswith(f"tolerance success_drop_pct = {value!r} is invalid; "
+                                     "expected the drop in success rate that matters, in "
+                                     "percentage points: a number > 0 and <= 100")
+    assert "\n" not in str(err.value)

@@ -10,7 +10,9 @@ from __future__ import annotations
 import functools
 import json
 import math
+import re
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -186,3 +188,15 @@ def test_success_drop_pct_is_points_above_0(value):
                                      "expected the drop in success rate that matters, in "
                                      "percentage points: a number > 0 and <= 100")
     assert "\n" not in str(err.value)
+
+
+def test_the_docs_table_of_scenarios_is_what_the_code_computes():
+    page = (Path(__file__).resolve().parents[2] / "docs" / "how-to" / "paired-sweeps.md")
+    block = page.read_text().split('title="measured: python tools/sweep_power.py table"')[1]
+    rows = re.findall(r"^ +([\d.]+)p +([\d.]+)% +(\d+) +([\d.]+) +[\d.]+$",
+                      block.split("```")[0], re.MULTILINE)
+    assert len(rows) == 9
+    for drop_pct, flipped_pct, scenarios, computed in rows:
+        share = float(flipped_pct) / 100
+        assert power.scenarios_to_detect(float(drop_pct), share) == int(scenarios)
+        assert f"{power.drop_power(int(scenarios), share, float(drop_pct) / 100):.3f}" == computed

@@ -13,16 +13,17 @@ verdict fails exactly when B <= m(d), the largest count with 2 P(Binomial(d, 1/2
 
     power(delta) = sum over d of P(D = d) P(Binomial(d, r) <= m(d)),
 
-summed over the d that hold all of D's probability but a tail far below 1e-20 (WINDOW standard
-deviations and SLACK counts either side of its mean). Both factors are exact binomial sums: m(d)
-by stepping Binomial(d, 1/2)'s distribution function from one d to the next (F(m; d+1) =
-F(m; d) - f(m; d) / 2), the second factor by the same step at r, taken for all d at once (a
-cumulative sum of its steps); the probabilities come from log-factorials. When r = 0 (every flip
-one-way) the verdict fails exactly when D >= MIN_FLIPS: power = P(D >= MIN_FLIPS).
+summed over the d within WINDOW standard deviations and SLACK counts of D's mean (what is left
+out held less than 1e-26 for n from 6 to 100k and psi from 1e-7 to 0.999). Both factors are
+exact binomial sums: m(d) by stepping Binomial(d, 1/2)'s distribution function from one d to the
+next (F(m; d+1) = F(m; d) - f(m; d) / 2), the second factor by the same step at r, taken for all
+d at once (a cumulative sum of its steps); the probabilities come from log-factorials. When
+r = 0 (every flip one-way) the verdict fails exactly when D >= MIN_FLIPS.
 
-The power grows with delta, so the detectable drop is found by bisection to BISECT_TOL, in
-percentage points. The cost is a few vector operations over the d window (about 24 standard
-deviations of D wide) per step: a 100k-scenario comparison with 1 % flips takes milliseconds.
+The power grows with delta, so the detectable drop is found by bisection (to BISECT_TOL, a share
+of the scenarios) and given in percentage points. Each step costs a few vector operations over
+the d window (about 24 standard deviations of D wide); m(d) is stepped once, in Python. The whole
+of detectable_drop_pct: 3 ms for 100k scenarios with 1 % flipped, 0.4 s for 10M with half.
 """
 
 from __future__ import annotations

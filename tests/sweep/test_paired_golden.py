@@ -15,6 +15,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from twin.cli.main import main
+from twin.sweep import power
 from twin.sweep.executors import make_executor
 from twin.sweep.golden import check_sweep
 
@@ -155,6 +156,39 @@ def test_the_significant_rule_names_the_flips_and_passes_a_balanced_change(
     capsys.readouterr()
     assert main(["check", str(definition)]) == 0
     assert "matches" in capsys.readouterr().out
+
+
+def test_the_verdict_says_the_drop_it_detects_and_warns_below_success_drop_pct(
+    golden, tmp_path, capsys
+):
+    (tmp_path / "g.toml").write_text(DEFINITION + "\n[tolerance]\nsuccess_drop_pct = 10\n")
+    for suffix in (".summary.json", ".results.parquet"):
+        shutil.copy(golden / f"small{suffix}", tmp_path / f"g{suffix}")
+    detects = (
+        f"detects drops of {power.points_text(power.detectable_drop_pct(20, 0))} points or more "
+        "at 80 % power (20 scenarios, alpha 0.05)"
+    )
+    warning = (
+        "warning: success_drop_pct 10 is below the detectable drop ("
+        f"{power.points_text(power.detectable_drop_pct(20, 0))} points at 80 % power with 20 "
+        f"scenarios): about {power.scenarios_to_detect(10, 0.0)} scenarios would detect a "
+        "10-point drop"
+    )
+    executor = make_executor("local", 2)
+    try:
+        outcome = check_sweep(str(tmp_path / "g.toml"), executor)
+    finally:
+        executor.close()
+    assert outcome.status == "match"  # a warning fails nothing
+    assert outcome.summary == f"matches; {detects}; {warning}"
+    assert f"\n  {detects}\n" in outcome.report and f"\n  {warning}\n" in outcome.report
+    (tmp_path / "strict").mkdir()
+    definition, _, _ = _swap_two(golden, tmp_path / "strict", strict=True)
+    capsys.readouterr()
+    assert main(["check", str(definition), "-v"]) == 1
+    strict = "detects a drop of one flip, 5.0 points (20 scenarios; strict: any flip fails)"
+    out = capsys.readouterr().out
+    assert f"\n  {strict}\n" in out and f"; {strict}\n" in out  # the report, the verdict
 
 
 def test_a_golden_without_results_checks_by_its_summary(golden, tmp_path, capsys):

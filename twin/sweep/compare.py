@@ -9,7 +9,7 @@ distribution, the rate) is named: it is what the comparison measures."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from twin.model.errors import ConfigError
@@ -83,6 +83,7 @@ class Comparison:
     differences: list[str]
     result: paired.Paired | paired.Unpaired
     problems: list[str]  # what makes B worse than A (--fail-if-worse)
+    warnings: list[str] = field(default_factory=list)  # said, failing nothing (paired.warnings)
 
     @property
     def is_paired(self) -> bool:
@@ -90,7 +91,7 @@ class Comparison:
 
     def as_dict(self) -> dict:
         return {**self.result.as_dict(), "definition_differences": self.differences,
-                "worse": self.problems}
+                "worse": self.problems, "warnings": self.warnings}
 
     def text(self) -> str:
         head = ("definitions differ in: " + "; ".join(self.differences) + "\n"
@@ -99,13 +100,15 @@ class Comparison:
                 else paired.unpaired_text(self.result))
         verdict = ("worse: " + "; ".join(self.problems) if self.problems
                    else "not worse beyond sampling noise")
-        return head + body + verdict + "\n"
+        warned = "".join(f"warning: {w}\n" for w in self.warnings)
+        return head + body + warned + verdict + "\n"
 
     def markdown(self) -> str:
         body = (paired.report_markdown(self.result, self.new.definition) if self.is_paired
                 else paired.unpaired_markdown(self.result))
         diffs = "\n".join(f"- {d}" for d in self.differences) or "- none"
         verdict = "\n".join(f"- {p}" for p in self.problems) or "- not worse beyond sampling noise"
+        verdict += "".join(f"\n- warning: {w}" for w in self.warnings)
         return f"{body}\n## Definitions differ in\n\n{diffs}\n\n## Verdict\n\n{verdict}\n"
 
 
@@ -126,10 +129,11 @@ def compare(a: Run, b: Run) -> Comparison:
                               "comparison)")
         shift = {**TOLERANCES, **a.spec.tolerance}["placement_shift_mm"]
         problems = paired.problems(result, "significant", shift)
+        warnings = paired.warnings(result, "significant", a.spec.tolerance.get("success_drop_pct"))
     else:
         result = paired.unpaired(a.side, b.side, why)
-        problems = paired.unpaired_problems(result)
-    return Comparison(a, b, diffs, result, problems)
+        problems, warnings = paired.unpaired_problems(result), []
+    return Comparison(a, b, diffs, result, problems, warnings)
 
 
 def write_report(comparison: Comparison, path: str) -> None:

@@ -29,7 +29,7 @@ import pyarrow.parquet as pq
 
 from twin.model.errors import ConfigError, TwinError
 from twin.model.json_values import load_json_text, load_toml_text
-from twin.sweep import paired
+from twin.sweep import paired, power
 from twin.sweep.results import summary, summary_text, table
 from twin.sweep.runner import run_sweep
 from twin.sweep.spec import SweepSpec, load_spec, prepare
@@ -202,8 +202,9 @@ def check_sweep(
             raise done.stopped_by
         new = summary(spec, done.rows)
         new_table = golden_table(spec, done.rows)
+        notes = []  # said after the verdict, failing nothing: what a paired verdict detects
         if reference is not None:
-            problems, report, within = _judge_paired(definition, spec, reference, new_table)
+            problems, report, within, notes = _judge_paired(definition, spec, reference, new_table)
             report += "\n" + _report(golden, new)
         elif golden is not None:
             problems, report = judge(golden, new, spec.tolerances()), _report(golden, new)
@@ -217,9 +218,9 @@ def check_sweep(
             line = f"rewrote {', '.join(wrote)}; was: {was}"
             return Outcome(definition, "updated", 0, line, report, spec.scenarios, seconds)
         if not problems:
-            line = within or "matches"
+            line = "; ".join([within or "matches", *notes])
             return Outcome(definition, "match", 0, line, report, spec.scenarios, seconds)
-        line = "; ".join(problems)
+        line = "; ".join(problems + notes)
         outcome = Outcome(definition, "differ", 1, line, report, spec.scenarios, seconds)
         if keep is not None:
             outcome.kept = _keep(keep, outcome, new, new_table if reference is not None else None)
@@ -268,10 +269,11 @@ def _keep(base: str, outcome: Outcome, new: dict, new_table: pa.Table | None) ->
 
 def _judge_paired(
     definition: str, spec: SweepSpec, reference: tuple[paired.Side, dict], new_table: pa.Table
-) -> tuple[list[str], str, str]:
-    """Problems, the report and a within-tolerance note ("" when nothing moved) of the new run
-    paired with the golden's results. Another seed or set of scenarios is a problem of its own:
-    those scenarios are not the same ones."""
+) -> tuple[list[str], str, str, list[str]]:
+    """Problems, the report, a within-tolerance note ("" when nothing moved) and the notes that
+    fail nothing (the drop the verdict detects, warnings) of the new run paired with the golden's
+    results. Another seed or set of scenarios is a problem of its own: those scenarios are not the
+    same ones."""
     side, meta = reference
     problems = []
     if meta["seed"] != spec.seed:
@@ -300,7 +302,12 @@ def _judge_paired(
         within = f"within tolerance ({rule}): {paired.flip_text(p)}; {paired.rate_text(p)}"
         if p.shift is not None:
             within += f"; paired placement shift median {p.shift[0]:+.3f} mm"
-    return problems, paired.report_text(p, definition), within
+    notes = [power.detectable_text(p.n, p.detectable_drop_pct, rule)]
+    notes += [f"warning: {w}" for w in
+              paired.warnings(p, rule, spec.tolerance.get("success_drop_pct"))]
+    report = paired.report_text(p, definition, rule)
+    report += "".join(f"  {note}\n" for note in notes[1:])
+    return problems, report, within, notes
 
 
 def _read(path: Path) -> dict:

@@ -10,7 +10,9 @@ What is reported (new minus reference throughout):
 - the paired difference in success rate with Newcombe's paired 95 % interval (stats.py);
 - McNemar's exact test on the flips;
 - the paired shift of the placement error: the median of the per-scenario differences with its
-  sign-test (order-statistic) 95 % interval, over the scenarios that placed in both runs.
+  sign-test (order-statistic) 95 % interval, over the scenarios that placed in both runs;
+- the smallest drop in success rate the verdict detects at this size (twin.sweep.power): at 80 %
+  power under "significant", one flip under "strict".
 
 `problems` turns a comparison into a verdict by a rule: "significant" (fail on a significant drop
 in success rate, McNemar p < ALPHA with more ok->failed, or a significant increase of the placement
@@ -32,12 +34,13 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from twin.model.errors import ConfigError
+from twin.sweep import power
 from twin.sweep.stats import mcnemar_exact, median_ci, newcombe_paired, newcombe_unpaired, wilson
 
 RESULT_COLUMNS = ("scenario", "outcome", "error", "placement_error_mm")
 NOT_VARIED = frozenset((*RESULT_COLUMNS, "seed", "attach", "release", "break", "suction_empty",
                         "sim_s", "wall_s"))
-ALPHA = 0.05  # the significance level of the "significant" rule (intervals are 95 %)
+ALPHA = power.ALPHA  # the significance level of the "significant" rule (intervals are 95 %)
 RULES = ("significant", "strict")
 LISTED = 20  # flips named one by one in a report; the rest are counted
 MAX_RESULTS_BYTES = 2**30  # a results file read for pairing: 10M scenarios fit
@@ -147,6 +150,8 @@ class Paired:
     moved: np.ndarray | None = None  # per common scenario: new - reference placement (NaN: none)
     common: np.ndarray | None = None  # the common scenario numbers
     flip_kind: np.ndarray | None = None  # per common scenario: -1 worse, +1 better, 0 unchanged
+    # the smallest drop (percentage points) "significant" finds at 80 % power (None: n < 6)
+    detectable_drop_pct: float | None = None
 
     @property
     def reference_rate(self) -> float:
@@ -164,6 +169,7 @@ class Paired:
                "ok_to_failed": self.worse, "failed_to_ok": self.better,
                "difference": self.difference, "newcombe_paired95": list(self.interval),
                "mcnemar_exact_p": self.mcnemar_p,
+               "detectable_drop_pct": self.detectable_drop_pct,
                "placement_shift_mm": None if self.shift is None else {
                    "median": self.shift[0], "ci95": [self.shift[1], self.shift[2]],
                    "method": "sign-test order statistics", "count": self.shift_count},
@@ -210,7 +216,7 @@ def pair(reference: Side, new: Side) -> Paired:
         largest, values_moved,
         _flips(reference, new, ir, inew, np.flatnonzero(worse_mask)[:LISTED]),
         _flips(reference, new, ir, inew, np.flatnonzero(better_mask)[:LISTED]),
-        moved, common, kind)
+        moved, common, kind, power.detectable_drop_pct(n, worse + better))
 
 
 def _differs(a: pa.ChunkedArray, b: pa.ChunkedArray) -> int:
@@ -258,6 +264,25 @@ def problems(p: Paired, rule: str, shift_mm: float) -> list[str]:
     return out
 
 
+def warnings(p: Paired, rule: str, success_drop_pct: float | None) -> list[str]:
+    """What the verdict says without failing, one line each: the drop the definition cares about
+    (success_drop_pct, points) when it is below what the verdict detects, and a measured drop
+    beyond it that "significant" does not fail (not significant: it may be the flips' noise)."""
+    if success_drop_pct is None or p.n == 0:
+        return []
+    out = []
+    warning = power.threshold_warning(success_drop_pct, p.n, p.worse + p.better,
+                                      p.detectable_drop_pct, rule)
+    if warning:
+        out.append(warning)
+    measured_pct = -100.0 * p.difference
+    if rule != "strict" and measured_pct > success_drop_pct and p.mcnemar_p >= ALPHA:
+        out.append(f"the measured drop, {measured_pct:.2f} points, is beyond success_drop_pct "
+                   f"{success_drop_pct:g} but not significant (McNemar exact p = "
+                   f"{p.mcnemar_p:.3g}): it does not fail the significant rule")
+    return out
+
+
 def rate_text(p: Paired) -> str:
     lo, hi = p.interval
     return (f"{100 * p.reference_rate:.2f} % -> {100 * p.new_rate:.2f} %, paired difference "
@@ -298,7 +323,7 @@ def _mm(v: float | None) -> str:
     return "none" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.2f} mm"
 
 
-def report_text(p: Paired, definition: str | None = None) -> str:
+def report_text(p: Paired, definition: str | None = None, rule: str = "significant") -> str:
     """The paired comparison as text (twin check -v, twin sweep compare)."""
     lines = [f"paired on {p.n} scenarios: reference {p.reference}, new {p.new}"]
     if p.only_reference or p.only_new:
@@ -307,6 +332,7 @@ def report_text(p: Paired, definition: str | None = None) -> str:
     lines.append(f"  ok->failed {p.worse}, failed->ok {p.better}, unchanged "
                  f"{p.both_ok + p.neither_ok} ({p.both_ok} ok, {p.neither_ok} failed in both)")
     lines.append(f"  success rate {rate_text(p)}")
+    lines.append(f"  {power.detectable_text(p.n, p.detectable_drop_pct, rule)}")
     if p.shift is not None:
         med, lo, hi = p.shift
         lines.append(f"  placement error, paired shift (new - reference) over {p.shift_count} "
@@ -333,7 +359,7 @@ def report_text(p: Paired, definition: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def report_markdown(p: Paired, definition: str | None = None) -> str:
+def report_markdown(p: Paired, definition: str | None = None, rule: str = "significant") -> str:
     lo, hi = p.interval
     rows = [("scenarios paired", str(p.n)),
             ("success rate", f"{100 * p.reference_rate:.2f} % -> {100 * p.new_rate:.2f} %"),
@@ -345,7 +371,8 @@ def report_markdown(p: Paired, definition: str | None = None) -> str:
         rows.append(("placement shift, median (95 %, sign test)",
                      f"{p.shift[0]:+.3f} mm ({p.shift[1]:+.3f} to {p.shift[2]:+.3f})"))
     lines = [f"# Paired comparison: {p.new} vs {p.reference}", "", "| statistic | value |",
-             "|---|---|", *(f"| {a} | {b} |" for a, b in rows), ""]
+             "|---|---|", *(f"| {a} | {b} |" for a, b in rows), "",
+             f"The verdict {power.detectable_text(p.n, p.detectable_drop_pct, rule)}.", ""]
     for title, flips, count, before in (("ok -> failed", p.worse_flips, p.worse, False),
                                         ("failed -> ok", p.better_flips, p.better, True)):
         if not count:

@@ -38,6 +38,8 @@ TOLERANCES = {
     "placement_shift_mm": 0.5,  # a paired golden (NAME.results.parquet): twin.sweep.paired
 }
 PAIRED_RULES = ("significant", "strict")  # tolerance `paired`: a paired golden's verdict rule
+# tolerance `success_drop_pct` (optional, no default): the drop in success rate, in percentage
+# points, that a paired verdict should detect; a warning (twin.sweep.power) when it cannot
 
 
 @dataclass(frozen=True)
@@ -92,17 +94,20 @@ class SweepSpec:
                         '"significant" or "strict"'
                     )
                 continue
-            if (
-                name not in TOLERANCES
-                or isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not math.isfinite(value)
-                or value < 0
-            ):  # a NaN tolerance would pass any move
+            if name == "success_drop_pct":
+                if not _number(value) or not 0 < value <= 100:
+                    raise ConfigError(
+                        f"tolerance success_drop_pct = {value!r:.60} is invalid; expected the "
+                        "drop in success rate that matters, in percentage points: a number "
+                        "> 0 and <= 100"
+                    )
+                continue
+            if name not in TOLERANCES or not _number(value) or value < 0:
+                # a NaN tolerance would pass any move
                 raise ConfigError(
                     f"tolerance {name} = {value!r:.60} is invalid; expected one of "
                     f"{', '.join(TOLERANCES)} = a finite number >= 0 (mm), "
-                    'or paired = "significant" or "strict"'
+                    'success_drop_pct = percentage points, or paired = "significant" or "strict"'
                 )
 
     def tolerances(self) -> dict[str, float]:
@@ -152,6 +157,13 @@ def prepare(spec: SweepSpec) -> Prepared:
         check_dist(key, dist, config, fn)
         keys.append((key, dist))
     return Prepared(spec, fn, config, tuple(keys))
+
+
+def _number(value: object) -> bool:
+    """A finite int or float (not a bool)."""
+    return (
+        isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    )
 
 
 def parse_vary(texts: list[str]) -> tuple[tuple[str, str], ...]:

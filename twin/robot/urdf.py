@@ -3,6 +3,7 @@ user's URDF (links may use STL meshes)."""
 
 from __future__ import annotations
 
+import functools
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -187,19 +188,70 @@ def urdf_from_profile(profile: RobotProfile) -> str:
     """A URDF of the profile's SCARA built from boxes and cylinders (aluminium links), in the
     profile's joint conventions: link 1 along shoulder_zero_rad at zero, each axis turned by its
     sign, cyclic revolute joints continuous."""
-    p = profile
-    s1, s2, s3, s4 = p.axis_signs
-    revolute = "continuous" if p.revolute_cyclic else "revolute"
-    l1, l2 = p.link1_m, p.link2_m
+    parts = [
+        f'<?xml version="1.0"?>\n<robot name="{profile.name}">\n',
+        *_shoulder_parts(profile),
+        *_elbow_parts(profile),
+        *_quill_and_pad_parts(profile),
+        "</robot>\n",
+    ]
+    return "".join(parts)
+
+
+def _revolute(p: RobotProfile) -> dict:
+    """What the three revolute joints share: their kind, effort and velocity."""
+    return {
+        "kind": "continuous" if p.revolute_cyclic else "revolute",
+        "effort": p.revolute_max_torque_nm,
+        "velocity": p.revolute_max_velocity_rad_s,
+    }
+
+
+def _shoulder_parts(p: RobotProfile) -> list[str]:
+    """The base, the shoulder joint and link 1 (a hollow aluminium box, 25 % fill)."""
     h1 = p.elbow_height_m - p.shoulder_height_m
-    h2 = 0.04
-    limits = p.joint_limits()
-    n1, n2, n3, n4 = p.joint_names
-    m_base = 8.0
-    # hollow section: 25 % fill
+    l1, m_base = p.link1_m, 8.0
     m1 = ALUMINIUM_KG_M3 * (l1 + LINK_WIDTH_M) * LINK_WIDTH_M * h1 * 0.25
+    base_centre = (0.0, 0.0, p.shoulder_height_m / 2)
+    lower, upper = p.joint_limits()[0]
+    return [
+        _link(
+            name="MTB_base",
+            geom=f'<cylinder radius="{_f(BASE_RADIUS_M)}" length="{_f(p.shoulder_height_m)}"/>',
+            origin_xyz=base_centre,
+            mass=m_base,
+            inertia=_cyl_inertia(m_base, BASE_RADIUS_M, p.shoulder_height_m),
+            inertial_xyz=base_centre,
+            rgba="0.3 0.3 0.35 1",
+        ),
+        _joint(
+            name=p.joint_names[0],
+            parent="MTB_base",
+            child="MTB_link1",
+            xyz=(0.0, 0.0, p.shoulder_height_m),
+            axis=_axis(p.axis_signs[0]),
+            lower=lower,
+            upper=upper,
+            yaw_rad=p.shoulder_zero_rad,
+            **_revolute(p),
+        ),
+        _link(
+            name="MTB_link1",
+            geom=f'<box size="{_f(l1 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h1)}"/>',
+            origin_xyz=(l1 / 2, 0.0, h1 / 2),
+            mass=m1,
+            inertia=_box_inertia(m1, l1 + LINK_WIDTH_M, LINK_WIDTH_M, h1),
+            inertial_xyz=(l1 / 2, 0.0, h1 / 2),
+            rgba="0.9 0.5 0.1 1",
+        ),
+    ]
+
+
+def _elbow_parts(p: RobotProfile) -> list[str]:
+    """The elbow joint and link 2: the arm (a hollow box) on a hub that rises to it, one inertia."""
+    h1, h2 = p.elbow_height_m - p.shoulder_height_m, 0.04
+    l2, hub_r = p.link2_m, LINK_WIDTH_M / 2
     m2 = ALUMINIUM_KG_M3 * (l2 + LINK_WIDTH_M) * LINK_WIDTH_M * h2 * 0.25
-    hub_r = LINK_WIDTH_M / 2
     m_hub = ALUMINIUM_KG_M3 * math.pi * hub_r**2 * LINK2_RISE_M * 0.25
     arm2_centre = (l2 / 2, 0.0, LINK2_RISE_M + h2 / 2)
     hub_centre = (0.0, 0.0, LINK2_RISE_M / 2)
@@ -209,114 +261,89 @@ def urdf_from_profile(profile: RobotProfile) -> str:
             (m_hub, hub_centre, _cyl_inertia(m_hub, hub_r, LINK2_RISE_M)),
         ]
     )
-    m3 = ALUMINIUM_KG_M3 * math.pi * QUILL_RADIUS_M**2 * QUILL_LENGTH_M
-    pad_offset = pad_root_height_m(p) - p.elbow_height_m  # axis4 above the Z joint's frame
-    pad_h = p.pad_length_m
-    pad_inertia = _cyl_inertia(PAD_MASS_KG, PAD_RADIUS_M, pad_h)
-    parts = [
-        f'<?xml version="1.0"?>\n<robot name="{p.name}">\n',
-        _link(
-            "MTB_base",
-            f'<cylinder radius="{_f(BASE_RADIUS_M)}" length="{_f(p.shoulder_height_m)}"/>',
-            (0.0, 0.0, p.shoulder_height_m / 2),
-            m_base,
-            _cyl_inertia(m_base, BASE_RADIUS_M, p.shoulder_height_m),
-            (0.0, 0.0, p.shoulder_height_m / 2),
-            "0.3 0.3 0.35 1",
-        ),
+    lower, upper = p.joint_limits()[1]
+    return [
         _joint(
-            n1,
-            revolute,
-            "MTB_base",
-            "MTB_link1",
-            (0.0, 0.0, p.shoulder_height_m),
-            _axis(s1),
-            *limits[0],
-            p.revolute_max_torque_nm,
-            p.revolute_max_velocity_rad_s,
-            p.shoulder_zero_rad,
+            name=p.joint_names[1],
+            parent="MTB_link1",
+            child="MTB_link2",
+            xyz=(p.link1_m, 0.0, h1),
+            axis=_axis(p.axis_signs[1]),
+            lower=lower,
+            upper=upper,
+            **_revolute(p),
         ),
         _link(
-            "MTB_link1",
-            f'<box size="{_f(l1 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h1)}"/>',
-            (l1 / 2, 0.0, h1 / 2),
-            m1,
-            _box_inertia(m1, l1 + LINK_WIDTH_M, LINK_WIDTH_M, h1),
-            (l1 / 2, 0.0, h1 / 2),
-            "0.9 0.5 0.1 1",
-        ),
-        _joint(
-            n2,
-            revolute,
-            "MTB_link1",
-            "MTB_link2",
-            (l1, 0.0, h1),
-            _axis(s2),
-            *limits[1],
-            p.revolute_max_torque_nm,
-            p.revolute_max_velocity_rad_s,
-        ),
-        _link(
-            "MTB_link2",
-            f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
-            arm2_centre,
-            link2_mass,
-            link2_inertia,
-            link2_com,
-            "0.9 0.6 0.2 1",
+            name="MTB_link2",
+            geom=f'<box size="{_f(l2 + LINK_WIDTH_M)} {_f(LINK_WIDTH_M)} {_f(h2)}"/>',
+            origin_xyz=arm2_centre,
+            mass=link2_mass,
+            inertia=link2_inertia,
+            inertial_xyz=link2_com,
+            rgba="0.9 0.6 0.2 1",
             extra_parts=(
                 (f'<cylinder radius="{_f(hub_r)}" length="{_f(LINK2_RISE_M)}"/>', hub_centre),
             ),
             inertial_rpy=link2_rpy,
         ),
+    ]
+
+
+def _quill_and_pad_parts(p: RobotProfile) -> list[str]:
+    """The Z joint and its quill (link 3), the wrist joint and the suction pad."""
+    m3 = ALUMINIUM_KG_M3 * math.pi * QUILL_RADIUS_M**2 * QUILL_LENGTH_M
+    pad_offset = pad_root_height_m(p) - p.elbow_height_m  # axis4 above the Z joint's frame
+    pad_h = p.pad_length_m
+    pad_inertia = _cyl_inertia(PAD_MASS_KG, PAD_RADIUS_M, pad_h)
+    limits = p.joint_limits()
+    quill_centre = (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2)
+    return [
         _joint(
-            n3,
-            "prismatic",
-            "MTB_link2",
-            "MTB_link3",
-            (l2, 0.0, 0.0),
-            _axis(-s3),
-            *limits[2],
-            p.prismatic_max_force_n,
-            p.prismatic_max_velocity_m_s,
+            name=p.joint_names[2],
+            kind="prismatic",
+            parent="MTB_link2",
+            child="MTB_link3",
+            xyz=(p.link2_m, 0.0, 0.0),
+            axis=_axis(-p.axis_signs[2]),
+            lower=limits[2][0],
+            upper=limits[2][1],
+            effort=p.prismatic_max_force_n,
+            velocity=p.prismatic_max_velocity_m_s,
         ),
         _link(
-            "MTB_link3",
-            f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',
-            (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2),
-            m3,
-            _cyl_inertia(m3, QUILL_RADIUS_M, QUILL_LENGTH_M),
-            (0.0, 0.0, pad_offset + QUILL_LENGTH_M / 2),
-            "0.7 0.7 0.75 1",
+            name="MTB_link3",
+            geom=f'<cylinder radius="{_f(QUILL_RADIUS_M)}" length="{_f(QUILL_LENGTH_M)}"/>',
+            origin_xyz=quill_centre,
+            mass=m3,
+            inertia=_cyl_inertia(m3, QUILL_RADIUS_M, QUILL_LENGTH_M),
+            inertial_xyz=quill_centre,
+            rgba="0.7 0.7 0.75 1",
         ),
         _joint(
-            n4,
-            revolute,
-            "MTB_link3",
-            "suctionPad",
-            (0.0, 0.0, pad_offset),
-            _axis(s4),
-            *limits[3],
-            p.revolute_max_torque_nm,
-            p.revolute_max_velocity_rad_s,
+            name=p.joint_names[3],
+            parent="MTB_link3",
+            child="suctionPad",
+            xyz=(0.0, 0.0, pad_offset),
+            axis=_axis(p.axis_signs[3]),
+            lower=limits[3][0],
+            upper=limits[3][1],
+            **_revolute(p),
         ),
         # The pad's inertial frame sits at its root so a held object's constraint frame is simple.
         _link(
-            "suctionPad",
-            f'<cylinder radius="{_f(PAD_RADIUS_M)}" length="{_f(pad_h)}"/>',
-            (0.0, 0.0, -pad_h / 2),
-            PAD_MASS_KG,
-            (
+            name="suctionPad",
+            geom=f'<cylinder radius="{_f(PAD_RADIUS_M)}" length="{_f(pad_h)}"/>',
+            origin_xyz=(0.0, 0.0, -pad_h / 2),
+            mass=PAD_MASS_KG,
+            inertia=(
                 pad_inertia[0] + PAD_MASS_KG * (pad_h / 2) ** 2,
                 pad_inertia[1] + PAD_MASS_KG * (pad_h / 2) ** 2,
                 pad_inertia[2],
             ),
-            (0.0, 0.0, 0.0),
-            "0.1 0.1 0.1 1",
+            inertial_xyz=(0.0, 0.0, 0.0),
+            rgba="0.1 0.1 0.1 1",
         ),
-        "</robot>\n",
     ]
-    return "".join(parts)
 
 
 def urdf_text(profile: RobotProfile) -> str:
@@ -439,21 +466,7 @@ def profile_from_urdf(
     by_child = {
         j.find("child").get("link"): j for j in root.findall("joint") if j.find("child") is not None
     }
-
-    def world_origin(link: str) -> tuple[float, float, float]:
-        x = y = z = 0.0
-        while link in by_child:
-            j = by_child[link]
-            origin = j.find("origin")
-            if origin is not None and any(abs(v) > 1e-12 for v in vector3(origin, "rpy")):
-                raise ConfigError(
-                    f"URDF joint {j.get('name')!r} has a rotated origin; expected rpy 0 0 0"
-                )
-            dx, dy, dz = vector3(origin)
-            x, y, z = x + dx, y + dy, z + dz
-            link = j.find("parent").get("link")
-        return (x, y, z)
-
+    world_origin = functools.partial(_world_origin, by_child)
     missing = [n for n in joint_names if n not in joints]
     if missing:
         raise ConfigError(
@@ -470,21 +483,7 @@ def profile_from_urdf(
     e_world = world_origin(elbow.find("child").get("link"))
     pad_world = world_origin(pad_link)
 
-    def limit(j: ET.Element) -> tuple[float, float, float, float]:
-        lim = j.find("limit")
-        if lim is None:
-            raise ConfigError(f"URDF joint {j.get('name')!r} has no <limit>")
-        try:
-            return tuple(
-                float(lim.get(k, d))
-                for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1))
-            )
-        except ValueError as err:
-            raise ConfigError(
-                f"URDF joint {j.get('name')!r} <limit> has a value that is not a number: {err}"
-            ) from err
-
-    s_lim, e_lim, z_lim, w_lim = (limit(j) for j in (shoulder, elbow, zj, _wrist))
+    s_lim, e_lim, z_lim, w_lim = (_limit(j) for j in (shoulder, elbow, zj, _wrist))
     return RobotProfile(
         name=name,
         link1_m=math.hypot(e_world[0] - s_world[0], e_world[1] - s_world[1]),
@@ -506,3 +505,36 @@ def profile_from_urdf(
         pad_link=pad_link,
         description=f"user URDF {urdf_path.name}",
     )
+
+
+def _world_origin(by_child: dict[str, ET.Element], link: str) -> tuple[float, float, float]:
+    """A link's origin in the world: its joints' translations summed up to the root (joint origins
+    must not be rotated)."""
+    x = y = z = 0.0
+    while link in by_child:
+        j = by_child[link]
+        origin = j.find("origin")
+        if origin is not None and any(abs(v) > 1e-12 for v in vector3(origin, "rpy")):
+            raise ConfigError(
+                f"URDF joint {j.get('name')!r} has a rotated origin; expected rpy 0 0 0"
+            )
+        dx, dy, dz = vector3(origin)
+        x, y, z = x + dx, y + dy, z + dz
+        link = j.find("parent").get("link")
+    return (x, y, z)
+
+
+def _limit(j: ET.Element) -> tuple[float, float, float, float]:
+    """A joint's (lower, upper, effort, velocity) from its <limit>."""
+    lim = j.find("limit")
+    if lim is None:
+        raise ConfigError(f"URDF joint {j.get('name')!r} has no <limit>")
+    try:
+        return tuple(
+            float(lim.get(k, d))
+            for k, d in (("lower", 0), ("upper", 0), ("effort", 50), ("velocity", 1))
+        )
+    except ValueError as err:
+        raise ConfigError(
+            f"URDF joint {j.get('name')!r} <limit> has a value that is not a number: {err}"
+        ) from err

@@ -163,7 +163,6 @@ def start_local(
     dask, _ = _need_dask()
     from distributed import Client, Nanny, Scheduler, SpecCluster
     from distributed.security import Security
-    from distributed.worker_memory import parse_memory_limit
 
     if jobs < 1:
         raise ConfigError(f"a local Dask cluster needs at least 1 worker; got {jobs}")
@@ -182,33 +181,9 @@ def start_local(
     settings["distributed.scheduler.http.routes"] = list(
         dask.config.get("distributed.scheduler.http.routes")
     )
-    scheduler_options = {
-        "host": HOST,
-        "port": 0,
-        "protocol": "tls://",
-        "security": security,
-        "services": {},
-        "dashboard": dashboard,
-        "dashboard_address": f"{HOST}:0" if dashboard else None,
-    }
-    worker_options = {
-        "host": HOST,
-        "protocol": "tls://",
-        "security": security,
-        "nthreads": 1,
-        # as LocalCluster
-        "memory_limit": parse_memory_limit("auto", 1, jobs, logger=logging.getLogger(__name__)),
-        # a spawned worker process unpickles it by name: module __getattr__
-        "worker_class": quiet_worker,
-        "dashboard": False,
-        "dashboard_address": None,
-        "silence_logs": logging.ERROR,
-        "preload": list(preload),
-        # a nanny hands its worker processes a shallow copy of the configuration taken as it starts,
-        # whose nested dicts dask.config.set's context restores in place as it ends: without
-        # `config` here, a worker that the nanny restarts later would get Dask's defaults
-        "config": dict(config),
-    }
+    scheduler_options, worker_options = _options(jobs, security, dashboard, preload, config)
+    # a spawned worker process unpickles it by name: module __getattr__
+    worker_options["worker_class"] = quiet_worker
     worker = {"cls": Nanny, "options": worker_options}
     cluster = client = None
     try:
@@ -236,6 +211,41 @@ def start_local(
         ) from err
     url = (cluster.dashboard_link or None) if dashboard else None
     return cluster, client, url
+
+
+def _options(
+    jobs: int, security, dashboard: bool, preload: Sequence[str], config: Mapping
+) -> tuple[dict, dict]:
+    """The scheduler's and each worker's options for start_local (the worker class is added by the
+    caller): TLS on 127.0.0.1, one thread a worker, no HTTP server unless dashboard."""
+    from distributed.worker_memory import parse_memory_limit
+
+    scheduler_options = {
+        "host": HOST,
+        "port": 0,
+        "protocol": "tls://",
+        "security": security,
+        "services": {},
+        "dashboard": dashboard,
+        "dashboard_address": f"{HOST}:0" if dashboard else None,
+    }
+    worker_options = {
+        "host": HOST,
+        "protocol": "tls://",
+        "security": security,
+        "nthreads": 1,
+        # as LocalCluster
+        "memory_limit": parse_memory_limit("auto", 1, jobs, logger=logging.getLogger(__name__)),
+        "dashboard": False,
+        "dashboard_address": None,
+        "silence_logs": logging.ERROR,
+        "preload": list(preload),
+        # a nanny hands its worker processes a shallow copy of the configuration taken as it starts,
+        # whose nested dicts dask.config.set's context restores in place as it ends: without
+        # `config` here, a worker that the nanny restarts later would get Dask's defaults
+        "config": dict(config),
+    }
+    return scheduler_options, worker_options
 
 
 class _Deadline(Exception):

@@ -64,6 +64,13 @@ def _plain(value: object) -> object:
     raise TypeError(f"{type(value).__name__} value {value!r} is not JSON data")
 
 
+COMPRESSIONS = {  # a chunk's compression by name
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+
+
 class McapRecorder(Sink):
     """Writes Frames, Commands and Events to an MCAP file; close() ends it cleanly (finalized
     marker)."""
@@ -84,14 +91,10 @@ class McapRecorder(Sink):
             raise RecordingError(
                 f"recording rate {rate!r} is invalid; expected a whole number of steps >= 1"
             )
-        kinds = {
-            "zstd": CompressionType.ZSTD,
-            "lz4": CompressionType.LZ4,
-            "none": CompressionType.NONE,
-        }
-        if compression not in kinds:
+        if compression not in COMPRESSIONS:
             raise RecordingError(
-                f"chunk compression {compression!r} is unknown; expected one of {sorted(kinds)}"
+                f"chunk compression {compression!r} is unknown; expected one of "
+                f"{sorted(COMPRESSIONS)}"
             )
         check_run(run)  # before the file is opened: bad input must not clobber an unfinished file
         mesh_files = _read_meshes(config, meshes)  # likewise an unreadable mesh
@@ -106,25 +109,10 @@ class McapRecorder(Sink):
         self.view_every = max(1, round(1e9 / (VIEW_HZ * dt_ns)))
         self.flush_ns = round(FLUSH_S * 1e9)
         self._gap_ns = 2 * self.flush_ns  # blocks this far apart (a high --rate): flush between
-        self._joint_names = b"".join(wire.str_field(S.NAMES, n) for n in config.profile.joint_names)
-        self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
         self._tf = SceneTransforms(
             urdf, config.profile.joint_names, tuple(o.name for o in config.objects)
         )
-        n_joints = len(config.profile.joint_names)
-        # the next block's frames (copied in: what on_frames gets may be written over after it),
-        # and room for the run's last frame, which close adds whatever the rate
-        self._block = FrameColumns.empty(self.block_frames + 1, n_joints, self.n_objects)
-        self._block_count = 0
-        self._blocks = BlockEncoder(
-            {
-                b: self._joint_names if b == "JointBlock" else self._object_names
-                # every other block names the objects
-                for b in F.BLOCKS
-            },
-        )
-        # on_frame's Frames, gathered into columns for on_frames
-        self._batch = FrameBatch(n_joints, self.n_objects, BATCH_FRAMES)
+        self._init_blocks(config)
         self._pending: list[tuple[int, int, bytes]] = []  # (log_time_ns, channel_id, data)
         self._last_step, self._last_t_ns = -1, 0  # the last frame seen
         # the last frame seen, when the recording rate left it out of the blocks (close writes it)
@@ -146,13 +134,35 @@ class McapRecorder(Sink):
             raise RecordingError(
                 f"cannot write recording {str(self.path)!r}: {err.strerror or err}"
             ) from err
-        self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, compression=kinds[compression])
+        self._writer = Writer(
+            self._file, chunk_size=CHUNK_BYTES, compression=COMPRESSIONS[compression]
+        )
         try:
             self._start(config, run, urdf, mesh_files, compression)
         except BaseException:
             self._file.close()
             self.partial.unlink(missing_ok=True)  # nothing of the run in it yet
             raise
+
+    def _init_blocks(self, config: TwinConfig) -> None:
+        """The block encoder with the names its blocks carry, the next block's frames and the
+        batch on_frame gathers."""
+        self._joint_names = b"".join(wire.str_field(S.NAMES, n) for n in config.profile.joint_names)
+        self._object_names = b"".join(wire.str_field(S.NAMES, o.name) for o in config.objects)
+        n_joints = len(config.profile.joint_names)
+        # the next block's frames (copied in: what on_frames gets may be written over after it),
+        # and room for the run's last frame, which close adds whatever the rate
+        self._block = FrameColumns.empty(self.block_frames + 1, n_joints, self.n_objects)
+        self._block_count = 0
+        self._blocks = BlockEncoder(
+            {
+                b: self._joint_names if b == "JointBlock" else self._object_names
+                # every other block names the objects
+                for b in F.BLOCKS
+            },
+        )
+        # on_frame's Frames, gathered into columns for on_frames
+        self._batch = FrameBatch(n_joints, self.n_objects, BATCH_FRAMES)
 
     def _start(
         self,

@@ -5,13 +5,18 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from tests.support.cli import twin_child
 from twin.cli import main
+
+TWIN_CHILD = [sys.executable, "-m", "twin"]
 
 GIT_ENV = {
     "GIT_AUTHOR_NAME": "Test",
@@ -165,3 +170,26 @@ def test_bad_input_is_exit_2_and_one_line(tmp_path, repo):
         assert done.returncode == 2, (args, done.stderr)
         assert done.stderr.count("\n") == 1 and says in done.stderr, done.stderr
         assert "Traceback" not in done.stderr and done.stdout == ""
+
+
+def test_a_stopped_bisect_removes_its_worktree(tmp_path):
+    repo = make_repo(tmp_path / "repo")
+    before = state(repo)
+    proc = subprocess.Popen(
+        [*TWIN_CHILD, "bisect", "--good", "HEAD~15", "golden.mcap"],
+        cwd=repo,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while git(repo, "worktree", "list").count("\n") < 1:  # a tried commit checked out
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and "stopped by SIGTERM" in err, err
+    assert state(repo) == before  # the worktree removed, the repository as it was

@@ -119,7 +119,7 @@ def test_bisect_names_the_commit_that_moved_the_pick_point_and_leaves_the_repo_a
     moved = git(repo, "rev-parse", f"HEAD~{15 - MOVED}")
     assert found["outcome"] == "found"
     assert found["first_bad"]["commit"] == moved
-    assert f"first bad commit: {moved[:12]} change {MOVED}" in done.stdout
+    assert f"first bad commit: {moved} change {MOVED}" in done.stdout
     assert len(found["tried"]) <= 6, [t["subject"] for t in found["tried"]]
     assert found["from_cache"] == 0
     # the golden that flips, in the words of twin check's summary line

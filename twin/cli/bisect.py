@@ -42,7 +42,7 @@ def cmd_bisect(args: argparse.Namespace) -> int:
         f"({len(result.tried) - cached} checked, {cached} from the cache .twin-bisect/)"
     )
     if result.outcome == "found":
-        print(f"first bad commit: {_short(result.first_bad)}")
+        print(f"first bad commit: {result.first_bad.commit} {result.first_bad.subject}")
         for g in result.flipped:
             print(f"  {g['golden']}: {g['summary']}")
     elif result.outcome == "same":

@@ -165,8 +165,10 @@ def goldens_in(root: Path, paths: list[str]) -> list[Golden]:
         if rel.startswith(".."):
             raise ConfigError(f"golden {path!r} lies outside the repository {str(root)!r}")
         p = Path(path)
-        # NAME.mcap, NAME.toml and their companions NAME.summary.json, NAME.expect.json, ...
+        # a sweep or search golden NAME.toml with its companions (NAME.summary.json,
+        # NAME.expect.json, NAME.mcap, ...); an .mcap golden is one file
         files = sorted(f for f in p.parent.glob(f"{p.stem}.*") if f.is_file())
+        files = files if p.suffix == ".toml" else [p]
         out.append(Golden(Path(rel).as_posix(), files, golden_sha256(files)))
     return out
 
@@ -268,7 +270,8 @@ class Bisector:
             check=False,
         )
         cases = _junit_cases(junit)
-        if cases is None or len(cases) != len(goldens):
+        names = [Path(g.rel).name for g in goldens]  # JUnit names a case by the file's name
+        if cases is None or [case.pop("name") for case in cases] != names:
             why = _last_line(done.stderr) or _last_line(done.stdout)
             return None, f"twin check did not run (exit {done.returncode}): {why}"
         return {g.rel: case for g, case in zip(goldens, cases, strict=True)}, ""
@@ -342,11 +345,12 @@ def _junit_cases(junit: Path) -> list[dict] | None:
     for case in suite.iter("testcase"):
         failure, error = case.find("failure"), case.find("error")
         if failure is not None:
-            cases.append({"status": "differ", "summary": failure.get("message", "")})
+            status, summary = "differ", failure.get("message", "")
         elif error is not None:
-            cases.append({"status": "error", "summary": error.get("message", "")})
+            status, summary = "error", error.get("message", "")
         else:
-            cases.append({"status": "match", "summary": "match"})
+            status, summary = "match", "match"
+        cases.append({"name": case.get("name"), "status": status, "summary": summary})
     return cases
 
 

@@ -35,7 +35,7 @@ def cmd_bisect(args: argparse.Namespace) -> int:
         raise ConfigError(f"--json {args.json!r} must end in .json")
     options = check_options(args.tolerance, args.tol, args.event_window)
 
-    result = bisect(args.good, args.bad, args.paths, options, progress=_print_tried)
+    result = bisect(args.good, args.bad, args.paths, options, progress=_print_tried, announce=print)
     cached = sum(t.cached for t in result.tried)
     print(
         f"tried {len(result.tried)} of {len(result.path) + 1} commits "

@@ -325,6 +325,7 @@ def bisect(
     options: list[str],
     progress: Callable[[Tried], None] | None = None,
     cwd: str | os.PathLike = ".",
+    announce: Callable[[str], None] | None = None,
 ) -> Bisection:
     """Find the first commit after good, up to bad, at which the goldens named by paths (as they
     are in the work tree now; `twin check`'s default recordings/ when none) stop matching."""
@@ -332,6 +333,12 @@ def bisect(
     good_c, bad_c = commit_of(root, good, "--good"), commit_of(root, bad, "--bad")
     path = commit_range(root, good_c, bad_c)
     goldens = goldens_in(root, paths)
+    if announce:
+        noun = "golden" if len(goldens) == 1 else "goldens"
+        announce(
+            f"bisecting {len(path)} commits after {good_c[:12]} up to {bad_c[:12]}, "
+            f"{len(goldens)} {noun}"
+        )
     return Bisector(root, goldens, options, progress).search(good_c, bad_c, path)
 
 

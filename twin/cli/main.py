@@ -17,6 +17,7 @@ from twin.cli.args import (
     twin_config,
     whole_number,
 )
+from twin.cli.bisect import add_bisect_command
 from twin.cli.compare import add_compare_commands
 from twin.cli.export import add_export_command
 from twin.cli.record import add_record_commands, add_record_options, record_paths
@@ -241,6 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_run)
     _add_teleop_parser(sub)
     add_compare_commands(sub)
+    add_bisect_command(sub)
     add_record_commands(sub)
     add_serve_command(sub)
     add_sweep_command(sub)

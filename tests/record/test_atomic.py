@@ -46,10 +46,9 @@ def test_the_temporary_is_hidden_beside_the_target(tmp_path):
 def test_an_error_or_ctrl_c_removes_the_temporary_and_keeps_the_old_file(tmp_path, stop):
     target = tmp_path / "golden.json"
     target.write_text("old")
-    with pytest.raises(stop):
-        with atomic_path(target) as tmp:
-            tmp.write_text("half")
-            raise stop()
+    with pytest.raises(stop), atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise stop()
     assert target.read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["golden.json"]
 
@@ -77,7 +76,7 @@ def test_a_folder_that_is_a_file_is_an_output_error_even_for_root(tmp_path):
 
 def test_a_failed_write_in_the_body_is_an_output_error(tmp_path):
     target = tmp_path / "t.txt"
-    with pytest.raises(OutputError, match="cannot write .*t.txt.*: No such file or directory"):
-        with atomic_path(target) as tmp:
-            Path(tmp.parent / "missing" / "x").write_text("")
+    missing = "cannot write .*t.txt.*: No such file or directory"
+    with pytest.raises(OutputError, match=missing), atomic_path(target) as tmp:
+        Path(tmp.parent / "missing" / "x").write_text("")
     assert list(tmp_path.iterdir()) == []

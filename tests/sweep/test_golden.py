@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.read_only import read_only
 
 from twin.cli.main import main
 from twin.model.errors import ConfigError
@@ -85,6 +86,26 @@ def test_a_moved_statistic_is_exit_1_naming_it_and_by_how_much(golden, tmp_path,
     assert json.loads((tmp_path / "moved.summary.json").read_text()) == json.loads(
         (golden / "small.summary.json").read_text()
     )
+
+
+def test_update_into_a_read_only_folder_is_one_output_error(golden, tmp_path, capsys):
+    """The new summary cannot be written: exit 2 (OutputError's), one line naming the file, the
+    golden as it was and nothing left beside it."""
+    folder = tmp_path / "locked"
+    folder.mkdir()
+    shutil.copy(golden / "small.toml", folder / "small.toml")
+    summary = json.loads((golden / "small.summary.json").read_text())
+    summary["placement_error_mm"]["p95"] -= 0.4
+    (folder / "small.summary.json").write_text(json.dumps(summary))
+    before = sorted((p.name, p.read_bytes()) for p in folder.iterdir())
+    capsys.readouterr()
+    with read_only(folder):
+        assert main(["check", str(folder / "small.toml"), "--update"]) == 2
+        out = capsys.readouterr().out
+        assert sorted((p.name, p.read_bytes()) for p in folder.iterdir()) == before
+    lines = [line for line in out.splitlines() if "cannot write" in line]
+    assert len(lines) == 1 and str(folder / "small.summary.json") in lines[0], out
+    assert "Traceback" not in out
 
 
 def test_keep_writes_the_report_and_the_new_summary_of_a_moved_sweep(golden, tmp_path, capsys):
@@ -403,8 +424,8 @@ def test_update_replaces_the_summary_atomically(golden, tmp_path, capsys, monkey
     assert after == (golden / "small.summary.json").read_text() != before
     [(src, _, new_text, old_text)] = [r for r in renames if r[1] == "g.summary.json"]
     assert (
-        src.startswith("g.summary.json.")
-        and src.endswith(".partial")
+        src.startswith(".g.summary.json.")  # hidden, beside it (twin.record.outputs.atomic_path)
+        and src.endswith(".tmp")
         and new_text == after
         and old_text == before
     )

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.read_only import read_only
 
 from twin.cli.main import main
 from twin.sweep.executors import LocalExecutor
@@ -209,6 +210,27 @@ def test_a_saved_failure_checks_green_then_red_when_the_boundary_moves(
         "fails the same way: cycle 1: suction on at (0.2, 0.7), nothing sensed"
         in capsys.readouterr().out
     )
+
+
+def test_save_golden_into_a_read_only_folder_is_one_output_error(tmp_path, monkeypatch, capsys):
+    """The search runs and writes search.json; its golden cannot be written: exit 2, one line naming
+    the file, no traceback, nothing left in the folder."""
+    monkeypatch.chdir(tmp_path)
+    folder = tmp_path / "recordings" / "search"
+    folder.mkdir(parents=True)
+    args = ["pick_place", "--vary", "box.x_m=0.19..0.21", *FAST, "--precision", "0.05"]
+    with read_only(folder):
+        code = main(
+            ["search", *args, "--budget", "20", "--save-golden", "placement", "--out", "runs/p"]
+        )
+        assert list(folder.iterdir()) == []
+    captured = capsys.readouterr()
+    assert code == 2 and (tmp_path / "runs" / "p" / "search.json").is_file()
+    assert [line for line in captured.err.splitlines() if "error" in line] == [
+        "twin: error: cannot write 'recordings/search/placement.toml': "
+        + ("Permission denied" if os.geteuid() else "Operation not permitted")
+    ]
+    assert "Traceback" not in captured.err
 
 
 def test_a_search_of_the_seeing_task_finds_a_wider_boundary(reach, tmp_path, capsys):

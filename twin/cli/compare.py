@@ -11,7 +11,7 @@ from pathlib import Path
 
 from twin.cli.args import add_executor_options, whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
-from twin.model.errors import ConfigError, OutputError
+from twin.model.errors import ConfigError
 
 _TOL_HELP = (
     "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: "
@@ -158,11 +158,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     outcomes = _check_goldens(args, goldens, tol, keep)
     if args.junit:
         from twin.compare.report import render_check_junit
+        from twin.record.outputs import write_atomic
 
-        try:
-            Path(args.junit).write_text(render_check_junit(outcomes))
-        except OSError as err:
-            raise OutputError(f"cannot write JUnit report {args.junit!r}: {err.strerror}") from err
+        write_atomic(args.junit, render_check_junit(outcomes))
     for o in outcomes:
         if o.status in ("differ", "refused") and args.verbose:
             print(f"== {o.path}\n{o.report}")

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
-from twin.model.errors import ConfigError, RecordingError
+from twin.model.errors import ConfigError
 from twin.signals import Terminated
 
 RESULT, MINIMAL = "search.json", "minimal.mcap"
@@ -149,11 +148,12 @@ def _finish(
 ) -> None:
     """Write search.json (and, unless interrupted, the smallest failure's recording and golden);
     print the summary."""
+    from twin.record.outputs import write_atomic
     from twin.sweep.search import probe_spec, result_json
     from twin.sweep.search_golden import record_scenario, save_golden
 
     data = result_json(result)
-    _write(out / RESULT, json.dumps(data, indent=2, allow_nan=False) + "\n")
+    write_atomic(out / RESULT, json.dumps(data, indent=2, allow_nan=False) + "\n")
     minimal = result.minimal
     wrote = [out / RESULT]
     if record and minimal is not None:
@@ -220,16 +220,6 @@ def summary_lines(data: dict, executor, wall_s: float) -> list[str]:
 def _offset(value: float, key: dict) -> str:
     offset = value - key["nominal"]
     return f"nominal {offset:+.4g}, {abs(offset) / key['half_width']:.3f} of the half-width"
-
-
-def _write(path: Path, text: str) -> None:
-    partial = path.with_name(path.name + ".partial")
-    try:
-        partial.write_text(text)
-        os.replace(partial, path)
-    except OSError as err:
-        partial.unlink(missing_ok=True)
-        raise RecordingError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
 
 
 def _out_dir(path: str) -> Path:

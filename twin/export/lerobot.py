@@ -34,7 +34,7 @@ from twin.export.episodes import NS_PER_S, Episode, nearest
 from twin.export.stats import feature_stats, image_sample, image_stride, sampled_image_stats
 from twin.model.errors import ConfigError, RecordingError
 from twin.pictures import track_rgb
-from twin.record.outputs import fsync_file
+from twin.record.outputs import fsync_file, publish
 from twin.record.tables import frame_column_names, suction_command
 
 CODEBASE_VERSION = "v3.0"
@@ -518,13 +518,13 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
                 f"folder (or --overwrite)"
             )
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
-        os.replace(out, old / out.name)
-        os.replace(tmp, out)
+        publish(out, old / out.name)
+        publish(tmp, out)
         shutil.rmtree(old, ignore_errors=True)
     elif out.exists():
         # an empty folder (perhaps the current one): filled in place, meta/ (info.json) last
         for name in sorted(p.name for p in tmp.iterdir() if p.name != "meta") + ["meta"]:
-            os.replace(tmp / name, out / name)
+            publish(tmp / name, out / name)
         tmp.rmdir()
     else:
-        os.replace(tmp, out)
+        publish(tmp, out)

@@ -8,8 +8,11 @@ fsync it and rename it over the target, so the target is either the old file or 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+import secrets
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager, suppress
 from pathlib import Path
+from stat import S_IMODE
 
 from twin.model.errors import ConfigError, OutputError, TwinError
 
@@ -129,12 +132,57 @@ def fsync_file(path: str | os.PathLike) -> None:
 
 
 def publish(written: str | os.PathLike, target: str | os.PathLike) -> None:
-    """Put a completely written file in its place: fsync it, rename it over `target` (atomic on one
-    file system), fsync the folder so the rename itself is durable."""
-    fsync_file(written)
-    os.replace(written, target)
-    folder = os.open(Path(target).parent, os.O_RDONLY)
+    """Put a completely written file (or folder) in its place: fsync it, rename it over `target`
+    (atomic on one file system), fsync the folder so the rename itself is durable. The one rename of
+    the twin's outputs; OutputError naming `target` and the system's reason if any step fails."""
     try:
-        os.fsync(folder)
+        fsync_file(written)
+        os.replace(written, target)
+        folder = os.open(Path(target).parent, os.O_RDONLY)
+        try:
+            os.fsync(folder)
+        finally:
+            os.close(folder)
+    except OSError as err:
+        raise _cannot_write(target, err) from err
+
+
+@contextmanager
+def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
+    """A temporary path beside `target` (`.NAME.XXXXXXXX.tmp`: hidden, in the same folder, made
+    with the mode a new file gets, or target's mode if it exists) for the body to write; when the
+    body ends, the file is fsynced and renamed over `target` (publish), so `target` is the old file
+    or the whole new one. The temporary is removed on any error or KeyboardInterrupt; a failed write
+    is an OutputError naming `target` and the system's reason (a read-only folder, a full disk)."""
+    target = Path(target)
+    tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp")
+    try:
+        mode = S_IMODE(os.stat(target).st_mode)
+    except OSError:
+        mode = None  # a new file: the mode the umask gives it, as a plain write would
+    try:
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            if mode is not None:
+                os.chmod(tmp, mode)
+        except OSError as err:
+            raise _cannot_write(target, err) from err
+        try:
+            yield tmp
+        except OSError as err:
+            raise _cannot_write(target, err) from err
+        publish(tmp, target)
     finally:
-        os.close(folder)
+        with suppress(OSError):  # never made, or its folder refuses: the error above says why
+            tmp.unlink(missing_ok=True)
+
+
+def write_atomic(target: str | os.PathLike, data: str | bytes) -> None:
+    """Write `data` (text as UTF-8) to `target` through atomic_path: all of it or, on an
+    OutputError, nothing changed."""
+    with atomic_path(target) as tmp:
+        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+
+
+def _cannot_write(target: str | os.PathLike, err: OSError) -> OutputError:
+    return OutputError(f"cannot write {str(target)!r}: {err.strerror or err}")

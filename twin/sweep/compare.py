@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from twin.model.errors import ConfigError
+from twin.record.outputs import write_atomic
 from twin.sweep import paired
 from twin.sweep.spec import TOLERANCES, SweepSpec, load_spec
 
@@ -144,7 +145,4 @@ def write_report(comparison: Comparison, path: str) -> None:
         text = comparison.markdown()
     else:
         raise ConfigError(f"--report {path!r} is invalid; expected a file ending in .md or .json")
-    try:
-        Path(path).write_text(text)
-    except OSError as err:
-        raise ConfigError(f"cannot write --report {path!r}: {err.strerror or err}") from err
+    write_atomic(path, text)

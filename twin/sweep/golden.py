@@ -19,16 +19,16 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 import time
 from pathlib import Path
-from stat import S_IMODE, S_ISREG
+from stat import S_ISREG
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.model.errors import ConfigError, TwinError
+from twin.model.errors import ConfigError, OutputError, TwinError
 from twin.model.json_values import load_json_text, load_toml_text
+from twin.record.outputs import atomic_path, write_atomic
 from twin.sweep import paired, power
 from twin.sweep.results import summary, summary_text, table
 from twin.sweep.runner import run_sweep
@@ -244,7 +244,8 @@ def _update(spec, golden, new, reference, new_table, definition) -> list[str]:
         or reference[1] != _meta(spec)
         or not reference[0].table.equals(paired.side_from_table(new_table, "now").table)
     ):
-        _publish_atomically(scenarios_path, lambda p: pq.write_table(new_table, p))
+        with atomic_path(scenarios_path) as tmp:
+            pq.write_table(new_table, tmp)
         wrote.append(scenarios_path.name)
     return wrote
 
@@ -263,7 +264,7 @@ def _keep(base: str, outcome: Outcome, new: dict, new_table: pa.Table | None) ->
             except (OSError, pa.ArrowException) as err:
                 why = getattr(err, "strerror", None) or err
                 where = base + ".results.parquet"
-                raise ConfigError(f"cannot write {where!r}: {why}") from err
+                raise OutputError(f"cannot write {where!r}: {why}") from err
         return staged.publish()
 
 
@@ -389,7 +390,7 @@ def _write_atomically(path: Path, data: dict) -> None:
     """Write the summary to a temporary file beside path and rename it into place: an interrupted
     --update leaves the old golden or the new one, never half of one."""
     text = _summary_text(path.name, data)
-    _publish_atomically(path, lambda p: Path(p).write_text(text))
+    write_atomic(path, text)
 
 
 def _summary_text(name: str, data: dict) -> str:
@@ -407,26 +408,6 @@ def _summary_text(name: str, data: dict) -> str:
             f"{MAX_BYTES}; not written"
         )
     return text
-
-
-def _publish_atomically(path: Path, write) -> None:
-    """write(a temporary path beside path), then rename it into place, keeping path's mode."""
-    try:
-        mode = S_IMODE(os.stat(path).st_mode)
-    except OSError:
-        mode = 0o644
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".partial", dir=path.parent)
-        os.close(fd)
-        write(tmp)
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except (OSError, pa.ArrowException) as err:
-        if tmp is not None:
-            Path(tmp).unlink(missing_ok=True)
-        why = getattr(err, "strerror", None) or err
-        raise ConfigError(f"cannot write {str(path)!r}: {why}") from err
 
 
 def _moves(golden: dict, new: dict) -> str:

@@ -10,6 +10,7 @@ import numpy as np
 import pyarrow as pa
 
 from twin.model.errors import ConfigError
+from twin.record.outputs import atomic_path
 from twin.sweep.paired import Paired, Side
 
 
@@ -75,9 +76,8 @@ def plot_sweep(side: Side, out_png: str, title: str, comparison: Paired | None =
         _differences(axes[2], comparison)
     fig.suptitle(title)
     try:
-        fig.savefig(out_png, dpi=110)
-    except OSError as err:
-        raise ConfigError(f"cannot write the plot {out_png!r}: {err.strerror or err}") from err
+        with atomic_path(out_png) as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
     finally:
         plt.close(fig)
     return keys

@@ -11,7 +11,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.model.errors import ConfigError
+from twin.record.outputs import atomic_path, write_atomic
 from twin.sweep.spec import SweepSpec, dump_spec
 from twin.sweep.stats import summarize
 from twin.sweep.worker import COUNTED
@@ -79,8 +79,9 @@ def write_results(
     """Write results.parquet and summary.json into out_dir; returns the summary."""
     out = Path(out_dir)
     data = summary(spec, rows, planned=planned)
-    _publish(out / RESULTS, lambda p: pq.write_table(table(spec, rows), p))
-    _publish(out / SUMMARY, lambda p: p.write_text(summary_text(data)))
+    with atomic_path(out / RESULTS) as tmp:
+        pq.write_table(table(spec, rows), tmp)
+    write_atomic(out / SUMMARY, summary_text(data))
     return data
 
 
@@ -94,14 +95,4 @@ def write_definition(out_dir: str | os.PathLike, spec: SweepSpec) -> None:
                 spec, **{name: os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir))}
             )
     text = dump_spec(spec)
-    _publish(Path(out_dir) / DEFINITION, lambda p: p.write_text(text))
-
-
-def _publish(path: Path, write) -> None:
-    partial = path.with_name(path.name + ".partial")
-    try:
-        write(partial)
-        os.replace(partial, path)
-    except OSError as err:
-        partial.unlink(missing_ok=True)
-        raise ConfigError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
+    write_atomic(Path(out_dir) / DEFINITION, text)

@@ -14,8 +14,9 @@ import re
 import time
 from pathlib import Path
 
-from twin.model.errors import ConfigError, RecordingError, TwinError
+from twin.model.errors import ConfigError, TwinError
 from twin.model.json_values import load_json_text
+from twin.record.outputs import write_atomic
 from twin.sweep.sampling import RandomSampler
 from twin.sweep.search import run_probe
 from twin.sweep.spec import SweepSpec, dump_spec, load_spec, prepare
@@ -71,24 +72,14 @@ def save_golden(
         task.endswith(".py") and Path(task).is_file()
     ):  # found relative to the definition, as load_spec does
         task = os.path.relpath(os.path.abspath(task), os.path.abspath(folder))
-    _write(definition, dump_spec(SweepSpec(**{**spec.__dict__, "task": task})))
+    write_atomic(definition, dump_spec(SweepSpec(**{**spec.__dict__, "task": task})))
     record_scenario(spec, recording)
-    _write(
+    write_atomic(
         expect_path(definition),
         json.dumps({**expectation(outcome, error), "search": found}, indent=2, allow_nan=False)
         + "\n",
     )
     return [definition, recording, expect_path(definition)]
-
-
-def _write(path: Path, text: str) -> None:
-    partial = path.with_name(path.name + ".partial")
-    try:
-        partial.write_text(text)
-        os.replace(partial, path)
-    except OSError as err:
-        partial.unlink(missing_ok=True)
-        raise RecordingError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
 
 
 def is_search_golden(path: Path) -> bool:
@@ -157,7 +148,7 @@ def check_search(definition: str, *, update: bool = False, keep: str | None = No
         if status == "differ" and update:
             record_scenario(spec, Path(definition).with_suffix(".mcap"))
             kept = {k: v for k, v in expected.items() if k not in ("outcome", "reason", "error")}
-            _write(
+            write_atomic(
                 expect_path(definition),
                 json.dumps({**expectation(outcome, error), **kept}, indent=2, allow_nan=False)
                 + "\n",

@@ -23,6 +23,7 @@ from twin.compare.tolerances import Tolerances
 from twin.model.config import TwinConfig
 from twin.model.errors import ConfigError, TwinError
 from twin.model.recording import Recording
+from twin.record.outputs import publish
 from twin.sim.twin import Sink, Twin
 from twin.sim.world import engine_versions
 from twin.tasks import TimeLimit, resolve, run_task, source_sha256
@@ -146,7 +147,7 @@ def check_one(
             new, result = _rerun_and_judge(golden, tolerances, record_to)
             outcome = _verdict(path, golden, new, result, update=update, allow_error=allow_error)
             if outcome.status == "updated":
-                os.replace(tmp, path)
+                publish(tmp, path)
             elif staged is not None and outcome.status in KEPT:
                 outcome.kept = keep_recording(staged, golden, new, result, record_to)
             outcome.seconds = time.perf_counter() - t0

@@ -22,7 +22,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from twin.model.errors import ConfigError, OutputError
-from twin.record.outputs import partial_path
+from twin.record.outputs import partial_path, publish
 
 # what each kind of golden may leave in DIR, by suffix
 SUFFIXES = {
@@ -157,16 +157,13 @@ class Staged:
             raise OutputError(f"cannot write {str(self.temp(suffix))!r}: {err.strerror}") from err
 
     def publish(self) -> list[str]:
-        """Rename every file into place; their final paths."""
+        """Rename every file into place (OutputError if one cannot be); their final paths."""
         done = []
-        try:
-            for suffix, path in list(self.temps.items()):
-                final = self.base.with_name(self.base.name + suffix)
-                os.replace(path, final)
-                del self.temps[suffix]
-                done.append(str(final))
-        except OSError as err:
-            raise OutputError(f"cannot keep {str(self.base)!r}: {err.strerror or err}") from err
+        for suffix, path in list(self.temps.items()):
+            final = self.base.with_name(self.base.name + suffix)
+            publish(path, final)
+            del self.temps[suffix]
+            done.append(str(final))
         return done
 
     def discard(self) -> None:

@@ -72,6 +72,35 @@ def add_sweep_command(sub) -> None:
         "DIR/sweep.toml and DIR/failures/scenario-<i>.mcap. Exit 0 done, 1 under "
         "--fail-under, 2 bad input, 130 Ctrl-C (the results so far are written).",
     )
+    _add_what_options(p)
+    add_executor_options(p, os.cpu_count() or 1, f"default: every core, {os.cpu_count()}")
+    p.add_argument(
+        "--dashboard",
+        action="store_true",
+        help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on "
+        "a free "
+        "port (its address is printed); without it no HTTP server runs",
+    )
+    p.add_argument(
+        "--batch",
+        type=whole_number(1),
+        default=None,
+        metavar="N",
+        help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on "
+        "Dask; at most 16)",
+    )
+    _add_output_options(p)
+    p.set_defaults(func=cmd_sweep)
+    p.epilog = (
+        "twin sweep compare A B: two sweeps' results compared (paired when they ran "
+        "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
+        "`twin sweep compare --help`."
+    )
+    _add_subcommands(p)
+
+
+def _add_what_options(p: argparse.ArgumentParser) -> None:
+    """What a sweep runs: the task or definition, the robot, the scenarios and what varies."""
     p.add_argument("task", help="a built-in task, path/to/task.py, or a sweep definition NAME.toml")
     p.add_argument(
         "--robot", default=None, help="profile: mtb (default), seed000..seed003, or a profile file"
@@ -115,22 +144,11 @@ def add_sweep_command(sub) -> None:
         "stepping) "
         "is ended and fails with that reason",
     )
-    add_executor_options(p, os.cpu_count() or 1, f"default: every core, {os.cpu_count()}")
-    p.add_argument(
-        "--dashboard",
-        action="store_true",
-        help="with --executor dask and no --scheduler: serve Dask's dashboard on 127.0.0.1 on "
-        "a free "
-        "port (its address is printed); without it no HTTP server runs",
-    )
-    p.add_argument(
-        "--batch",
-        type=whole_number(1),
-        default=None,
-        metavar="N",
-        help="scenarios per task sent to a worker (default: about 4 tasks per worker, 2 on "
-        "Dask; at most 16)",
-    )
+
+
+def _add_output_options(p: argparse.ArgumentParser) -> None:
+    """Where a sweep writes, what it keeps, and how it ends: --out, --save, --resume, --only,
+    --fail-under, --plot, --quiet."""
     p.add_argument(
         "--out",
         required=True,
@@ -172,13 +190,6 @@ def add_sweep_command(sub) -> None:
         "matplotlib: twin[plot])",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar; only the summary")
-    p.set_defaults(func=cmd_sweep)
-    p.epilog = (
-        "twin sweep compare A B: two sweeps' results compared (paired when they ran "
-        "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
-        "`twin sweep compare --help`."
-    )
-    _add_subcommands(p)
 
 
 def _add_subcommands(p: argparse.ArgumentParser) -> None:
@@ -347,12 +358,10 @@ def sweep_spec(args: argparse.Namespace):
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from twin.sweep import folder
     from twin.sweep.executors import make_executor
-    from twin.sweep.journal import JOURNAL, Journal
-    from twin.sweep.results import write_definition, write_results
-    from twin.sweep.runner import run_sweep
+    from twin.sweep.journal import JOURNAL
     from twin.sweep.spec import prepare
-    from twin.sweep.worker import Job
 
     spec = sweep_spec(args)
     prepare(spec)  # every key, distribution and parameter checked before anything runs
@@ -360,74 +369,33 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.only is not None:
             raise ConfigError("--plot draws a whole sweep; expected it without --only")
         _plot_target("sweep.png")  # matplotlib is there, before anything runs
-    if args.only is not None and args.resume:
-        raise ConfigError("--only and --resume cannot go together; expected one of them")
-    if args.only is not None and max(args.only) >= spec.scenarios:
-        raise ConfigError(
-            f"--only {max(args.only)} is out of range; the sweep has scenarios "
-            f"0..{spec.scenarios - 1}"
+    the_plan = folder.plan(spec, args.out, only=args.only, resume=args.resume)
+    out = the_plan.out
+    if the_plan.resumed:
+        print(
+            f"resuming: {the_plan.resumed} of {spec.scenarios} scenarios are in {out / JOURNAL}",
+            file=sys.stderr,
         )
-    out = _out_dir(args.out, clear=args.only is None and not args.resume)
-    journal = None
-    if args.only is None:
-        if args.resume and not (out / JOURNAL).exists():
-            raise ConfigError(
-                f"--resume: {str(out / JOURNAL)!r} does not exist; expected the folder of a sweep "
-                "that was stopped (or run without --resume)"
-            )
-        journal = Journal(out, spec, resume=args.resume)
-        write_definition(out, spec)
-        if journal.rows:
-            print(
-                f"resuming: {len(journal.rows)} of {spec.scenarios} scenarios are in "
-                f"{out / JOURNAL}",
-                file=sys.stderr,
-            )
-        scenarios = (i for i in range(spec.scenarios) if not journal.done(i))
-        count = spec.scenarios - len(journal.rows)
-    else:
-        scenarios, count = args.only, len(args.only)
-    jobs = max(1, min(args.jobs, count)) if args.executor == "local" else args.jobs
+    jobs = max(1, min(args.jobs, the_plan.count)) if args.executor == "local" else args.jobs
     executor = make_executor(args.executor, jobs, args.scheduler, dashboard=args.dashboard)
     if getattr(executor, "dashboard_url", None):
         print(f"Dask dashboard: {executor.dashboard_url}", file=sys.stderr)
-    progress = Progress(count, quiet=args.quiet)
-
-    def on_row(row: dict) -> None:
-        if journal is not None:
-            journal.add(row)
-        progress(row)
-
+    progress = Progress(the_plan.count, quiet=args.quiet)
     try:
-        done = run_sweep(
-            Job(spec, str(out), args.save),
-            scenarios,
+        done = folder.run(
+            spec,
+            the_plan,
             executor,
-            count=count,
+            save=args.save,
             batch_size_n=args.batch,
             scenario_timeout_s=args.scenario_timeout,
-            on_row=on_row,
-            rows=journal.rows if journal else None,
-            planned=spec.scenarios if journal else None,
+            on_row=progress,
         )
     finally:
         progress.close()
         executor.close()
-        if journal is not None:
-            journal.close()
-    if args.only is not None:
-        _print_only(done.rows, out, args.save)
-    else:
-        summary = write_results(out, spec, done.rows, planned=done.planned)
-        for line in summary_lines(spec, summary, done, executor, out, args.save):
-            print(line)
-        print(f"wrote {out / 'results.parquet'}, {out / 'summary.json'}, {out / 'sweep.toml'}")
-        if args.plot and done.rows:
-            from twin.sweep.paired import read_side
-
-            _plot_run(
-                read_side(out / "results.parquet", str(out)), str(out / "sweep.png"), spec, str(out)
-            )
+    summary = folder.finish(spec, the_plan, done)
+    _print_outcome(args, spec, summary, done, executor, out)
     if done.stopped_by is not None:
         print(
             f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` "
@@ -436,41 +404,28 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         )
         # 130 (Ctrl-C) or 128 + the signal, after the results so far are written
         raise done.stopped_by
-    if (
-        args.fail_under is not None
-        and args.only is None
-        and summary["success_rate"] < args.fail_under
-    ):
+    rate_now = summary["success_rate"] if summary is not None else None
+    if rate_now is not None and args.fail_under is not None and rate_now < args.fail_under:
         raise BelowThreshold(
-            f"success rate {summary['success_rate']:.4f} is under --fail-under {args.fail_under:g}"
+            f"success rate {rate_now:.4f} is under --fail-under {args.fail_under:g}"
         )
     return 0
 
 
-def _out_dir(path: str, *, clear: bool) -> Path:
-    """The output folder, created (its parent must exist, or be runs/); a full sweep removes the
-    recordings an earlier sweep left in it (failures/ and scenarios/ scenario-*.mcap), so none is
-    mistaken for its own."""
-    from twin.record.outputs import make_default_folder
-    from twin.sweep.worker import FAILURES, SCENARIOS
+def _print_outcome(args, spec, summary: dict | None, done, executor, out: Path) -> None:
+    """What a sweep prints when it ends: --only's scenarios, or the summary and the files."""
+    if summary is None:
+        _print_only(done.rows, out, args.save)
+        return
+    for line in summary_lines(spec, summary, done, executor, out, args.save):
+        print(line)
+    print(f"wrote {out / 'results.parquet'}, {out / 'summary.json'}, {out / 'sweep.toml'}")
+    if args.plot and done.rows:
+        from twin.sweep.paired import read_side
 
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {path!r} is a file; expected a folder")
-    if not make_default_folder(out.parent):  # runs/ is made when missing, as for recordings
-        raise ConfigError(f"--out {path!r}: folder {str(out.parent)!r} does not exist")
-    try:
-        out.mkdir(exist_ok=True)
-        if clear:
-            for folder in (FAILURES, SCENARIOS):
-                for old in (
-                    *(out / folder).glob("scenario-*.mcap"),
-                    *(out / folder).glob("scenario-*.mcap.partial"),
-                ):
-                    old.unlink()
-    except OSError as err:
-        raise ConfigError(f"--out {path!r}: {err.strerror or err}") from err
-    return out
+        _plot_run(
+            read_side(out / "results.parquet", str(out)), str(out / "sweep.png"), spec, str(out)
+        )
 
 
 def _print_only(rows: list[dict], out: Path, save: str) -> None:

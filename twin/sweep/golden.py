@@ -21,13 +21,13 @@ import math
 import os
 import time
 from pathlib import Path
-from stat import S_ISREG
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from twin.model.errors import ConfigError, OutputError, TwinError
-from twin.model.json_values import load_json_text, load_toml_text
+from twin.model.golden_files import regular_text, summary_path
+from twin.model.json_values import load_json_text
 from twin.record.outputs import atomic_path, write_atomic
 from twin.sweep import paired, power
 from twin.sweep.results import summary, summary_text, table
@@ -42,13 +42,7 @@ PERCENTILES = (
     ("max", "placement_max_mm"),
 )
 # what makes a .toml a sweep definition (a robot profile has none)
-DEFINITION_KEYS = ("task", "scenarios", "seed")
 MAX_BYTES = 4 * 2**20  # the largest definition or summary read: a golden is a few kB
-
-
-def summary_path(definition: str | os.PathLike) -> Path:
-    path = Path(definition)
-    return path.with_name(path.stem + ".summary.json")
 
 
 def results_path(definition: str | os.PathLike) -> Path:
@@ -87,67 +81,6 @@ def _read_results(path: Path) -> tuple[paired.Side, dict]:
             f"{META_KEY.decode()!r}); expected a file `twin check --update` wrote"
         )
     return side, meta
-
-
-def is_sweep_golden(path: str, *, named: bool) -> bool:
-    """Whether a .toml file is a sweep golden's definition (task, scenarios and seed). A file named
-    on the command line must be one: ConfigError saying why not. One found in a folder that is not
-    is skipped (a robot profile kept beside the goldens), unless NAME.summary.json beside it says
-    it is a golden: then it is an error, never skipped."""
-    problem = _not_a_definition(Path(path))
-    if problem is None:
-        return True
-    if named:
-        raise ConfigError(f"sweep definition {path!r} {problem}")
-    if summary_path(path).exists():
-        raise ConfigError(f"sweep golden {path!r} (beside {summary_path(path).name}) {problem}")
-    return False
-
-
-def _not_a_definition(path: Path) -> str | None:
-    """None when path is a sweep definition (a TOML file with task, scenarios and seed), else why
-    not."""
-    try:
-        data = load_toml_text(_regular_text(path), "is not valid TOML")  # also too deep: one line
-    except (ConfigError, ValueError) as err:
-        return str(err)
-    missing = [k for k in DEFINITION_KEYS if k not in data]
-    if missing:
-        return (
-            f"lacks {', '.join(missing)}; expected a sweep definition with "
-            f"{', '.join(DEFINITION_KEYS)}"
-        )
-    return None
-
-
-def _regular_text(path: Path) -> str:
-    """path's text when it is a regular file of at most MAX_BYTES, else ValueError saying why. A
-    FIFO, device or folder is refused before it is opened (reading a FIFO waits for a writer for
-    ever)."""
-    try:
-        st = os.stat(path)
-        if not S_ISREG(st.st_mode):
-            raise ValueError("is not a regular file (a FIFO, device or folder); expected a file")
-        if st.st_size > MAX_BYTES:
-            raise ValueError(f"holds {st.st_size} bytes; expected at most {MAX_BYTES}")
-        # never blocks, even if swapped for a FIFO
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with os.fdopen(fd, "rb") as f:
-            if not S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise ValueError(
-                    "is not a regular file (a FIFO, device or folder); expected a file"
-                )
-            data = f.read(MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise ValueError("does not exist") from None
-    except OSError as err:
-        raise ValueError(f"cannot be read: {err.strerror or err}") from err
-    if len(data) > MAX_BYTES:
-        raise ValueError(f"holds more than {MAX_BYTES} bytes; expected at most {MAX_BYTES}")
-    try:
-        return data.decode()
-    except UnicodeDecodeError as err:
-        raise ValueError(f"is not UTF-8 text: {err}") from err
 
 
 def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
@@ -314,7 +247,7 @@ def _judge_paired(
 def _read(path: Path) -> dict:
     """A golden summary, validated (check_summary)."""
     try:
-        text = _regular_text(path)
+        text = regular_text(path, MAX_BYTES)
     except ValueError as err:
         raise ConfigError(f"sweep golden summary {str(path)!r} {err}") from err
     # also too deep: one line

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from twin.model.errors import ConfigError, TwinError
+from twin.model.golden_files import expect_path
 from twin.model.json_values import load_json_text
 from twin.record.outputs import write_atomic
 from twin.sweep.sampling import RandomSampler
@@ -25,7 +26,6 @@ from twin.sweep.worker import _run  # the run a sweep records for a scenario, by
 from twin.verify.check import Outcome
 
 SEARCH_DIR = Path("recordings") / "search"
-EXPECT_SUFFIX = ".expect.json"
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,99}$")
 MAX_BYTES = 1 << 20  # an expectation is a few hundred bytes
 
@@ -38,11 +38,6 @@ def check_name(name: str) -> str:
             "(at most 100)"
         )
     return name
-
-
-def expect_path(definition: str | os.PathLike) -> Path:
-    path = Path(definition)
-    return path.with_name(path.stem + EXPECT_SUFFIX)
 
 
 def record_scenario(spec: SweepSpec, dest: Path) -> None:
@@ -80,12 +75,6 @@ def save_golden(
         + "\n",
     )
     return [definition, recording, expect_path(definition)]
-
-
-def is_search_golden(path: Path) -> bool:
-    """A NAME.toml with NAME.expect.json beside it, wherever it lies (`twin check` takes it as a
-    search golden, and the NAME.mcap beside it as part of it)."""
-    return path.suffix == ".toml" and expect_path(path).is_file()
 
 
 def read_expectation(definition: str) -> dict:

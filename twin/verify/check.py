@@ -257,8 +257,7 @@ def find_goldens(paths: Sequence[str]) -> Goldens:
     for every golden under it (walk_folder). None: recordings/. Each file once however it is named
     (`G`, `./G`, a folder holding it, a link): two checks of one golden would race on its temporary
     file."""
-    from twin.sweep.golden import is_sweep_golden
-    from twin.sweep.search_golden import is_search_golden
+    from twin.model.golden_files import is_search_golden, is_sweep_golden
 
     if not paths:
         if not Path(DEFAULT_DIR).is_dir():
@@ -306,8 +305,7 @@ def walk_folder(folder: str) -> Goldens:
     definitions (a .toml with task, scenarios and seed; another .toml, such as a robot profile, is
     skipped, unless NAME.summary.json beside it says it is a golden: an error). Leftovers of an
     interrupted write (`.partial`, `.tmp`) are no .mcap or .toml files."""
-    from twin.sweep.golden import is_sweep_golden
-    from twin.sweep.search_golden import is_search_golden
+    from twin.model.golden_files import is_search_golden, is_sweep_golden
 
     out, seen = Goldens(), set()
     for top, dirs, files in os.walk(folder, onerror=_unreadable, followlinks=True):

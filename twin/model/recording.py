@@ -22,8 +22,18 @@ class Recording:
     """Everything one run produced, plus how to rebuild it (twin.load and a replay give it with its
     tables: record.tables.RecordingWithTables).
 
-    run: {"source": "task"|"teleop"|"remote", "task": name or path or "", "params": {...}}
-    meta: the rest of the file's metadata (versions, platform, engine, ...), as strings.
+    Attributes:
+        config: the configuration that rebuilds the run (robot profile, scene, time step, engine).
+        frames: one row a kept physics step, as numpy columns (`step`, `t_ns`, `joint_q`, ...).
+        commands: every input, at every step whatever the frame rate.
+        events: what the twin and the task said (attach, release, placed, phases, ...).
+        run: `{"source": "task"|"teleop"|"remote", "task": name or path or "", "params": {...}}`.
+        meta: the rest of the file's metadata (versions, platform, engine, ...).
+        finalized: the file was closed cleanly.
+        urdf: the robot's URDF text.
+        path: the file it was loaded from ("" in memory).
+        assets: attachments (robot.urdf and meshes) by name.
+        cameras: each camera's pictures, by camera name.
     """
 
     config: TwinConfig

@@ -47,9 +47,26 @@ class GoldenChecker:
         event_kinds: frozenset[str] | None = None,
         allow_error: bool = False,
     ) -> DiffResult:
-        """Assert that `run` (a Recording, or an .mcap path) matches golden `name`; returns the
-        diff. Under the default `noise` preset the run is made once more with its math perturbed
-        (its task re-run, or its commands replayed) to measure its noise floor."""
+        """Assert that a run matches golden `name`. Under the default `noise` preset the run is
+        made once more with its math perturbed (its task re-run, or its commands replayed) to
+        measure its noise floor.
+
+        Args:
+            run: a Recording (e.g. from `record_task`) or the path of an `.mcap` file.
+            name: the golden's name: `NAME.mcap` in the `twin_goldens_dir` folder.
+            tolerance: a preset: exact, tight, noise (default), physical or outcome.
+            tol: overrides, `CHANNEL.FIELD=VALUE` as `twin diff --tol` takes them.
+            event_window_steps: events pair within this many steps (default: the preset's).
+            event_kinds: the event kinds to pair one by one (default: all).
+            allow_error: a run whose task failed may become or replace the golden.
+
+        Returns:
+            The diff (`twin.compare.engine.DiffResult`) when the run matches.
+
+        Raises:
+            pytest.fail.Exception: the golden differs (the report is the message; NAME.obtained.mcap
+                and NAME.report.md are left beside it), or it did not exist and was written.
+        """
         from twin.record.mcap.reader import load
         from twin.verify.check import remade
         from twin.verify.noise import judge

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from twin.model.types import Command
 
 if TYPE_CHECKING:
-    from twin.compare.engine import DiffResult
+    from twin.compare.engine import DiffResult, FieldStat
 
 EARLIER_RELEASE = "recorded by an earlier release"
 _SHA = re.compile(r"sha256:[0-9a-f]{64}")
@@ -107,9 +107,11 @@ def _messages_as_the_golden_words_them(
     return out, reworded
 
 
-def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[str]:
+def identity_notes(
+    diffs: list[IdentityDifference], *, match: bool, fields: list[FieldStat]
+) -> list[str]:
     """The report's note on each identity difference: why it differs, and whether the verdict
-    counted it."""
+    counted it (match: the verdict; fields: the result's)."""
     notes = []
     for d in diffs:
         if d.judged:
@@ -117,8 +119,8 @@ def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[
                 f"{d.cause}: {d.describe()}; a tolerance of 0 on commands.annotations (exact) "
                 "judges the task's identity, the other presets leave it out"
             )
-        elif result.match:
-            how = "bit for bit" if _bit_identical(result) else "within the verdict"
+        elif match:
+            how = "bit for bit" if _bit_identical(fields) else "within the verdict"
             notes.append(f"{d.cause}, behaviour identical ({how}): {d.describe()}")
         else:
             notes.append(f"{d.cause} (not judged; the differences reported are others): "
@@ -143,6 +145,6 @@ def _short(identity: str) -> str:
     return f"{identity!r}"
 
 
-def _bit_identical(result: DiffResult) -> bool:
+def _bit_identical(fields: list[FieldStat]) -> bool:
     """Every frame field bit for bit the same (what the report's summary calls bit-identical)."""
-    return all(f.identical or not f.worst > 0 for f in result.fields if f.unit)
+    return all(f.identical or not f.worst > 0 for f in fields if f.unit)

@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twin.compare.engine import DiffResult, Divergence
 from twin.compare.metrics import REVOLUTE
 from twin.compare.noise import command_number_difference
+from twin.compare.result import DiffResult, Divergence
 from twin.model.recording import Recording
 from twin.model.types import Command
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from twin.model.types import Command
 
 if TYPE_CHECKING:
-    from twin.compare.engine import DiffResult, FieldStat
+    from twin.compare.result import DiffResult, FieldStat
 
 EARLIER_RELEASE = "recorded by an earlier release"
 _SHA = re.compile(r"sha256:[0-9a-f]{64}")

@@ -13,8 +13,8 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from twin.compare.engine import DiffResult, Divergence, FieldStat
 from twin.compare.identity import identity_summary
+from twin.compare.result import DiffResult, Divergence, FieldStat
 from twin.model.errors import ConfigError, OutputError
 
 FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}

@@ -24,7 +24,7 @@ from twin.compare.outcome import (
     length_stat,
     task_stat,
 )
-from twin.compare.result import DiffResult, Divergence, FieldStat, NotComparable
+from twin.compare.result import DiffResult, Divergence, FieldStat, NotComparable, bit_identical
 from twin.compare.tolerances import INF, Tolerances
 from twin.model.errors import RecordingError
 from twin.model.recording import Recording
@@ -101,7 +101,7 @@ def compare(
     first = _first(fields, event_diffs, dt_ns, allow.event_window) or first_annotation
     notes += allow.commands_note() + pictures_note + allow.events_note()
     notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
-    notes += identity_notes(identities, match=first is None, fields=fields)
+    notes += identity_notes(identities, match=first is None, bit_identical=bit_identical(fields))
     return DiffResult(
         golden=run_summary(golden),
         candidate=run_summary(candidate),

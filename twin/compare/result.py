@@ -84,6 +84,11 @@ class FieldStat:
         )
 
 
+def bit_identical(fields: list[FieldStat]) -> bool:
+    """Every frame field bit for bit the same (what the report's summary calls bit-identical)."""
+    return all(f.identical or not f.worst > 0 for f in fields if f.unit)
+
+
 @dataclass
 class FinalPose:
     name: str

@@ -10,171 +10,24 @@ Everything is numpy over whole columns: no per-frame Python.
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING
-
-import numpy as np
-
+from twin.compare.allowances import Allowances
+from twin.compare.commands import command_stats, likely_cause
 from twin.compare.events import EventDiff, match_events
-from twin.compare.identity import IdentityDifference, identity_notes, set_identity_apart
-from twin.compare.metrics import (
-    REVOLUTE,
-    abs_error,
-    differs,
-    discrete_error,
-    joint_error,
-    norm_error,
-    quat_angle,
+from twin.compare.fields import align, frame_stats
+from twin.compare.identity import identity_notes
+from twin.compare.noise import NoiseFloor
+from twin.compare.outcome import (
+    count_stats,
+    final_poses,
+    final_stats,
+    image_stat,
+    length_stat,
+    task_stat,
 )
-from twin.compare.noise import NoiseFloor, command_number_difference
-from twin.compare.tolerances import COUNTED_EVENTS, FIELDS, INF, Tolerances
-from twin.model.errors import RecordingError, TwinError
-from twin.model.fields import COMPARED
+from twin.compare.result import DiffResult, Divergence, FieldStat, NotComparable, bit_identical
+from twin.compare.tolerances import INF, Tolerances
+from twin.model.errors import RecordingError
 from twin.model.recording import Recording
-from twin.model.types import Command
-from twin.pictures import track_rgb
-
-if TYPE_CHECKING:
-    from twin.compare.explain import Explanation
-
-# a joint field's unit for a revolute joint, and for the prismatic Z joint ("rad|m" in model.fields)
-JOINT_UNITS = {c.name: tuple(c.unit.split("|")) for f, c in COMPARED if f.shape == "joint"}
-
-
-class NotComparable(TwinError):
-    """The two runs differ in structure (joints by role, time step, scene objects)."""
-
-    exit_code = 3
-
-
-@dataclass
-class Divergence:
-    """Where the candidate first leaves the golden, in one field of one element."""
-
-    step: int
-    t_s: float
-    channel: str
-    field: str
-    element: str
-    expected: list
-    actual: list
-    difference: float
-    tolerance: float
-    unit: str
-    # the measured noise floor there (times its margin); 0 when none was measured
-    floor: float = 0.0
-
-    @property
-    def name(self) -> str:
-        return f"{self.channel}.{self.field}"
-
-
-@dataclass
-class FieldStat:
-    name: str
-    unit: str
-    tolerance: float
-    worst: float  # largest error over steps and elements
-    worst_step: int
-    worst_element: str
-    rms: float
-    steps_over: int  # steps where some element is over tolerance
-    first: Divergence | None = None
-    # the largest noise floor allowed (times its margin); 0 when none was measured
-    floor: float = 0.0
-    identical: bool = False  # every value bit for bit the same
-
-    @property
-    def ok(self) -> bool:
-        return self.first is None
-
-
-@dataclass
-class FinalPose:
-    name: str
-    expected: list
-    actual: list
-    distance_m: float
-    angle_rad: float
-    ok: bool
-
-
-@dataclass
-class DiffResult:
-    golden: dict  # run_summary(): path, profile, run, frames
-    candidate: dict
-    tolerances: Tolerances
-    fields: list[FieldStat]
-    events_matched: int
-    events_shifted: int  # matched, but at another step inside the window
-    event_diffs: list[EventDiff]
-    final_poses: list[FinalPose]
-    length: tuple[int, int]  # last step of golden, candidate
-    steps_compared: int
-    config_differences: list[tuple[str, str, str]]
-    notes: list[str] = field(default_factory=list)
-    first: Divergence | None = None
-    first_command: Divergence | None = None  # the first difference in the command sequences
-    # the first difference in what the tasks said (event Commands)
-    first_annotation: Divergence | None = None
-    # the golden's last command at or before the first divergence acting on its field
-    likely_cause: str = ""
-    # False: the tolerances pair no events (outcome); counts still compare
-    events_compared: bool = True
-    floor: NoiseFloor | None = None  # the candidate's measured noise floor (the `noise` preset)
-    # what changed, read from both runs (twin.compare.explain; None until explained)
-    explanation: Explanation | None = None
-    identity: list[IdentityDifference] = field(default_factory=list)  # task_start's, apart
-
-    @property
-    def match(self) -> bool:
-        return self.first is None
-
-    @property
-    def exit_code(self) -> int:
-        return 0 if self.match else 1
-
-    def to_dict(self) -> dict:
-        def clean(x):
-            if isinstance(x, float) and not math.isfinite(x):
-                return str(x)
-            if isinstance(x, dict):
-                return {k: clean(v) for k, v in x.items()}
-            if isinstance(x, list | tuple):
-                return [clean(v) for v in x]
-            return x
-
-        out = asdict(self)
-        out["tolerances"] = self.tolerances.to_dict()
-        out["floor"] = self.floor.to_dict() if self.floor is not None else None
-        out["match"] = self.match
-        return clean(out)
-
-
-# field -> (column, component slice, metric, element kind), from model.fields
-_METRICS = {"joint": joint_error, "abs": abs_error, "discrete": discrete_error, "norm": norm_error,
-            "angle": quat_angle}
-_SPECS = {
-    c.name: (
-        f.name,
-        c.components,
-        _METRICS[c.metric],
-        {"joint": "joint", "object_pose": "object"}.get(f.shape, ""),
-    )
-    for f, c in COMPARED
-}
-
-
-def _shaped(values: np.ndarray, components: slice | None, kind: str) -> np.ndarray:
-    """Any column -> (n, elements, components)."""
-    if values.ndim == 1:
-        return values[:, None, None]
-    if kind == "joint":
-        return values[:, :, None]
-    if values.ndim == 2:
-        return values[:, None, components or slice(None)]
-    return values[:, :, components]
 
 
 # -- the engine --------------------------------------------------------------------------------
@@ -225,87 +78,31 @@ def compare(
     """
     tol = tolerances or Tolerances()
     notes = refuse_incomparable(golden, candidate, force)
-    g, c = golden.frames, candidate.frames
-    if len(g) == 0 or len(c) == 0:
-        raise RecordingError(
-            f"cannot compare a run without frames (golden {golden.path or '<memory>'}: {len(g)} "
-            f"frames, candidate {candidate.path or '<memory>'}: {len(c)} frames)"
-        )
-    gi, ci = align(g.step, c.step)
-    common, g_obj, c_obj = _common_objects(golden, candidate)
-    steps = g.step[gi]
-    fields = [
-        _field_stat(
-            name,
-            a,
-            b,
-            metric,
-            tol[name],
-            elements,
-            steps,
-            g.t_ns[gi],
-            floor.at(name, steps) if floor is not None else None,
-        )
-        for name, a, b, metric, elements in _field_arrays(
-            golden, candidate, gi, ci, common, g_obj, c_obj
-        )
-    ]
-
+    _require_frames(golden, candidate)
+    allow = Allowances.of(tol, floor)
+    gi, ci = align(golden.frames.step, candidate.frames.step)
     dt_ns = golden.config.dt_ns
-    length = (int(g.step[-1]), int(c.step[-1]))
-    scalar = (
-        tol.values
-        if floor is None
-        else {name: max(t, floor.scalar(name)) for name, t in tol.values.items()}
-    )
-    fields.append(_length_stat(length, scalar["run.length"], dt_ns))
-    finals = _final_poses(g.object_poses[-1][g_obj], c.object_poses[-1][c_obj], common, scalar)
-    fields.extend(_final_stats(finals, scalar, max(length), dt_ns))
-    commands_tol, commands_until = tol["commands.sequence"], None
-    if floor is not None:
-        commands_tol, commands_until = max(commands_tol, floor.commands), floor.commands_split_step
-        if commands_until is not None:
-            notes.append(
-                f"the candidate's own commands change with last-bit noise from step "
-                f"{commands_until} on "
-                "(its noise run took other ones): commands are compared up to there"
-            )
-    g_parts, c_parts = _split_annotations(golden.commands), _split_annotations(candidate.commands)
-    fields.append(_command_stat(g_parts[0], c_parts[0], commands_tol, dt_ns, commands_until))
-    annotations_tol = tol["commands.annotations"]
-    if floor is not None:
-        annotations_tol = max(annotations_tol, floor.commands)
-    said, identities = set_identity_apart(g_parts[1], c_parts[1], tol["commands.annotations"] == 0)
-    fields.append(_command_stat(g_parts[1], said, annotations_tol, dt_ns, commands_until,
-                                name="commands.annotations"))
-    task_tol = INF if floor is not None and floor.outcome_differs else tol["outcome.task"]
-    fields.append(_task_stat(golden, candidate, task_tol, max(length), dt_ns))
-    fields.extend(_count_stats(golden.events, candidate.events, scalar, max(length), dt_ns))
-    if golden.config.cameras or candidate.config.cameras:
-        fields.append(_image_stat(golden, candidate, scalar["images.pixels"], dt_ns))
-        if tol["images.pixels"] == INF:
-            notes.append(
-                "camera pictures are not compared under these tolerances (images.pixels = inf)"
-            )
-    window = tol.event_window_steps
-    if floor is not None and window is not None:
-        window = max(window, floor.event_shift_steps)
-    if window is None:
-        matched, shifted, event_diffs = 0, 0, []
-    else:
-        matched, shifted, event_diffs = match_events(
-            golden.events, candidate.events, window, event_kinds
-        )
-        if floor is not None and floor.events_split_step is not None:
-            event_diffs = [d for d in event_diffs if d.step < floor.events_split_step]
-            notes.append(
-                f"the candidate's own events change with last-bit noise from step "
-                f"{floor.events_split_step} "
-                "on: events are paired up to there"
-            )
+    length = (int(golden.frames.step[-1]), int(candidate.frames.step[-1]))
+    finals = final_poses(golden, candidate, allow.scalar)
+    commands, identities = command_stats(golden, candidate, allow, dt_ns)
+    pictures, pictures_note = _pictures(golden, candidate, allow, dt_ns)
+    fields = [
+        *frame_stats(golden, candidate, gi, ci, allow),
+        length_stat(length, allow.scalar["run.length"], dt_ns),
+        *final_stats(finals, allow.scalar, max(length), dt_ns),
+        *commands,
+        task_stat(golden, candidate, allow.task, max(length), dt_ns),
+        *count_stats(golden.events, candidate.events, allow.scalar, max(length), dt_ns),
+        *pictures,
+    ]
+    matched, shifted, event_diffs = _events(golden, candidate, allow, event_kinds)
+    first_annotation = _first_of(fields, "commands.annotations")
+    # annotations alone are still a difference, but never ahead of a physical one
+    first = _first(fields, event_diffs, dt_ns, allow.event_window) or first_annotation
+    notes += allow.commands_note() + pictures_note + allow.events_note()
     notes += _decimation_notes(golden, candidate, int(gi.shape[0]))
-
-    result = DiffResult(
+    notes += identity_notes(identities, match=first is None, bit_identical=bit_identical(fields))
+    return DiffResult(
         golden=run_summary(golden),
         candidate=run_summary(candidate),
         tolerances=tol,
@@ -321,483 +118,57 @@ def compare(
             {**candidate.config.to_dict(), "run": candidate.run or {}},
         ),
         notes=notes,
+        first=first,
+        first_command=_first_of(fields, "commands.sequence"),
+        first_annotation=first_annotation,
+        likely_cause=(
+            "" if first is None
+            else likely_cause(golden.commands, first, golden.config.profile.joint_names)
+        ),
         events_compared=tol.event_window_steps is not None,
         floor=floor,
         identity=identities,
     )
-    result.first_command = next((f.first for f in fields if f.name == "commands.sequence"), None)
-    result.first_annotation = next(
-        (f.first for f in fields if f.name == "commands.annotations"), None
-    )
-    # annotations alone are still a difference, but never ahead of a physical one
-    result.first = _first(fields, event_diffs, dt_ns, window) or result.first_annotation
-    result.notes += identity_notes(result.identity, result)
-    if result.first is not None:
-        result.likely_cause = likely_cause(
-            golden.commands, result.first, golden.config.profile.joint_names
-        )
-    return result
 
 
-def _common_objects(
-    golden: Recording, candidate: Recording
-) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """Object names both runs have (golden order) and their indices in each run."""
-    g_names = [o.name for o in golden.config.objects]
-    c_names = [o.name for o in candidate.config.objects]
-    common = [n for n in g_names if n in c_names]
-    return (
-        common,
-        np.array([g_names.index(n) for n in common], dtype=np.int64),
-        np.array([c_names.index(n) for n in common], dtype=np.int64),
-    )
-
-
-def _field_arrays(
-    golden: Recording,
-    candidate: Recording,
-    gi: np.ndarray,
-    ci: np.ndarray,
-    common: list[str],
-    g_obj: np.ndarray,
-    c_obj: np.ndarray,
-):
-    """Per field: (name, golden (n, k, c), candidate (n, k, c), metric, element names) on aligned
-    steps; common, g_obj, c_obj as _common_objects gives them."""
+def _require_frames(golden: Recording, candidate: Recording) -> None:
     g, c = golden.frames, candidate.frames
-    g_names = [o.name for o in golden.config.objects]
-    c_names = [o.name for o in candidate.config.objects]
-    joint_names = list(golden.config.profile.joint_names)
-    for name, (column, comp, metric, kind) in _SPECS.items():
-        a, b = getattr(g, column)[gi], getattr(c, column)[ci]
-        if kind == "object":
-            a, b = a[:, g_obj], b[:, c_obj]
-        elif column in ("sensed_body", "held_body"):
-            b = _remap_bodies(b, c_names, g_names)
-        elements = joint_names if kind == "joint" else common if kind == "object" else [""]
-        yield name, _shaped(a, comp, kind), _shaped(b, comp, kind), metric, elements
-
-
-def error_series(
-    golden: Recording, candidate: Recording
-) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """On the steps both runs have: (steps, t_ns, {field: largest error over its elements}), FIELDS
-    units."""
-    gi, ci = align(golden.frames.step, candidate.frames.step)
-    out = {}
-    for name, a, b, metric, _elements in _field_arrays(
-        golden, candidate, gi, ci, *_common_objects(golden, candidate)
-    ):
-        err = metric(a, b)
-        out[name] = err.max(axis=1) if err.shape[1] else np.zeros(err.shape[0])
-    return golden.frames.step[gi], golden.frames.t_ns[gi], out
-
-
-def align(g_steps: np.ndarray, c_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of the steps both runs have, in step order."""
-    n = min(len(g_steps), len(c_steps))
-    if np.array_equal(g_steps[:n], c_steps[:n]):
-        idx = np.arange(n)
-        return idx, idx
-    _, gi, ci = np.intersect1d(g_steps, c_steps, assume_unique=True, return_indices=True)
-    return gi, ci
-
-
-def _remap_bodies(b: np.ndarray, c_names: list[str], g_names: list[str]) -> np.ndarray:
-    """Candidate object indices -> golden indices (by name); -2 for objects the golden lacks."""
-    table = np.array(
-        [g_names.index(n) if n in g_names else -2 for n in c_names] + [-1], dtype=np.int64
-    )
-    return table[b]  # index -1 (no body) reads the table's last entry, -1
-
-
-def _field_stat(
-    name: str,
-    a: np.ndarray,
-    b: np.ndarray,
-    metric,
-    tolerance: float,
-    elements: list[str],
-    steps: np.ndarray,
-    t_ns: np.ndarray,
-    floor: np.ndarray | None = None,
-) -> FieldStat:
-    """One field over the aligned steps; floor: the noise floor per step (allowed where above
-    tolerance)."""
-    unit = FIELDS[name][0]
-    n = a.shape[0]
-    if n == 0 or a.shape[1] == 0:
-        return FieldStat(name, unit, tolerance, 0.0, -1, "", 0.0, 0, identical=True)
-    err = metric(a, b)
-    bits = differs(a, b)
-    if floor is not None and tolerance != INF:
-        over = ~(err <= np.maximum(tolerance, floor)[:, None])
-    elif tolerance == 0:
-        over = bits
-    else:
-        over = ~(err <= tolerance)
-    over_steps = over.any(axis=1)
-    finite = np.where(np.isnan(err), INF, err)
-    flat = int(np.argmax(finite))
-    w_i, w_k = divmod(flat, finite.shape[1])
-    stat = FieldStat(
-        name,
-        unit,
-        tolerance,
-        float(finite[w_i, w_k]),
-        int(steps[w_i]),
-        elements[w_k],
-        float(np.sqrt(np.mean(np.square(finite)))),
-        int(over_steps.sum()),
-        floor=float(floor.max()) if floor is not None and len(floor) else 0.0,
-        identical=not bool(bits.any()),
-    )
-    if stat.steps_over and tolerance != INF:
-        i = int(np.argmax(over_steps))
-        k = int(np.argmax(over[i]))
-        channel, fld = name.split(".")
-        if channel == "joints":
-            unit = JOINT_UNITS[name][0 if REVOLUTE[k] else 1]
-        stat.first = Divergence(
-            int(steps[i]),
-            int(t_ns[i]) * 1e-9,
-            channel,
-            fld,
-            elements[k],
-            _values(a[i, k]),
-            _values(b[i, k]),
-            float(err[i, k]),
-            tolerance,
-            unit,
-            float(floor[i]) if floor is not None else 0.0,
+    if len(g) == 0 or len(c) == 0:
+        raise RecordingError(
+            f"cannot compare a run without frames (golden {golden.path or '<memory>'}: {len(g)} "
+            f"frames, candidate {candidate.path or '<memory>'}: {len(c)} frames)"
         )
-    elif tolerance == INF:
-        stat.steps_over = 0
-    return stat
 
 
-def _values(x: np.ndarray) -> list:
-    return [v.item() for v in x]
+def _pictures(
+    golden: Recording, candidate: Recording, allow: Allowances, dt_ns: int
+) -> tuple[list[FieldStat], list[str]]:
+    """The camera pictures' field (none when neither run has a camera), and the note when the
+    tolerances leave them out."""
+    if not (golden.config.cameras or candidate.config.cameras):
+        return [], []
+    stat = image_stat(golden, candidate, allow.scalar["images.pixels"], dt_ns)
+    if not allow.images_off:
+        return [stat], []
+    return [stat], ["camera pictures are not compared under these tolerances (images.pixels = inf)"]
 
 
-def _length_stat(length: tuple[int, int], tolerance: float, dt_ns: int) -> FieldStat:
-    diff = abs(length[0] - length[1])
-    stat = FieldStat(
-        "run.length",
-        "steps",
-        tolerance,
-        float(diff),
-        min(length),
-        "",
-        float(diff),
-        int(diff > tolerance),
-    )
-    if diff > tolerance:
-        step = min(length) + 1
-        stat.first = Divergence(
-            step,
-            step * dt_ns * 1e-9,
-            "run",
-            "length",
-            "",
-            [length[0]],
-            [length[1]],
-            float(diff),
-            tolerance,
-            "steps",
-        )
-    return stat
+def _events(
+    golden: Recording, candidate: Recording, allow: Allowances, kinds: frozenset[str] | None
+) -> tuple[int, int, list[EventDiff]]:
+    """(matched, shifted, differences) of the events paired within the allowed window, up to
+    where the candidate's own events change with last-bit noise; nothing when not paired."""
+    if allow.event_window is None:
+        return 0, 0, []
+    matched, shifted, diffs = match_events(golden.events, candidate.events, allow.event_window,
+                                           kinds)
+    if allow.events_until is not None:
+        diffs = [d for d in diffs if d.step < allow.events_until]
+    return matched, shifted, diffs
 
 
-def _final_poses(
-    g: np.ndarray, c: np.ndarray, names: list[str], tol: dict[str, float]
-) -> list[FinalPose]:
-    dist = np.linalg.norm(g[:, :3] - c[:, :3], axis=-1)
-    ang = quat_angle(g[:, 3:], c[:, 3:])
-    out = []
-    for k, name in enumerate(names):
-        ok = True
-        for key, err, a, b in (
-            ("final.position", dist[k], g[k, :3], c[k, :3]),
-            ("final.orientation", ang[k], g[k, 3:], c[k, 3:]),
-        ):
-            t = tol[key]
-            ok &= bool(np.array_equal(a, b) if t == 0 else err <= t)
-        out.append(FinalPose(name, _values(g[k]), _values(c[k]), float(dist[k]), float(ang[k]), ok))
-    return out
-
-
-def _final_stats(
-    finals: list[FinalPose], tol: dict[str, float], last_step: int, dt_ns: int
-) -> list[FieldStat]:
-    stats = []
-    for name, attr, part in (
-        ("final.position", "distance_m", slice(0, 3)),
-        ("final.orientation", "angle_rad", slice(3, 7)),
-    ):
-        t = tol[name]
-        errs = [getattr(f, attr) for f in finals]
-        worst_k = int(np.argmax(errs)) if errs else 0
-        # "not <=" so that a NaN error counts as bad, as it does in _final_poses
-        bad = [
-            f
-            for f in finals
-            if (f.expected[part] != f.actual[part] if t == 0 else not getattr(f, attr) <= t)
-        ]
-        stat = FieldStat(
-            name,
-            FIELDS[name][0],
-            t,
-            errs[worst_k] if errs else 0.0,
-            last_step,
-            finals[worst_k].name if finals else "",
-            float(np.sqrt(np.mean(np.square(errs)))) if errs else 0.0,
-            len(bad),
-        )
-        if bad:
-            f = bad[0]
-            stat.first = Divergence(
-                last_step,
-                last_step * dt_ns * 1e-9,
-                "final",
-                name.split(".")[1],
-                f.name,
-                f.expected[part],
-                f.actual[part],
-                getattr(f, attr),
-                t,
-                FIELDS[name][0],
-            )
-        stats.append(stat)
-    return stats
-
-
-def _command_text(c: Command) -> str:
-    args = ", ".join(f"{k}={v!r}" for k, v in sorted(c.args.items()))
-    return f"step {c.step} {c.kind}({args})"
-
-
-def _split_annotations(commands: list[Command]) -> tuple[list[Command], list[Command]]:
-    """(commands that act, annotations): an `event` Command acts on nothing, so the two sequences
-    are paired apart and an extra annotation does not shift the pairing of the commands that act."""
-    return [c for c in commands if c.kind != "event"], [c for c in commands if c.kind == "event"]
-
-
-def _command_stat(
-    g: list[Command],
-    c: list[Command],
-    tolerance: float,
-    dt_ns: int,
-    until_step: int | None = None,
-    name: str = "commands.sequence",
-) -> FieldStat:
-    """Two command sequences, entry by entry: step, kind and text exactly, the numbers in their
-    arguments within tolerance (0: equal; inf: the field is off); entries from until_step on are not
-    judged."""
-    if until_step is not None:
-        g, c = [x for x in g if x.step < until_step], [x for x in c if x.step < until_step]
-    n = max(len(g), len(c))
-    differing = [
-        i
-        for i in range(n)
-        if i >= len(g) or i >= len(c) or not _commands_agree(g[i], c[i], tolerance)
-    ]
-    first_i = differing[0] if differing else -1
-    step = -1 if first_i < 0 else min(x[first_i].step for x in (g, c) if first_i < len(x))
-    stat = FieldStat(
-        name,
-        "",
-        tolerance,
-        float(len(differing)),
-        step,
-        "",
-        float(len(differing)),
-        len(differing) if tolerance != INF else 0,
-    )
-    if differing and tolerance != INF:
-        expected = [_command_text(g[first_i]) if first_i < len(g) else None]
-        actual = [_command_text(c[first_i]) if first_i < len(c) else None]
-        command = g[first_i] if first_i < len(g) else c[first_i]
-        kind = command.args.get("kind", "event") if command.kind == "event" else command.kind
-        stat.first = Divergence(
-            step,
-            step * dt_ns * 1e-9,
-            "commands",
-            name.split(".")[1],
-            f"#{first_i} {kind}",
-            expected,
-            actual,
-            float(len(differing)),
-            tolerance,
-            "",
-        )
-    return stat
-
-
-def _commands_agree(a: Command, b: Command, tolerance: float) -> bool:
-    if tolerance == 0:
-        return a == b
-    d = command_number_difference(a, b)
-    return d is not None and d <= tolerance
-
-
-def on_path(command: Command, d: Divergence, joint_names: tuple[str, ...] | list[str]) -> bool:
-    """Whether a command acts on the diverging field: a joint's command on that joint's fields, any
-    joint, suction or key command on the pad, the hold and the objects; an annotation (`event`) on
-    nothing."""
-    if command.kind == "event":
-        return False
-    if d.channel == "joints":
-        if command.kind == "key":
-            return True
-        joint = command.args.get("joint")
-        if isinstance(joint, int) and not isinstance(joint, bool) and 0 <= joint < len(joint_names):
-            joint = joint_names[joint]
-        return command.kind.startswith("joint_") and joint == d.element
-    return d.channel in (
-        "suction",
-        "hold",
-        "pad",
-        "objects",
-        "final",
-        "counts",
-        "events",
-        "outcome",
-        "run",
-        "images",
-    )
-
-
-def likely_cause(
-    commands: list[Command], d: Divergence, joint_names: tuple[str, ...] | list[str] = ()
-) -> str:
-    """The golden's last command at or before the divergence that acts on the diverging field, or
-    ""."""
-    if d.channel == "commands":
-        return ""
-    before = [c for c in commands if c.step <= d.step and on_path(c, d, joint_names)]
-    return _command_text(max(before, key=lambda c: c.step)) if before else ""
-
-
-def _task_stat(
-    golden: Recording, candidate: Recording, tolerance: float, last_step: int, dt_ns: int
-) -> FieldStat:
-    a, b = golden.outcome, candidate.outcome
-    stat = FieldStat(
-        "outcome.task",
-        "",
-        tolerance,
-        float(a != b),
-        last_step,
-        "",
-        float(a != b),
-        int(a != b and tolerance != INF),
-    )
-    if a != b and tolerance != INF:
-        stat.first = Divergence(
-            last_step, last_step * dt_ns * 1e-9, "outcome", "task", "", [a], [b], 1.0, tolerance, ""
-        )
-    return stat
-
-
-def _count_stats(g: list, c: list, tol: Tolerances, last_step: int, dt_ns: int) -> list[FieldStat]:
-    stats = []
-    for kind in COUNTED_EVENTS:
-        name = f"counts.{kind}"
-        a, b = sum(e.kind == kind for e in g), sum(e.kind == kind for e in c)
-        t = tol[name]
-        over = not abs(a - b) <= t
-        stat = FieldStat(
-            name, "events", t, float(abs(a - b)), last_step, "", float(abs(a - b)), int(over)
-        )
-        if over:
-            stat.first = Divergence(
-                last_step,
-                last_step * dt_ns * 1e-9,
-                "counts",
-                kind,
-                "",
-                [a],
-                [b],
-                float(abs(a - b)),
-                t,
-                "events",
-            )
-        stats.append(stat)
-    return stats
-
-
-def _image_stat(golden: Recording, candidate: Recording, tolerance: float, dt_ns: int) -> FieldStat:
-    """Each camera's pictures, paired by step: the mean absolute difference of their pixels (levels
-    0..255), inf for a picture only one run has. Identical bytes are 0 without decoding; others are
-    decoded by the codec (twin.pictures.track_rgb). Not looked at when the tolerance is inf."""
-    unit = FIELDS["images.pixels"][0]
-    if tolerance == INF:
-        return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
-    names = list(
-        dict.fromkeys(
-            [c.name for c in golden.config.cameras] + [c.name for c in candidate.config.cameras]
-        )
-    )
-    # (step, "camera #index", error, golden's, candidate's)
-    rows: list[tuple[int, str, float, str, str]] = []
-    for name in names:
-        g, c = golden.cameras.get(name), candidate.cameras.get(name)
-        g_steps = g.step if g is not None else np.zeros(0, dtype=np.int64)
-        c_steps = c.step if c is not None else np.zeros(0, dtype=np.int64)
-        _, gi, ci = np.intersect1d(g_steps, c_steps, assume_unique=True, return_indices=True)
-        for i, j in zip(gi.tolist(), ci.tolist(), strict=True):
-            rows.append(
-                (int(g_steps[i]), f"{name} #{i}", _picture_error(g, i, c, j), "picture", "picture")
-            )
-        for steps, which, sides in (
-            (g_steps, gi, ("picture", "missing")),
-            (c_steps, ci, ("missing", "picture")),
-        ):
-            missing = np.setdiff1d(np.arange(len(steps)), which)
-            rows += [(int(steps[k]), f"{name} #{k}", INF, *sides) for k in missing.tolist()]
-    if not rows:
-        return FieldStat("images.pixels", unit, tolerance, 0.0, -1, "", 0.0, 0)
-    rows.sort(key=lambda r: r[0])
-    errors = np.array([r[2] for r in rows])
-    worst = int(np.argmax(errors))
-    over = [r for r in rows if not r[2] <= tolerance]
-    stat = FieldStat(
-        "images.pixels",
-        unit,
-        tolerance,
-        float(errors[worst]),
-        rows[worst][0],
-        rows[worst][1],
-        float(np.sqrt(np.mean(np.square(errors)))),
-        len(over),
-    )
-    if over:
-        step, element, err, expected, actual = over[0]
-        stat.first = Divergence(
-            step,
-            step * dt_ns * 1e-9,
-            "images",
-            "pixels",
-            element,
-            [expected],
-            [actual],
-            err,
-            tolerance,
-            unit,
-        )
-    return stat
-
-
-def _picture_error(g, i: int, c, j: int) -> float:
-    """Mean absolute pixel difference of picture i of track g and picture j of track c (inf: other
-    sizes)."""
-    if g.data[i] == c.data[j]:
-        return 0.0
-    a, b = track_rgb(g, i), track_rgb(c, j)
-    if a.shape != b.shape:
-        return INF
-    return float(np.mean(np.abs(a.astype(np.int16) - b.astype(np.int16))))
+def _first_of(fields: list[FieldStat], name: str) -> Divergence | None:
+    return next((f.first for f in fields if f.name == name), None)
 
 
 def _decimation_notes(golden: Recording, candidate: Recording, compared: int) -> list[str]:
@@ -824,16 +195,18 @@ def _first(
         element = f"{d.event_kind} {d.body}".strip()
         candidates.append(
             Divergence(
-                d.step,
-                d.step * dt_ns * 1e-9,
-                "events",
-                d.kind,
-                element,
-                [d.expected_step],
-                [d.actual_step],
-                float(abs(d.expected_step - d.actual_step)) if d.kind == "moved" else INF,
-                float(window_steps or 0),
-                "steps",
+                step=d.step,
+                t_s=d.step * dt_ns * 1e-9,
+                channel="events",
+                field=d.kind,
+                element=element,
+                expected=[d.expected_step],
+                actual=[d.actual_step],
+                difference=(
+                    float(abs(d.expected_step - d.actual_step)) if d.kind == "moved" else INF
+                ),
+                tolerance=float(window_steps or 0),
+                unit="steps",
             )
         )
     return min(candidates, key=lambda d: d.step) if candidates else None

@@ -51,15 +51,26 @@ def match_events(
         for ge, ce in zip(gs, cs, strict=False):
             shift = abs(ge.step - ce.step)
             if shift > window_steps:
-                diffs.append(EventDiff("moved", key[0], key[1], ge.step, ce.step, ge.message))
+                diffs.append(_event_diff("moved", key, ge, ce))
             else:
                 matched += 1
                 shifted += shift > 0
-        diffs += [
-            EventDiff("missing", key[0], key[1], e.step, None, e.message) for e in gs[len(cs) :]
-        ]
-        diffs += [
-            EventDiff("extra", key[0], key[1], None, e.step, e.message) for e in cs[len(gs) :]
-        ]
+        diffs += [_event_diff("missing", key, e, None) for e in gs[len(cs) :]]
+        diffs += [_event_diff("extra", key, None, e) for e in cs[len(gs) :]]
     diffs.sort(key=lambda d: (d.step, d.kind, d.event_kind, d.body))
     return matched, shifted, diffs
+
+
+def _event_diff(
+    kind: str, key: tuple[str, str], golden: Event | None, candidate: Event | None
+) -> EventDiff:
+    """A difference of the events of key (kind, body); its message is the golden's when it has
+    one."""
+    return EventDiff(
+        kind=kind,
+        event_kind=key[0],
+        body=key[1],
+        expected_step=golden.step if golden is not None else None,
+        actual_step=candidate.step if candidate is not None else None,
+        message=(golden if golden is not None else candidate).message,
+    )

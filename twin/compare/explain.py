@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twin.compare.engine import DiffResult, Divergence
 from twin.compare.metrics import REVOLUTE
 from twin.compare.noise import command_number_difference
+from twin.compare.result import DiffResult, Divergence
 from twin.model.recording import Recording
 from twin.model.types import Command
 
@@ -262,7 +262,14 @@ def timing_shift(golden: Recording, candidate: Recording) -> TimingShift | None:
         return None
     from_step = g[start].step
     same, residual_rad, residual_m = _shifted_motion(golden, candidate, from_step, shift)
-    return TimingShift(shift, from_step, len(g) - start, same, residual_rad, residual_m)
+    return TimingShift(
+        steps=shift,
+        from_step=from_step,
+        commands=len(g) - start,
+        same_motion=same,
+        residual_rad=residual_rad,
+        residual_m=residual_m,
+    )
 
 
 def _shifted_motion(
@@ -365,7 +372,14 @@ def explain(golden: Recording, candidate: Recording, result: DiffResult) -> Expl
     task_changed = task_file_changed(golden, candidate)
     annotations = changed_annotations(golden, candidate)
     if result.first is None:
-        return Explanation("", "", None, annotations, configuration, task_changed)
+        return Explanation(
+            headline="",
+            change="",
+            shift=None,
+            annotations=annotations,
+            configuration=configuration,
+            task_file_changed=task_changed,
+        )
     change = change_text(golden, candidate, result.first)
     shift = None
     if result.first.field != "annotations":
@@ -380,4 +394,11 @@ def explain(golden: Recording, candidate: Recording, result: DiffResult) -> Expl
     if task_changed:
         parts.append("task file changed")
     parts += configuration
-    return Explanation("; ".join(parts), change, shift, annotations, configuration, task_changed)
+    return Explanation(
+        headline="; ".join(parts),
+        change=change,
+        shift=shift,
+        annotations=annotations,
+        configuration=configuration,
+        task_file_changed=task_changed,
+    )

@@ -14,12 +14,8 @@ from __future__ import annotations
 import dataclasses
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from twin.model.types import Command
-
-if TYPE_CHECKING:
-    from twin.compare.engine import DiffResult
 
 EARLIER_RELEASE = "recorded by an earlier release"
 _SHA = re.compile(r"sha256:[0-9a-f]{64}")
@@ -107,9 +103,11 @@ def _messages_as_the_golden_words_them(
     return out, reworded
 
 
-def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[str]:
+def identity_notes(
+    diffs: list[IdentityDifference], *, match: bool, bit_identical: bool
+) -> list[str]:
     """The report's note on each identity difference: why it differs, and whether the verdict
-    counted it."""
+    counted it (match: the verdict; bit_identical: every frame field bit for bit the same)."""
     notes = []
     for d in diffs:
         if d.judged:
@@ -117,8 +115,8 @@ def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[
                 f"{d.cause}: {d.describe()}; a tolerance of 0 on commands.annotations (exact) "
                 "judges the task's identity, the other presets leave it out"
             )
-        elif result.match:
-            how = "bit for bit" if _bit_identical(result) else "within the verdict"
+        elif match:
+            how = "bit for bit" if bit_identical else "within the verdict"
             notes.append(f"{d.cause}, behaviour identical ({how}): {d.describe()}")
         else:
             notes.append(f"{d.cause} (not judged; the differences reported are others): "
@@ -126,11 +124,11 @@ def identity_notes(diffs: list[IdentityDifference], result: DiffResult) -> list[
     return notes
 
 
-def identity_summary(result: DiffResult) -> str:
+def identity_summary(diffs: list[IdentityDifference], match: bool) -> str:
     """What a one-line summary of a match adds ("; recorded by an earlier release, behaviour
     identical"), or ""."""
-    causes = dict.fromkeys(d.cause for d in result.identity if not d.judged)
-    return "".join(f"; {c}, behaviour identical" for c in causes) if result.match else ""
+    causes = dict.fromkeys(d.cause for d in diffs if not d.judged)
+    return "".join(f"; {c}, behaviour identical" for c in causes) if match else ""
 
 
 def _task_start(c: Command) -> bool:
@@ -141,8 +139,3 @@ def _short(identity: str) -> str:
     if _SHA.fullmatch(identity):
         return f"by its source's sha256 {identity[7:19]}..."
     return f"{identity!r}"
-
-
-def _bit_identical(result: DiffResult) -> bool:
-    """Every frame field bit for bit the same (what the report's summary calls bit-identical)."""
-    return all(f.identical or not f.worst > 0 for f in result.fields if f.unit)

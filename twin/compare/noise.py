@@ -137,16 +137,16 @@ def measure(
         split = longer[min(len(run.commands), len(perturbed.commands))].step
     shift, unpaired = _event_drift(run.events, perturbed.events)
     return NoiseFloor(
-        perturbation,
-        margin,
-        np.asarray(steps),
-        envelopes,
-        scalars,
-        margin * commands,
-        split,
-        shift,
-        unpaired,
-        run.outcome != perturbed.outcome,
+        perturbation=perturbation,
+        margin=margin,
+        steps=np.asarray(steps),
+        envelopes=envelopes,
+        scalars=scalars,
+        commands=margin * commands,
+        commands_split_step=split,
+        event_shift_steps=shift,
+        events_split_step=unpaired,
+        outcome_differs=run.outcome != perturbed.outcome,
     )
 
 

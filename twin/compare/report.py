@@ -13,8 +13,8 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from twin.compare.engine import DiffResult, Divergence, FieldStat
 from twin.compare.identity import identity_summary
+from twin.compare.result import DiffResult, Divergence, FieldStat
 from twin.model.errors import ConfigError, OutputError
 
 FORMATS = {".md": "markdown", ".json": "json", ".xml": "junit", ".txt": "text"}
@@ -137,7 +137,7 @@ def headline(result: DiffResult) -> str:
     """The one line a check prints for a golden: on a mismatch what changed, both values and by
     how much (twin.compare.explain), else how the runs stand (noise_summary)."""
     if result.first is None:
-        return noise_summary(result) + identity_summary(result)
+        return noise_summary(result) + identity_summary(result.identity, result.match)
     explained = result.explanation.headline if result.explanation is not None else ""
     text = explained or first_line(result.first)
     if result.floor is not None and allowance_text(result.first):

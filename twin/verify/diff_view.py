@@ -12,8 +12,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from twin.compare.engine import DiffResult, error_series
+from twin.compare.fields import error_series
 from twin.compare.report import render_markdown
+from twin.compare.result import DiffResult
 from twin.compare.tolerances import FIELDS
 from twin.model.recording import Recording
 from twin.record.outputs import check_output, partial_path

@@ -13,9 +13,11 @@ import dataclasses
 import math
 from collections.abc import Callable
 
-from twin.compare.engine import DiffResult, compare, error_series, refuse_incomparable
+from twin.compare.engine import compare, refuse_incomparable
 from twin.compare.explain import explain
+from twin.compare.fields import error_series
 from twin.compare.noise import measure
+from twin.compare.result import DiffResult
 from twin.compare.tolerances import Tolerances
 from twin.model.errors import TwinError
 from twin.model.recording import Recording

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from twin.compare.engine import DiffResult
 from twin.compare.report import render_text, write_report
+from twin.compare.result import DiffResult
 from twin.compare.tolerances import DEFAULT, Tolerances
 from twin.model.recording import Recording
 

@@ -10,74 +10,18 @@ from __future__ import annotations
 import ast
 import math
 import re
-from dataclasses import dataclass, field
 
 import numpy as np
 
+from twin.compare.explanation import SAME_MOTION_M, Explanation, TimingShift, si, steps_word
 from twin.compare.metrics import REVOLUTE
 from twin.compare.noise import command_number_difference
 from twin.compare.result import DiffResult, Divergence
 from twin.model.recording import Recording
 from twin.model.types import Command
 
-# a shifted run's motion is "the same motion" when it stays this close to the golden's, shifted
-SAME_MOTION_M = 2.5e-4  # the physical preset's position tolerance (m, and rad for joints)
 SAME_COMMAND = 1e-9  # the numbers of a shifted command agree this closely (tight's tolerance)
 MOST_ANNOTATIONS = 2  # changed annotations named in the headline
-
-
-@dataclass
-class TimingShift:
-    """From golden step `from_step` on, the candidate's commands are the golden's, `steps` later
-    (negative: earlier); `same_motion` when the frames follow them within SAME_MOTION_M."""
-
-    steps: int
-    from_step: int
-    commands: int  # how many commands of the golden's tail are shifted
-    same_motion: bool
-    residual_rad: float  # the largest joint error after shifting (rad or m), nan without frames
-    residual_m: float  # the largest object position error after shifting (m)
-
-    def text(self) -> str:
-        when = f"{abs(self.steps)} {_steps(self.steps)} {'later' if self.steps > 0 else 'earlier'}"
-        what = "the same motion" if self.same_motion else "the same commands"
-        text = f"{what}, {when} from step {self.from_step}"
-        if self.same_motion and (self.residual_rad > 0 or self.residual_m > 0):
-            text += (
-                f" (within {si(self.residual_rad, 'rad')} and {si(self.residual_m, 'm')} "
-                "once shifted)"
-            )
-        return text
-
-
-@dataclass
-class Explanation:
-    headline: str  # one line: what changed, by how much, and why it may have
-    change: str = ""  # the first divergence with both values ("" when the runs match)
-    shift: TimingShift | None = None
-    annotations: list[str] = field(default_factory=list)  # annotations whose data changed
-    configuration: list[str] = field(default_factory=list)  # scene and task differences
-    task_file_changed: bool = False
-
-
-# -- numbers for people -------------------------------------------------------------------------
-_PREFIXES = ((1.0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"))
-
-
-def si(x: float, unit: str, signed: bool = False) -> str:
-    """A difference in its unit with a prefix that keeps 3 significant digits readable: 4.41 mrad,
-    2.00 mm, 1.9e-10 N·m (prefixes only for m and rad)."""
-    sign = "+" if signed and x > 0 else ""
-    if not math.isfinite(x):
-        return f"{x} {unit}".strip()
-    if x == 0:
-        return f"0 {unit}".strip()
-    if unit in ("m", "rad"):
-        rounded = float(f"{x:.3g}")  # 0.00099997 m is 1 mm, not 1e+03 µm
-        for scale, prefix in _PREFIXES:
-            if abs(rounded) >= scale:
-                return f"{sign}{x / scale:.3g} {prefix}{unit}"
-    return f"{sign}{x:.3g} {unit}".strip()
 
 
 def _exact(x: float, diff: float) -> str:
@@ -139,7 +83,7 @@ def _command_change(golden: Recording, candidate: Recording, d: Divergence) -> s
         == 0.0
     ):
         later = b.step - a.step
-        return f"{_subject(a)} at step {a.step} -> {b.step} ({later:+d} {_steps(later)})"
+        return f"{_subject(a)} at step {a.step} -> {b.step} ({later:+d} {steps_word(later)})"
     moved = _moved_number(a, b)
     if a.kind == b.kind and a.step == b.step and moved is not None:
         return _number_change(_subject(a), *moved, _arg_unit(golden, a, moved[0]))
@@ -209,13 +153,9 @@ def _event_change(d: Divergence, candidate: Recording) -> str:
     steps = d.actual[0] - d.expected[0]
     later = "later" if steps > 0 else "earlier"
     return (
-        f"{d.element} {abs(steps)} {_steps(steps)} {later} (step {d.expected[0]} -> "
+        f"{d.element} {abs(steps)} {steps_word(steps)} {later} (step {d.expected[0]} -> "
         f"{d.actual[0]})"
     )
-
-
-def _steps(n: int) -> str:
-    return "step" if abs(n) == 1 else "steps"
 
 
 def change_text(golden: Recording, candidate: Recording, d: Divergence) -> str:

@@ -5,18 +5,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.compare.events import EventDiff
+from twin.compare.explanation import Explanation
 from twin.compare.identity import IdentityDifference
 from twin.compare.noise import NoiseFloor
 from twin.compare.tolerances import Tolerances
 from twin.model.errors import TwinError
-
-if TYPE_CHECKING:
-    from twin.compare.explain import Explanation
 
 
 class NotComparable(TwinError):

@@ -375,7 +375,9 @@ class PeakRss:
         return (self.peak - self.base) / 1e6
 
 
-FLOOD_PARTS, FLOOD_PART_BYTES = 6, 100 << 20  # 600 MiB in parts each under the per-frame cap
+# 1200 MiB in parts each under the per-frame cap: a server that held the whole message is far
+# above what a cut-off one holds
+FLOOD_PARTS, FLOOD_PART_BYTES = 12, 100 << 20
 
 
 def keep_calling(sim, stop: threading.Event, errors: list) -> threading.Thread:
@@ -439,7 +441,10 @@ def test_a_multipart_flood_is_cut_off_after_one_frames_worth():
                 f"{rss.base / 1e6:.0f} MB, "
                 f"{elapsed_s:.2f} s; {reply}"
             )
-            assert rss.growth_mb() < (MAX_UNREAD_BYTES + (24 << 20)) / 1e6  # < 294 MB (old: 629 MB)
+            # ZMQ takes in a part's bytes as fast as loopback brings them while the server's
+            # measure reacts: 267 to 470 MB measured over 20 runs (6 parts; 2 of 6 runs failed a
+            # bound of MAX_UNREAD_BYTES + 24 MiB), against the whole 1258 MB message held before
+            assert rss.growth_mb() < (MAX_UNREAD_BYTES + 3 * FLOOD_PART_BYTES) / 1e6  # < 583 MB
             assert "closed the connection" in str(reply)
             assert not errors, errors  # the official client was answered all along
             deadline = time.monotonic() + 10.0  # ZMQ freed the unfinished message

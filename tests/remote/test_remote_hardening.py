@@ -495,10 +495,15 @@ def test_a_raw_peer_ignoring_the_close_cannot_make_the_server_buffer_more():
             f"raw flood: {sent >> 20} MiB sent in {elapsed_s:.2f} s, peak RSS "
             f"+{rss.growth_mb():.0f} MB"
         )
-        # what the kernels' buffers took after the close, at most
-        assert sent < MAX_UNREAD_BYTES + (32 << 20)
-        # the cap, plus what ZMQ and the allocator hold beside it: +269 to +297 MB measured
-        assert rss.growth_mb() < (MAX_UNREAD_BYTES + (48 << 20)) / 1e6
+        # what the kernels' buffers took after the close, and what arrived while the server's
+        # measure reacted (352 and 386 MB seen with the other flood test running beside it: 4 of
+        # 6 runs of this file at 2ab2bed failed a bound of + 32 MiB); without the cut-off all
+        # 1258 MB go in
+        assert sent < MAX_UNREAD_BYTES + FLOOD_PART_BYTES + (64 << 20)
+        # the cap, plus what ZMQ and the allocator hold beside it and what arrives while the
+        # measure reacts: +269 to +339 MB measured (a bound of + 48 MiB failed beside the other
+        # flood test)
+        assert rss.growth_mb() < (MAX_UNREAD_BYTES + FLOOD_PART_BYTES + (64 << 20)) / 1e6
         server.wait_for(
             r"closed the connection from 127\.0\.0\.1:\d+: it sent \d+ bytes without completing"
         )

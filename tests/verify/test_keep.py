@@ -77,7 +77,9 @@ def test_a_golden_2mm_off_keeps_its_run_report_and_view(recorded, tmp_path, caps
     assert sorted(os.listdir(keep)) == ["carry.mcap", "carry.md", "carry.rrd"]  # no leftovers
     code, out, _ = twin(capsys, "info", keep / "carry.mcap")
     assert code == 0 and "finalized: yes (run outcome ok)" in out
-    assert "## First divergence" in (keep / "carry.md").read_text()
+    report = (keep / "carry.md").read_text()
+    assert "## First divergence" in report
+    assert "- candidate: `carry.mcap (mtb, " in report  # the kept file beside it, not <memory>
     assert (keep / "carry.rrd").stat().st_size > 10_000
     assert (keep / "carry.rrd").read_bytes()[:4] == b"RRF2"
     code, out, _ = twin(capsys, "diff", goldens / "carry.mcap", keep / "carry.mcap", "-q")

@@ -199,6 +199,8 @@ def keep_recording(staged: Staged, golden, candidate, result, recorded: Path) ->
             shutil.copyfile(recorded, mcap)
         except OSError as err:
             raise OutputError(f"cannot write {str(mcap)!r}: {err.strerror or err}") from err
+    # the report names the candidate by the file kept beside it, not "<memory>"
+    result.candidate = {**result.candidate, "path": f"{Path(staged.base).name}.mcap"}
     write_report(result, staged.temp(".md"))
     write_diff_rrd(golden, candidate, result, staged.temp(".rrd"))
     return staged.publish()

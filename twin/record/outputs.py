@@ -149,7 +149,7 @@ def publish(written: str | os.PathLike, target: str | os.PathLike) -> None:
 
 @contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
-    """A temporary path beside `target` (`.NAME.XXXXXXXX.tmp`: hidden, in the same folder, made
+    """A temporary path beside `target` (`.NAME.<hex>.tmp`: hidden, in the same folder, made
     with the mode a new file gets, or target's mode if it exists) for the body to write; when the
     body ends, the file is fsynced and renamed over `target` (publish), so `target` is the old file
     or the whole new one. The temporary is removed on any error or KeyboardInterrupt; a failed write

@@ -228,6 +228,37 @@ def _cycle(
     keep_going: bool,
     max_error_m: float,
 ) -> None:
+    """One cycle: look, pick what was seen, place it; a miss is an error or, with keep_going, an
+    event."""
+    found = _look(twin, eye, cycle, box, box_index)
+    if found is None:
+        return _miss(
+            twin,
+            keep_going,
+            cycle,
+            box,
+            f"cycle {cycle}: {box!r} not found in the overhead picture",
+        )
+    hold_z, miss = _pick(twin, found, cycle, box_index, pause_s)
+    if miss:
+        return _miss(twin, keep_going, cycle, box, miss)
+    miss = _place(
+        twin,
+        cycle=cycle,
+        place=place,
+        box=box,
+        box_index=box_index,
+        hold_z=hold_z,
+        pause_s=pause_s,
+        max_error_m=max_error_m,
+    )
+    if miss:
+        _miss(twin, keep_going, cycle, box, miss)
+    return None
+
+
+def _look(twin, eye: Eye, cycle: int, box: str, box_index: int) -> Located | None:
+    """The arm out of the way, a picture, the box located in it; a `seen` event either way."""
     twin.phase(f"cycle {cycle}: look")
     twin.move_to(*SAFE_POINT_M)  # the arm out of the way of the picture
     seen = eye.look(twin.frame, box_index)
@@ -241,13 +272,7 @@ def _cycle(
             found=False,
             **({} if seen is None else seen.to_event()),
         )
-        return _miss(
-            twin,
-            keep_going,
-            cycle,
-            box,
-            f"cycle {cycle}: {box!r} not found in the overhead picture",
-        )
+        return None
     twin.event(
         "seen",
         box,
@@ -262,6 +287,14 @@ def _cycle(
         pixels=found.pixels,
         **seen.to_event(),
     )
+    return found
+
+
+def _pick(
+    twin, found: Located, cycle: int, box_index: int, pause_s: float
+) -> tuple[float, str]:
+    """Down on the box where it was seen, at its yaw, and up with it held: (the Z target where it
+    took hold, ""), else (nan, why not) with the pad off and raised."""
     twin.phase(f"cycle {cycle}: pick at ({found.x_m:.4f}, {found.y_m:.4f})")
     twin.move_to(found.x_m, found.y_m, heading_rad=found.yaw_rad)
     twin.wait(pause_s)
@@ -279,15 +312,26 @@ def _cycle(
             if held == NO_BODY
             else "held another body"
         )
-        return _miss(
-            twin,
-            keep_going,
-            cycle,
-            box,
+        return math.nan, (
             f"cycle {cycle}: suction on at the box seen at "
-            f"({found.x_m:.4f}, {found.y_m:.4f}), {what}",
+            f"({found.x_m:.4f}, {found.y_m:.4f}), {what}"
         )
     twin.raise_()
+    return hold_z, ""
+
+
+def _place(
+    twin,
+    cycle: int,
+    place: tuple[float, float],
+    box: str,
+    box_index: int,
+    hold_z: float,
+    pause_s: float,
+    max_error_m: float,
+) -> str:
+    """The held box set down square at place, at the height it was taken at; a `placed` event
+    with its error. "" when placed within max_error_m, else why not."""
     twin.phase(f"cycle {cycle}: place at {place}")
     twin.move_to(
         *place, heading_rad=0.0
@@ -297,9 +341,7 @@ def _cycle(
     if twin.frame.held_body != box_index:
         twin.suction(False)
         twin.raise_()
-        return _miss(
-            twin, keep_going, cycle, box, f"cycle {cycle}: {box!r} was lost on the way to {place}"
-        )
+        return f"cycle {cycle}: {box!r} was lost on the way to {place}"
     twin.suction(False)
     twin.wait(pause_s)
     twin.raise_()
@@ -316,17 +358,11 @@ def _cycle(
         yaw_rad=yaw_rad,
     )
     if error_m > max_error_m:
-        _miss(
-            twin,
-            keep_going,
-            cycle,
-            box,
+        return (
             f"cycle {cycle}: placed {mm_beyond(error_m, max_error_m)} mm "
-            f"from {place}, beyond {max_error_m * 1000:g} mm",
+            f"from {place}, beyond {max_error_m * 1000:g} mm"
         )
-    return None
-
-
+    return ""
 def _miss(twin, keep_going: bool, cycle: int, box: str, message: str) -> None:
     if not keep_going:
         raise TaskError(message)

@@ -83,21 +83,7 @@ class GoldenChecker:
         report = golden_path.with_name(f"{name}.report.md")
         failed = None if allow_error or candidate.outcome == "ok" else _failure(candidate)
         if not golden_path.exists():
-            # a golden is never made from a failed run unless asked (allow_error)
-            if failed is not None:
-                pytest.fail(
-                    f"golden {str(golden_path)!r} does not exist, and this run cannot "
-                    f"become it: {failed} "
-                    "(pass allow_error=True to keep a failing run as the golden)",
-                    pytrace=False,
-                )
-            golden_path.parent.mkdir(parents=True, exist_ok=True)
-            save(candidate, golden_path)
-            pytest.fail(
-                f"golden {str(golden_path)!r} did not exist; wrote it from this run: "
-                f"review and commit it",
-                pytrace=False,
-            )
+            self._write_missing(candidate, golden_path, failed)
         golden = load(golden_path)
         result = judge(golden, candidate, tolerances, remade, event_kinds=event_kinds)
         if result.match:
@@ -124,6 +110,27 @@ class GoldenChecker:
             pytrace=False,
         )
 
+
+    @staticmethod
+    def _write_missing(candidate: Recording, golden_path: Path, failed: str | None) -> None:
+        """A golden that does not exist yet: written from this run and the test failed (review
+        it, then commit it); never from a failed run unless asked (allow_error)."""
+        from twin.verify.replay import save
+
+        if failed is not None:
+            pytest.fail(
+                f"golden {str(golden_path)!r} does not exist, and this run cannot "
+                f"become it: {failed} "
+                "(pass allow_error=True to keep a failing run as the golden)",
+                pytrace=False,
+            )
+        golden_path.parent.mkdir(parents=True, exist_ok=True)
+        save(candidate, golden_path)
+        pytest.fail(
+            f"golden {str(golden_path)!r} did not exist; wrote it from this run: "
+            f"review and commit it",
+            pytrace=False,
+        )
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("twin", "twin golden recordings")

@@ -96,8 +96,3 @@ _PLAIN = {
     "pose": _tuple,
     "object_pose": lambda a: tuple(_tuple(p) for p in a),
 }
-# Frame, FrameColumns and model.fields name the same fields in the same order
-if Frame._fields != tuple(FIELD_SPECS) or tuple(f.name for f in fields(FrameColumns)) != tuple(
-    FIELD_SPECS
-):
-    raise ImportError("twin.model: Frame, FrameColumns and model.fields.FRAME_FIELDS disagree")

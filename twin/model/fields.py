@@ -1,6 +1,9 @@
 """The one description of a Frame's fields: from it come the numpy columns (model.columns), the MCAP
 block messages and their encoding and decoding (record.mcap), and the fields that runs are compared
-and toleranced by (compare). Adding a field means adding it here.
+and toleranced by (compare). Adding a field means adding it here, then in the five places that spell
+the table out by hand for readers, type checkers or speed (model.types.Frame, model.columns.
+FrameColumns, record.rows.FrameRows.pack_into, record.tables' column stems, and the Frame the twin
+builds from World.state); tests/model/test_frame_table.py fails until all five agree.
 
 Order matters: it is the order of the columns, of each block message's fields, of the report's rows.
 """

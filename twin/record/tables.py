@@ -45,8 +45,6 @@ _STEMS = {
     "pad_pose": "pad",
     "object_poses": "",
 }
-if tuple(_STEMS) != tuple(f.name for f in FRAME_FIELDS):
-    raise ImportError("twin.record.tables: give every model.fields.FRAME_FIELDS a column stem")
 _POSE = ("x_m", "y_m", "z_m", "qx", "qy", "qz", "qw")
 _XYZ = ("x", "y", "z")
 _PRISMATIC = ROLES.index("z")

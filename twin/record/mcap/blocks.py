@@ -27,10 +27,6 @@ class BlockEncoder:
         self._blocks = [[f.name for f in F.block_fields(block)] for block in F.BLOCKS]
         self._columns = [(f.name, np.dtype(f.dtype), f.wire) for f in F.FRAME_FIELDS]
         self._tags = {f.name: tag(f.number, LEN) for f in F.FRAME_FIELDS}
-        for f in F.FRAME_FIELDS:
-            column, wire = np.dtype(f.dtype), np.dtype(f.wire)
-            if column.itemsize != wire.itemsize or column.newbyteorder("<") != column:
-                raise ImportError(f"twin.record.mcap.blocks: {f.name}'s column is not its wire")
         self._heads: dict[tuple[int, ...], dict[str, bytes]] = {}  # byte counts -> field heads
 
     def messages(self, frames: FrameColumns, n: int | None = None) -> list[bytes]:

@@ -23,9 +23,11 @@ from twin.helpers import start_helper
 from twin.model.config import TwinConfig
 from twin.model.errors import HelperError
 from twin.model.images import CameraImage, CameraSpec, camera_view, optical_pose
-from twin.model.types import Frame
+from twin.model.types import NO_BODY, Frame
 from twin.pictures import encode
 from twin.sim.world import World, pb
+
+_View = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]  # eye, target, up
 
 
 class RenderWorld(World):
@@ -44,6 +46,23 @@ class RenderWorld(World):
         for body, pose in zip(self.object_ids, frame.object_poses, strict=True):
             pb.resetBasePositionAndOrientation(body, pose[:3], pose[3:7], physicsClientId=c)
 
+    def _draw(self, spec: CameraSpec, view: _View, flags: int) -> tuple:
+        """PyBullet's CPU renderer at this camera's size and lens: rgba, depth buffer, segments."""
+        eye, target, up = view
+        projection = pb.computeProjectionMatrixFOV(
+            spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m
+        )
+        _, _, rgba, depth, segments = pb.getCameraImage(
+            spec.width_px,
+            spec.height_px,
+            pb.computeViewMatrix(eye, target, up),
+            projection,
+            renderer=pb.ER_TINY_RENDERER,
+            flags=flags,
+            physicsClientId=self.client,
+        )
+        return rgba, depth, segments
+
     def render(
         self,
         spec: CameraSpec,
@@ -52,22 +71,25 @@ class RenderWorld(World):
         up: tuple[float, ...],
     ) -> np.ndarray:
         """The scene as this camera sees it: (height, width, 3) uint8."""
-        view = pb.computeViewMatrix(eye, target, up)
-        projection = pb.computeProjectionMatrixFOV(
-            spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m
-        )
-        _, _, rgba, _, _ = pb.getCameraImage(
-            spec.width_px,
-            spec.height_px,
-            view,
-            projection,
-            renderer=pb.ER_TINY_RENDERER,
-            flags=pb.ER_NO_SEGMENTATION_MASK,
-            physicsClientId=self.client,
-        )
+        rgba = self._draw(spec, (eye, target, up), pb.ER_NO_SEGMENTATION_MASK)[0]
         return np.reshape(np.asarray(rgba, dtype=np.uint8), (spec.height_px, spec.width_px, 4))[
             :, :, :3
         ]
+
+    def depth_and_objects(self, spec: CameraSpec, view: _View) -> tuple[np.ndarray, np.ndarray]:
+        """What a depth camera with a segmentation mask sees from `view` (eye, target, up): the
+        depth in metres along the optical axis at each pixel (OpenGL's depth buffer, linearized
+        with the camera's near and far planes) and the index of the scene object seen there
+        (NO_BODY where none is), each (height, width)."""
+        _, buffer, segments = self._draw(spec, view, 0)
+        shape = (spec.height_px, spec.width_px)
+        buffer = np.reshape(np.asarray(buffer, dtype=np.float64), shape)
+        depth_m = spec.far_m * spec.near_m / (spec.far_m - (spec.far_m - spec.near_m) * buffer)
+        segments = np.reshape(np.asarray(segments), shape)
+        objects = np.full(shape, NO_BODY, dtype=np.int32)
+        for index, body in enumerate(self.object_ids):
+            objects[segments == body] = index
+        return depth_m, objects
 
 
 def render_frame(

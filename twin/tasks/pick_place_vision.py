@@ -146,41 +146,21 @@ class Eye:
     def look(self, frame, box_index: int) -> SeenPicture | None:
         """The picture of this frame, cut to a window around the box (None when it is not in
         view)."""
-        from twin.sim.world import pb
-
         s = self.spec
         self.world.pose(frame)
         eye, target, up = camera_view(s, frame.pad_pose)
-        view = pb.computeViewMatrix(eye, target, up)
-        projection = pb.computeProjectionMatrixFOV(
-            s.fov_deg, s.width_px / s.height_px, s.near_m, s.far_m
-        )
-        _, _, _, depth, seg = pb.getCameraImage(
-            s.width_px,
-            s.height_px,
-            view,
-            projection,
-            renderer=pb.ER_TINY_RENDERER,
-            physicsClientId=self.world.client,
-        )
-        seg = np.reshape(np.asarray(seg), (s.height_px, s.width_px))
-        mask = seg == self.world.object_ids[box_index]
+        depth_m, objects = self.world.depth_and_objects(s, (eye, target, up))
+        mask = objects == box_index
         rows, cols = np.nonzero(mask)
         if len(rows) == 0:
             return None
         v0, u0 = max(0, rows.min() - WINDOW_MARGIN_PX), max(0, cols.min() - WINDOW_MARGIN_PX)
         v1, u1 = rows.max() + WINDOW_MARGIN_PX + 1, cols.max() + WINDOW_MARGIN_PX + 1
-        buffer = np.reshape(np.asarray(depth, dtype=np.float64), (s.height_px, s.width_px))[
-            v0:v1, u0:u1
-        ]
-        depth_m = (
-            s.far_m * s.near_m / (s.far_m - (s.far_m - s.near_m) * buffer)
-        )  # OpenGL's depth, linearized
         return SeenPicture(
             int(u0),
             int(v0),
             mask[v0:v1, u0:u1],
-            depth_m,
+            depth_m[v0:v1, u0:u1],
             s.intrinsics(),
             optical_pose(eye, target, up),
         )

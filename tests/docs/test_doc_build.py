@@ -51,6 +51,31 @@ def test_the_site_builds_strict_with_every_page(site):
     assert "twin.load" in api and "Recording" in api  # mkdocstrings rendered the docstrings
 
 
+def _section_after(page: str, anchor: str) -> str:
+    at = page.index(f'id="{anchor}"')
+    following = page.find('class="doc doc-heading"', page.index("</h", at))
+    return page[at : following if following > 0 else len(page)]
+
+
+@pytest.mark.parametrize(
+    "page, anchor, sections",
+    [
+        ("reference/python-api", "twin.load", ("Parameters", "Returns", "Raises")),
+        ("reference/task-api", "twin.sim.twin.Twin.move_to", ("Parameters", "Raises")),
+        ("reference/task-api", "twin.sim.twin.Twin.settle", ("Parameters", "Returns")),
+        ("reference/task-api", "twin.sim.twin.Twin.set_joint_target", ("Parameters", "Raises")),
+        ("reference/task-api", "twin.sim.twin.Twin.event", ("Parameters", "Returns", "Raises")),
+        ("reference/task-api", "twin.sim.twin.Twin.wait", ("Parameters", "Returns", "Raises")),
+    ],
+)
+def test_the_api_pages_render_the_docstrings_sections(site, page, anchor, sections):
+    """The Google-style Args/Returns/Raises of the public API come out as the site's sections."""
+    html = (site / page / "index.html").read_text(encoding="utf-8")
+    part = _section_after(html, anchor)
+    for section in sections:
+        assert f'doc-section-title">{section}:<' in part, (anchor, section)
+
+
 def test_the_cli_reference_names_every_command_and_option(site):
     page = (site / "reference" / "cli" / "index.html").read_text(encoding="utf-8")
     commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))

@@ -82,6 +82,30 @@ def shown(value: object, width: int = 60, *, as_json: bool = False) -> str:
     return text[:width]
 
 
+def event_data(kind: str, data: dict) -> dict:
+    """Event data as plain JSON values with sorted keys, exactly what a recording will give back
+    (a non-finite number is null)."""
+    if not data:
+        return {}
+
+    def plain(value: object) -> object:
+        tolist = getattr(value, "tolist", None)  # numpy scalars and arrays
+        if callable(tolist):
+            return tolist()
+        raise TypeError(f"a value of type {type(value).__name__!r}")
+
+    try:
+        # NaN and infinities become null, as the recording writes them: memory and file agree
+        return json.loads(
+            json.dumps(data, sort_keys=True, default=plain), parse_constant=lambda _: None
+        )
+    except (TypeError, ValueError) as err:
+        raise ConfigError(
+            f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
+            "expected numbers, strings, booleans, None, lists and dicts"
+        ) from err
+
+
 def _too_deep(what: str, limit: int) -> ConfigError:
     return ConfigError(
         f"{what}: arrays or tables nest more than {limit} levels deep; twin reads at most {limit}"

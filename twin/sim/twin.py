@@ -6,31 +6,31 @@ produces a Frame; every discrete happening an Event. All three go to the sinks, 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
 from twin.model.config import TwinConfig
-from twin.model.errors import ConfigError, OutOfReach, UnknownName
+from twin.model.errors import ConfigError, UnknownName
 from twin.model.images import CameraImage
-from twin.model.json_values import finite_number
+from twin.model.json_values import event_data, finite_number
 from twin.model.keymaps import KeyPlayer
 from twin.model.sink import Sink
 from twin.model.types import COMMAND_ARGS, NO_BODY, Command, Event, Frame
 from twin.robot import kinematics
+from twin.sim.motions import Motions, Z
 from twin.sim.suction import Suction
 from twin.sim.world import World
 
-SHOULDER, ELBOW, Z, WRIST = range(4)
-SETTLE_TOL = (5e-4, 5e-4, 2e-4, 5e-4)  # rad, rad, m, rad
-SETTLE_SPEED_TOL = (5e-3, 5e-3, 2e-3, 5e-3)
-SETTLE_TIMEOUT_S = 10.0
 _new_frame = tuple.__new__
 
 
-class Twin:
-    """A headless (or windowed) PyBullet twin of a SCARA robot, advanced in simulated time."""
+class Twin(Motions):
+    """A headless (or windowed) PyBullet twin of a SCARA robot, advanced in simulated time.
+
+    A task receives one and drives it through the methods below; every call that changes the twin
+    is a Command, recorded and replayed at the step it was made.
+    """
 
     def __init__(
         self,
@@ -40,9 +40,17 @@ class Twin:
         sinks: list[Sink] = (),
         camera_background: bool | None = None,
     ) -> None:
-        """camera_background: draw the cameras' pictures in a render process (None: unless this
-        process is a daemon, which may not fork), or False in the stepping thread
-        (twin.sim.camera)."""
+        """Build the scene and read the first Frame (step 0), which goes to every sink.
+
+        Args:
+            config: The robot profile, scene, suction pad, cameras and time step; the default
+                `TwinConfig()` is the MTB robot with one box.
+            gui: Open PyBullet's window (teleoperation) instead of running headless.
+            sinks: Receivers of every Frame, Command, Event and picture (the recorders).
+            camera_background: Draw the cameras' pictures in a render process (True), in the
+                stepping thread (False), or in a render process unless this process is a daemon
+                (None, which may not fork).
+        """
         self.config = config or TwinConfig()
         self.profile = self.config.profile
         self._world = World(self.config, gui=gui)
@@ -110,7 +118,14 @@ class Twin:
         return self.t_ns * 1e-9
 
     def step(self, n: int = 1) -> Frame:
-        """Advance n physics steps: suction rule, physics, then a Frame to every sink."""
+        """Advance n physics steps: the suction rule, physics, then a Frame to every sink.
+
+        Args:
+            n: How many physics steps (each `config.dt_ns` of simulated time).
+
+        Returns:
+            The Frame after the last step (also `twin.frame`).
+        """
         sinks, pad_model, world_step, read_frame = (
             self.sinks,
             self.suction_pad,
@@ -134,7 +149,17 @@ class Twin:
         return self.frame
 
     def wait(self, seconds: float) -> Frame:
-        """Let simulated time pass (the seeds' sim.wait)."""
+        """Let simulated time pass (the seeds' `sim.wait`), rounded to whole steps.
+
+        Args:
+            seconds: Simulated seconds, a finite number >= 0.
+
+        Returns:
+            The Frame after the last step.
+
+        Raises:
+            ConfigError: `seconds` is negative or not a finite number.
+        """
         if _number(seconds, "wait") < 0:
             raise ConfigError(f"wait of {seconds} s is invalid; expected a finite number >= 0")
         return self.step(round(seconds * 1e9 / self.config.dt_ns))
@@ -183,6 +208,14 @@ class Twin:
         return "" if index == NO_BODY else self.config.objects[index].name
 
     def object_index(self, name: str) -> int:
+        """The index of a scene object in `frame.object_poses` and in events.
+
+        Args:
+            name: The object's name (a leading "/", as CoppeliaSim paths have, is ignored).
+
+        Raises:
+            UnknownName: No object has that name.
+        """
         bare = name.lstrip("/")
         for i, o in enumerate(self.config.objects):
             if o.name == bare:
@@ -192,30 +225,58 @@ class Twin:
         )
 
     def joint_position(self, joint: str | int) -> float:
+        """A joint's position in the last Frame (rad, or m for the Z joint).
+
+        Args:
+            joint: A joint name, a role (`shoulder`, `elbow`, `z`, `wrist`) or an index 0..3.
+
+        Raises:
+            UnknownName: No such joint.
+        """
         return self.frame.joint_q[self._joint(joint)]
 
     def pad_position(self) -> tuple[float, float, float]:
+        """The pad tip's (centre of the cup's face) x, y, z in metres, world frame."""
         p = self.frame.pad_pose
         return (p[0], p[1], p[2])
 
     def object_pose(self, name: str) -> tuple[float, ...]:
+        """A scene object's pose in the last Frame: x, y, z (m), qx, qy, qz, qw.
+
+        Raises:
+            UnknownName: No object has that name.
+        """
         return self.frame.object_poses[self.object_index(name)]
 
     def get_signal(self, name: str) -> int | None:
+        """An integer signal's value, or None when it is not set."""
         return self._signals.get(name)
 
     # -- events -----------------------------------------------------------------------------
     def event(self, kind: str, body: str = "", message: str = "", **data: Any) -> Event:
-        """Say something now (a task's phase, a placement report, a client's log line): an `event`
-        Command, so a replay says it again at the same step. Data must be JSON data (numpy values
-        are turned into numbers and lists)."""
+        """Say something now (a task's phase, a placement report, a client's log line).
+
+        The Event travels as an `event` Command, so a replay says it again at the same step.
+
+        Args:
+            kind: What happened, a non-empty string (`placed`, `phase`, ...).
+            body: The scene object it concerns, if any.
+            message: A line for people.
+            **data: JSON data (numpy values become numbers and lists; a non-finite number null).
+
+        Returns:
+            The Event as the sinks received it.
+
+        Raises:
+            ConfigError: `kind` is empty or not a string, or `data` is not JSON data.
+        """
         if not isinstance(kind, str) or not kind:
             raise ConfigError(f"event kind {kind!r:.40} is invalid; expected a non-empty string")
         args = {
             "kind": kind,
             "body": str(body),
             "message": str(message),
-            "data": _json_data(kind, data),
+            "data": event_data(kind, data),
         }
         self.apply(Command(self.step_index, "event", args))
         return self._said
@@ -226,7 +287,7 @@ class Twin:
         """An Event the twin itself raises while stepping or applying a Command (attach, release,
         joint_limit, ...): replay regenerates these, so they are not Commands."""
         return self._send(
-            Event(self.step_index, self.t_ns, kind, body, message, _json_data(kind, data or {}))
+            Event(self.step_index, self.t_ns, kind, body, message, event_data(kind, data or {}))
         )
 
     def _send(self, ev: Event) -> Event:
@@ -235,12 +296,24 @@ class Twin:
         return ev
 
     def phase(self, name: str) -> None:
-        """Mark a task phase (shown in the log and the viewer)."""
+        """Mark a task phase (a `phase` event, shown in the log and the viewer).
+
+        Args:
+            name: The phase, e.g. "pick" or "place".
+        """
         self.event("phase", message=name)
 
     # -- commands ---------------------------------------------------------------------------
     def apply(self, command: Command) -> None:
-        """Validate and apply one Command now; replay feeds recorded Commands through here."""
+        """Validate and apply one Command now; replay feeds recorded Commands through here.
+
+        Args:
+            command: A Command stamped with the current step.
+
+        Raises:
+            ConfigError: The Command is for another step, of an unknown kind, or its arguments
+                are missing or malformed.
+        """
         if command.step != self.step_index:
             raise ConfigError(f"command for step {command.step} applied at step {self.step_index}")
         handler = self._COMMANDS.get(command.kind)
@@ -277,7 +350,18 @@ class Twin:
         return self.profile.joint_index(joint)
 
     def set_joint_target(self, joint: str | int, q: float) -> None:
-        """Drive a joint's motor toward q (rad | m) at its maximum velocity and force."""
+        """Drive a joint's motor toward q at its maximum velocity and force.
+
+        A target outside the joint's limits is clamped, with a `joint_limit` event.
+
+        Args:
+            joint: A joint name, a role (`shoulder`, `elbow`, `z`, `wrist`) or an index 0..3.
+            q: The target, rad (m for the Z joint).
+
+        Raises:
+            UnknownName: No such joint.
+            ConfigError: `q` is not a finite number.
+        """
         self._command(
             "joint_target",
             joint=self.profile.joint_names[self._joint(joint)],
@@ -285,11 +369,21 @@ class Twin:
         )
 
     def set_joint_targets(self, targets: dict[str, float]) -> None:
+        """`set_joint_target` for each joint of `targets` (joint -> q), in its order."""
         for joint, q in targets.items():
             self.set_joint_target(joint, q)
 
     def set_joint_position(self, joint: str | int, q: float) -> None:
-        """Set a joint's position at once (kinematic), as simxSetJointPosition does."""
+        """Set a joint's position at once (kinematic), as `sim.setJointPosition` does.
+
+        Args:
+            joint: A joint name, a role or an index 0..3.
+            q: The position, rad (m for the Z joint).
+
+        Raises:
+            UnknownName: No such joint.
+            ConfigError: `q` is not a finite number.
+        """
         self._command(
             "joint_position",
             joint=self.profile.joint_names[self._joint(joint)],
@@ -297,13 +391,31 @@ class Twin:
         )
 
     def set_joint_max_velocity(self, joint: str | int, v: float) -> None:
+        """Change the speed a joint's motor drives at.
+
+        Args:
+            joint: A joint name, a role or an index 0..3.
+            v: The maximum velocity, rad/s (m/s for the Z joint), > 0.
+
+        Raises:
+            UnknownName: No such joint.
+            ConfigError: `v` is not a finite number > 0.
+        """
         v = _number(v, "maximum velocity")
         if v <= 0:
             raise ConfigError(f"maximum velocity {v} is invalid; expected > 0")
         self._command("joint_max_velocity", joint=self.profile.joint_names[self._joint(joint)], v=v)
 
     def set_signal(self, name: str, value: int | None) -> None:
-        """Set (or with None clear) an integer signal; the suction signals switch the pad."""
+        """Set, or clear, an integer signal; the profile's suction signals switch the pad.
+
+        Args:
+            name: The signal's name, a non-empty string.
+            value: An integer, or None to clear it.
+
+        Raises:
+            ConfigError: The name is empty or the value is not an integer or None.
+        """
         if not isinstance(name, str) or not name:
             raise ConfigError(f"signal name {name!r} is invalid; expected a non-empty string")
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
@@ -311,78 +423,20 @@ class Twin:
         self._command("signal", name=name, value=value)
 
     def suction(self, on: bool) -> None:
+        """Switch the suction pad on or off (the profile's first suction signal, 1 or 0).
+
+        Args:
+            on: True to draw air: the pad grips an object it senses under it.
+        """
         self.set_signal(self.profile.suction_signals[0], 1 if on else 0)
 
     def press_key(self, key: str) -> None:
-        """A key press, interpreted by the configured key map (teleop)."""
+        """A key press, interpreted by the configured key map (teleop).
+
+        Args:
+            key: The key's name in the key map (`docs/how-to/teleop.md`).
+        """
         self._command("key", key=str(key))
-
-    # -- motion helpers (tasks) ---------------------------------------------------------------
-    def move_to(
-        self, x_m: float, y_m: float, heading_rad: float | None = None, *, settle: bool = True
-    ) -> None:
-        """Move the pad over (x, y), keeping its heading unless one is given; raises OutOfReach."""
-        q = self.frame.joint_q
-        heading = self._heading(self.frame) if heading_rad is None else heading_rad
-        try:
-            sol = kinematics.choose(kinematics.ik(self.profile, x_m, y_m), (q[SHOULDER], q[ELBOW]))
-            wrist = kinematics.wrist_for_heading(self.profile, sol, heading)
-        except OutOfReach as err:
-            self.event("out_of_reach", message=str(err), x_m=x_m, y_m=y_m)
-            raise
-        self.set_joint_target(SHOULDER, sol.shoulder_rad)
-        self.set_joint_target(ELBOW, sol.elbow_rad)
-        self.set_joint_target(WRIST, wrist)
-        if settle:
-            self.settle()
-
-    def z_to(self, z_m: float, *, settle: bool = True) -> None:
-        """Move the pad tip to height z_m with the Z joint."""
-        try:
-            q3 = kinematics.z_joint_for_height(self.profile, z_m)
-        except OutOfReach as err:
-            self.event("out_of_reach", message=str(err), z_m=z_m)
-            raise
-        self.set_joint_target(Z, q3)
-        if settle:
-            self.settle()
-
-    def lower(self) -> None:
-        """Lower the pad to the scene's "down" (on a box on the floor; mtb: the end of the Z
-        stroke)."""
-        self.set_joint_target(Z, self.profile.z_down())
-        self.settle()
-
-    def raise_(self) -> None:
-        """Raise the pad to the scene's "up" (mtb: the top of the Z stroke)."""
-        self.set_joint_target(Z, self.profile.z_up())
-        self.settle()
-
-    def settle(self, timeout_s: float = SETTLE_TIMEOUT_S) -> bool:
-        """Step until every joint is at its target and still; an Event if it times out."""
-        max_steps = round(timeout_s * 1e9 / self.config.dt_ns)
-        # the four joints' checks written out, on locals, with no tuple built per call: settle runs
-        # most of a task's steps (1601 of pick_place's 2517)
-        t0, t1, t2, t3 = self._targets
-        e0, e1, e2, e3 = SETTLE_TOL
-        v0, v1, v2, v3 = SETTLE_SPEED_TOL
-        step, f = self.step, self.frame
-        for _ in range(max_steps):
-            q, qd = f.joint_q, f.joint_qd
-            if not (
-                abs(q[0] - t0) > e0
-                or abs(qd[0]) > v0
-                or abs(q[1] - t1) > e1
-                or abs(qd[1]) > v1
-                or abs(q[2] - t2) > e2
-                or abs(qd[2]) > v2
-                or abs(q[3] - t3) > e3
-                or abs(qd[3]) > v3
-            ):
-                return True
-            f = step()
-        self.event("settle_timeout", message=f"joints did not reach their targets in {timeout_s} s")
-        return False
 
     # -- what each Command kind does: apply() looks the handler up in _COMMANDS -----------------
     def _clamped(self, joint: int, q: float) -> float:
@@ -480,33 +534,10 @@ class Twin:
             self._camera_renderer.flush()
 
     def close(self) -> None:
+        """Hand on the pictures still being drawn and end the simulation."""
         if self._camera_renderer is not None:
             self._camera_renderer.close()
         self._world.close()
-
-
-def _json_data(kind: str, data: dict) -> dict:
-    """Event data as plain JSON values with sorted keys, exactly what a recording will give back
-    (a non-finite number is null)."""
-    if not data:
-        return {}
-
-    def plain(value: Any) -> Any:
-        tolist = getattr(value, "tolist", None)  # numpy scalars and arrays
-        if callable(tolist):
-            return tolist()
-        raise TypeError(f"a value of type {type(value).__name__!r}")
-
-    try:
-        # NaN and infinities become null, as the recording writes them: memory and file agree
-        return json.loads(
-            json.dumps(data, sort_keys=True, default=plain), parse_constant=lambda _: None
-        )
-    except (TypeError, ValueError) as err:
-        raise ConfigError(
-            f"event {kind!r} data {sorted(data)} holds {err}, which is not JSON data; "
-            "expected numbers, strings, booleans, None, lists and dicts"
-        ) from err
 
 
 def _number(value: Any, what: str) -> float:

@@ -156,7 +156,14 @@ def write_dataset(
         shutil.rmtree(tmp)
     tmp.mkdir()
     try:
-        _write_all(tmp, episodes, tasks, cameras, fps, provenance)
+        _write_all(
+            root=tmp,
+            episodes=episodes,
+            tasks=tasks,
+            cameras=cameras,
+            fps=fps,
+            provenance=provenance,
+        )
         _publish(tmp, out, overwrite)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -343,7 +350,14 @@ def _write_videos(
         stats[key] = []
         encode_mp4(
             path,
-            _camera_images(episodes, name, fps, shape, ep_rows, stats[key]),
+            _camera_images(
+                episodes=episodes,
+                name=name,
+                fps=fps,
+                shape=shape,
+                ep_rows=ep_rows,
+                stats_out=stats[key],
+            ),
             fps,
             shape[1],
             shape[0],

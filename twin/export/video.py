@@ -50,7 +50,9 @@ def encode_mp4(
     os.environ.setdefault("SVT_LOG", "1")
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
     try:
-        return _encode(av, path, frames, fps, width_px, height_px)
+        return _encode(
+            av=av, path=path, frames=frames, fps=fps, width_px=width_px, height_px=height_px
+        )
     finally:
         # SVT-AV1, run as root, switches the calling thread to SCHED_FIFO 99: every process started
         # later would inherit it (a spinning one starved the machine)

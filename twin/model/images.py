@@ -196,13 +196,13 @@ class CameraTrack:
     @staticmethod
     def from_images(spec: CameraSpec, images: list[CameraImage]) -> CameraTrack:
         return CameraTrack(
-            spec.name,
-            spec.width_px,
-            spec.height_px,
-            spec.format,
-            np.array([im.step for im in images], dtype=np.int64),
-            np.array([im.t_ns for im in images], dtype=np.int64),
-            [im.data for im in images],
+            name=spec.name,
+            width_px=spec.width_px,
+            height_px=spec.height_px,
+            format=spec.format,
+            step=np.array([im.step for im in images], dtype=np.int64),
+            t_ns=np.array([im.t_ns for im in images], dtype=np.int64),
+            data=[im.data for im in images],
             pose=np.array([im.pose for im in images], dtype=np.float64).reshape(-1, 7),
         )
 

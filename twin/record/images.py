@@ -31,6 +31,13 @@ def recorded_images(
                 row = max(0, int(np.searchsorted(frame_steps, step, side="right")) - 1)
                 pose = optical_pose(*camera_view(spec, tuple(pad_poses[row].tolist())))
             out.append(
-                CameraImage(spec.name, step, int(track.t_ns[i]), track.format, track.data[i], pose)
+                CameraImage(
+                    camera=spec.name,
+                    step=step,
+                    t_ns=int(track.t_ns[i]),
+                    format=track.format,
+                    data=track.data[i],
+                    pose=pose,
+                )
             )
     return sorted(out, key=lambda im: im.step)

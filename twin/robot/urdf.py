@@ -439,13 +439,13 @@ def urdf_joints(urdf: str | ET.Element) -> list[UrdfJoint]:
             )
         joints.append(
             UrdfJoint(
-                name,
-                kind,
-                parent.get("link"),
-                child.get("link"),
-                vector3(origin, "xyz"),
-                vector3(origin, "rpy"),
-                tuple(a / (norm or 1.0) for a in axis),
+                name=name,
+                kind=kind,
+                parent=parent.get("link"),
+                child=child.get("link"),
+                xyz=vector3(origin, "xyz"),
+                rpy=vector3(origin, "rpy"),
+                axis=tuple(a / (norm or 1.0) for a in axis),
             )
         )
     return joints

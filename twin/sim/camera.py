@@ -103,12 +103,12 @@ def render_frame(
         pixels = world.render(spec, eye, target, up)
         out.append(
             CameraImage(
-                spec.name,
-                frame.step,
-                frame.t_ns,
-                spec.format,
-                encode(pixels, spec.format),
-                optical_pose(eye, target, up),
+                camera=spec.name,
+                step=frame.step,
+                t_ns=frame.t_ns,
+                format=spec.format,
+                data=encode(pixels, spec.format),
+                pose=optical_pose(eye, target, up),
             )
         )
     return out

@@ -287,7 +287,14 @@ class Twin(Motions):
         """An Event the twin itself raises while stepping or applying a Command (attach, release,
         joint_limit, ...): replay regenerates these, so they are not Commands."""
         return self._send(
-            Event(self.step_index, self.t_ns, kind, body, message, event_data(kind, data or {}))
+            Event(
+                step=self.step_index,
+                t_ns=self.t_ns,
+                kind=kind,
+                body=body,
+                message=message,
+                data=event_data(kind, data or {}),
+            )
         )
 
     def _send(self, ev: Event) -> Event:
@@ -495,7 +502,16 @@ class Twin(Motions):
         if not isinstance(data, dict):
             raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
         # data is plain JSON already: made so by event(), or read from a recording
-        self._said = self._send(Event(self.step_index, self.t_ns, kind, body, message, data))
+        self._said = self._send(
+            Event(
+                step=self.step_index,
+                t_ns=self.t_ns,
+                kind=kind,
+                body=body,
+                message=message,
+                data=data,
+            )
+        )
 
     def _do_key(self, args: dict) -> None:
         """A key, played through the configured key map (model.keymaps.KeyPlayer)."""

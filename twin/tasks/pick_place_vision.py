@@ -75,12 +75,12 @@ class SeenPicture:
             len(data["mask"]), -1
         )
         return SeenPicture(
-            int(u0),
-            int(v0),
-            mask,
-            np.array(data["depth_m"], dtype=np.float64).reshape(mask.shape),
-            tuple(data["k"]),
-            tuple(data["camera_pose"]),
+            u0=int(u0),
+            v0=int(v0),
+            mask=mask,
+            depth_m=np.array(data["depth_m"], dtype=np.float64).reshape(mask.shape),
+            k=tuple(data["k"]),
+            pose=tuple(data["camera_pose"]),
         )
 
 
@@ -157,12 +157,12 @@ class Eye:
         v0, u0 = max(0, rows.min() - WINDOW_MARGIN_PX), max(0, cols.min() - WINDOW_MARGIN_PX)
         v1, u1 = rows.max() + WINDOW_MARGIN_PX + 1, cols.max() + WINDOW_MARGIN_PX + 1
         return SeenPicture(
-            int(u0),
-            int(v0),
-            mask[v0:v1, u0:u1],
-            depth_m[v0:v1, u0:u1],
-            s.intrinsics(),
-            optical_pose(eye, target, up),
+            u0=int(u0),
+            v0=int(v0),
+            mask=mask[v0:v1, u0:u1],
+            depth_m=depth_m[v0:v1, u0:u1],
+            k=s.intrinsics(),
+            pose=optical_pose(eye, target, up),
         )
 
     def close(self) -> None:
@@ -192,7 +192,7 @@ def run(
         twin.move_to(*SAFE_POINT_M, heading_rad=0.0)
         for cycle in range(1, cycles + 1):
             place = POINT_B_M if cycle % 2 else POINT_A_M
-            _cycle(twin, eye, cycle, place, box, box_index, pause_s, keep_going, max_error_m)
+            _cycle(twin=twin, eye=eye, cycle=cycle, place=place, box=box, box_index=box_index, pause_s=pause_s, keep_going=keep_going, max_error_m=max_error_m)
     finally:
         eye.close()
 

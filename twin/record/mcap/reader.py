@@ -364,13 +364,13 @@ class RecordingBuilder:
                 poses if all(p is not None for p in poses) else [], dtype=np.float64
             ).reshape(-1, 7)
             tracks[spec.name] = CameraTrack(
-                spec.name,
-                spec.width_px,
-                spec.height_px,
-                spec.format,
-                times // config.dt_ns,
-                times,
-                [d for _, _, d in pictures],
+                name=spec.name,
+                width_px=spec.width_px,
+                height_px=spec.height_px,
+                format=spec.format,
+                step=times // config.dt_ns,
+                t_ns=times,
+                data=[d for _, _, d in pictures],
                 source=s.path,
                 pose=pose,
             )

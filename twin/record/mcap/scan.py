@@ -223,7 +223,15 @@ def _chunk_records(chunk: Chunk, state: _Pass) -> Iterator[McapRecord | Message]
                     )
                 elif length == same and not (left & 255):
                     # now and then in a run of same-size messages: count it at once
-                    skipped = _count_run(data, stop, end, length, counts, keep, left)
+                    skipped = _count_run(
+                        data=data,
+                        pos=stop,
+                        end=end,
+                        length=length,
+                        counts=counts,
+                        keep=keep,
+                        left=left,
+                    )
                     left -= skipped
                     stop += skipped * (9 + length)
                 same = length

@@ -286,6 +286,10 @@ class Twin(Motions):
     ) -> Event:
         """An Event the twin itself raises while stepping or applying a Command (attach, release,
         joint_limit, ...): replay regenerates these, so they are not Commands."""
+        return self._send_now(kind, body, message, event_data(kind, data or {}))
+
+    def _send_now(self, kind: str, body: str, message: str, data: dict) -> Event:
+        """An Event of this step to every sink."""
         return self._send(
             Event(
                 step=self.step_index,
@@ -293,7 +297,7 @@ class Twin(Motions):
                 kind=kind,
                 body=body,
                 message=message,
-                data=event_data(kind, data or {}),
+                data=data,
             )
         )
 
@@ -502,16 +506,7 @@ class Twin(Motions):
         if not isinstance(data, dict):
             raise TypeError(f"data must be a JSON object, got {type(data).__name__}")
         # data is plain JSON already: made so by event(), or read from a recording
-        self._said = self._send(
-            Event(
-                step=self.step_index,
-                t_ns=self.t_ns,
-                kind=kind,
-                body=body,
-                message=message,
-                data=data,
-            )
-        )
+        self._said = self._send_now(kind, body, message, data)
 
     def _do_key(self, args: dict) -> None:
         """A key, played through the configured key map (model.keymaps.KeyPlayer)."""

@@ -1,5 +1,6 @@
-"""`twin diff` when a side is a ROS 2 bag: parsing its options and printing only (the reading is in
-twin.ros2.bags, the judging in twin.compare.samples).
+"""`twin export --format ros2`, and `twin diff` when a side is a ROS 2 bag: parsing their options
+and printing only (the writing is in twin.ros2.export, the reading in twin.ros2.bags, the judging
+in twin.compare.samples).
 """
 
 from __future__ import annotations
@@ -82,3 +83,12 @@ def diff_with_bag(args: argparse.Namespace, tolerances) -> int | None:
         text = "\n".join(line for line in text.splitlines()[:4] if not line.startswith("joint "))
     print(text)
     return result.exit_code
+
+
+def cmd_export_ros2(files: list[str], output: str, *, force: bool) -> int:
+    """Each recording written as a bag; one line per bag."""
+    from twin.ros2.export import export_bags
+
+    for bag, messages, topics in export_bags(files, output, force=force):
+        print(f"wrote {bag}: ROS 2 bag, {messages} messages on {topics} topics")
+    return 0

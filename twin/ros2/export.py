@@ -191,3 +191,69 @@ def write_bag(rec: Recording, out: Path, *, force: bool = False) -> int:
         with suppress(OSError):
             shutil.rmtree(tmp)
     return count
+
+
+def bag_targets(paths: list[str], output: str | os.PathLike, force: bool) -> list[Path]:
+    """Where each recording's bag goes: `output` itself for one recording; for several, a bag
+    named after each (its stem) in the folder `output` (made if missing). Every target checked
+    before any work: ConfigError naming the first that may not be written."""
+    out = Path(output)
+    if len(paths) == 1:
+        targets = [out]
+    else:
+        stems = [Path(p).stem for p in paths]
+        twice = sorted({s for s in stems if stems.count(s) > 1})
+        if twice:
+            raise ConfigError(
+                f"recordings named {twice[0]!r} twice would go to one bag in {str(out)!r}; "
+                "expected recordings of different names (export them apart)"
+            )
+        if out.exists() and not out.is_dir():
+            raise ConfigError(
+                f"cannot write bags into {str(out)!r}: it is a file; expected a folder"
+            )
+        if is_bag_folder(out):
+            raise ConfigError(
+                f"cannot write bags into {str(out)!r}: it is a ROS 2 bag; expected a folder of bags"
+            )
+        targets = [out / stem for stem in stems]
+        if not out.exists() and not out.parent.is_dir():
+            raise ConfigError(
+                f"cannot write bags into {str(out)!r}: folder {str(out.parent)!r} does not exist; "
+                "create it first"
+            )
+    for target in targets:
+        if target.parent.is_dir():  # a folder of bags yet to be made holds none
+            check_bag_target(target, force)
+        for source in paths:
+            inside = Path(source).resolve()
+            if target.resolve() == inside or target.resolve() in inside.parents:
+                raise ConfigError(
+                    f"bag {str(target)!r} would replace its input {source!r}; expected another "
+                    "output"
+                )
+    return targets
+
+
+def export_bags(
+    paths: list[str], output: str | os.PathLike, *, force: bool = False
+) -> list[tuple[Path, int, int]]:
+    """Each recording as a bag (bag_targets); (bag, messages, topics) of each. All recordings are
+    loaded before any bag is written, so a bad one leaves nothing half done."""
+    from twin.record.mcap.reader import load
+
+    targets = bag_targets(paths, output, force)
+    recordings = [load(p) for p in paths]
+    if len(paths) > 1:
+        Path(output).mkdir(exist_ok=True)
+    done = []
+    for rec, target in zip(recordings, targets, strict=True):
+        count = write_bag(rec, target, force=force)
+        done.append((target, count, len(bag_topics(rec))))
+    return done
+
+
+def bag_topics(rec: Recording) -> list[str]:
+    """The topics a recording's bag has."""
+    topics = [t for t in TOPICS if t != "/events" or rec.events]
+    return topics + _camera_topics(rec)

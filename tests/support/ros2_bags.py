@@ -14,7 +14,7 @@ TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)  # another distribution's definiti
 JOINT_STATE = TYPESTORE.types["sensor_msgs/msg/JointState"]
 HEADER = TYPESTORE.types["std_msgs/msg/Header"]
 TIME = TYPESTORE.types["builtin_interfaces/msg/Time"]
-EPOCH_S = 1.7e9  # 2023-11-14, a wall-clock stamp
+EPOCH_NS = 1_700_000_000 * 10**9  # 2023-11-14, a wall-clock stamp
 
 
 def joint_bag(
@@ -30,7 +30,7 @@ def joint_bag(
     seed: int = 0,
 ) -> Path:
     """The run's joints sampled at rate_hz from -lead_s (at rest until 0) to its end, each message
-    stamped EPOCH_S + lead_s + its time and logged 3 ms later; noise_rad Gaussian on every position;
+    stamped EPOCH_NS + lead_s + its time and logged 3 ms later; noise_rad Gaussian on each position;
     bias (joint, rad) added to one joint; names instead of the twin's; velocity: also velocities.
     Returns out (a new bag folder, MCAP storage, metadata version 8)."""
     t_s = rec.frames.t_ns * 1e-9
@@ -46,7 +46,7 @@ def joint_bag(
             if bias:
                 pos[twin_names.index(bias[0])] += bias[1]
             vel = np.array([np.interp(u, t_s, qd[:, k]) for k in range(q.shape[1])])
-            ns = round((EPOCH_S + lead_s + u) * 1e9)
+            ns = EPOCH_NS + round((lead_s + u) * 1e9)  # exact: 1.7e18 as a float is not
             msg = JOINT_STATE(
                 header=HEADER(stamp=TIME(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""),
                 name=names or twin_names,

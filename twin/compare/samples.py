@@ -5,7 +5,8 @@ each joint's position (and velocity and effort where both have them) against the
 Times of a log count from its first sample. The lag is how much later the second log (B) runs than
 the first (A): B's sample at u seconds matches A at u - lag. Unless given, it is found: first the
 first motion of each (a joint leaving its first value by MOTION_RAD), then the lag within two
-sample intervals of that which fits the positions best (least squares).
+sample intervals of that which fits the positions best (least squares, each joint's mean difference
+taken out first, so that a constant offset on a joint does not move the lag).
 """
 
 from __future__ import annotations
@@ -115,20 +116,28 @@ class _Pair:
         at = self.dense_times(lag_s)
         return (at >= self.td[0]) & (at <= self.td[-1])
 
-    def error(self, attr: str, lag_s: float, keep: np.ndarray) -> np.ndarray:
+    def difference(self, attr: str, lag_s: float, keep: np.ndarray) -> np.ndarray:
+        """The sparse log's values less the dense log's interpolated at its times (signed)."""
         at = self.dense_times(lag_s)[keep]
         dense = _interp(self.td, at, getattr(self.dense, attr)[:, self.cols_d])
-        d = getattr(self.sparse, attr)[keep][:, self.cols_s] - dense
+        return getattr(self.sparse, attr)[keep][:, self.cols_s] - dense
+
+    def error(self, attr: str, lag_s: float, keep: np.ndarray) -> np.ndarray:
+        d = self.difference(attr, lag_s, keep)
         if attr != "position_rad":
             return np.abs(d)
         wrapped = np.abs((d + np.pi) % (2 * np.pi) - np.pi)
         return np.where(self.revolute & (np.abs(d) > np.pi), wrapped, np.abs(d))
 
     def cost(self, lag_s: float) -> float:
+        """How badly the positions fit at this lag: the mean square of each joint's difference
+        less its own mean, so that a joint off by a constant (a calibration offset) does not pull
+        the lag away from where the motions line up."""
         keep = self.inside(lag_s)
         if keep.sum() < 2:
             return np.inf
-        return float(np.mean(self.error("position_rad", lag_s, keep) ** 2))
+        d = self.difference("position_rad", lag_s, keep)
+        return float(np.mean((d - d.mean(axis=0)) ** 2))
 
 
 def best_lag_s(pair: _Pair, a: JointLog, b: JointLog) -> float:

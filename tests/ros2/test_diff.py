@@ -132,3 +132,21 @@ def test_offset_options_without_a_bag_and_a_bag_without_joint_states(run, tmp_pa
         writer.add_connection("/chatter", "std_msgs/msg/String", typestore=TYPESTORE)
     code, _, err = twin(capsys, "diff", run.path, empty)
     assert code == 2 and "has no /joint_states topic" in err and "/chatter" in err
+
+
+def test_an_exported_bag_is_judged_on_its_tf_frames_too(run, tmp_path, capsys):
+    bag = tmp_path / "exported"
+    assert twin(capsys, "export", run.path, "--format", "ros2", "-o", bag)[0] == 0
+    code, out, _ = twin(capsys, "diff", run.path, bag)
+    rows = {tuple(line.split()[:2]) for line in out.splitlines()[4:]}
+    assert code == 0 and {("pad_tip", "pad.position"), ("box", "objects.position")} <= rows, out
+    log = twin_pkg.load(bag)
+    t_ns, poses = log.tf["pad_tip"]
+    poses[len(t_ns) // 2 :, 0] += 0.001  # the pad 1 mm off along x from half way
+    result = compare_logs(
+        JointLog.from_recording(run), log, Tolerances.from_preset("physical"), revolute={}
+    )
+    (failed,) = [s for s in result.stats if not s.passed]
+    assert (failed.joint, failed.quantity) == ("pad_tip", "pad.position")
+    assert failed.worst == pytest.approx(0.001, abs=1e-9)
+    assert failed.parts_t_s == pytest.approx((t_ns[len(t_ns) // 2] - t_ns[0]) * 1e-9)

@@ -80,7 +80,8 @@ def diff_with_bag(args: argparse.Namespace, tolerances) -> int | None:
     )
     text = render_log_comparison(result)
     if args.quiet:  # the verdict, the alignment and the first divergence
-        text = "\n".join(line for line in text.splitlines()[:4] if not line.startswith("joint "))
+        head = text.splitlines()[:4]
+        text = "\n".join(line for line in head if not line.startswith("joint|frame"))
     print(text)
     return result.exit_code
 

@@ -19,6 +19,7 @@ from twin.compare.result import NotComparable
 from twin.compare.tolerances import Tolerances
 from twin.model.joint_log import JointLog
 
+PAD_FRAME = "pad_tip"  # the pad tip's frame in /tf (record.mcap.scene_tf.PAD_TIP)
 MOTION_RAD = 1e-3  # a joint has started moving once this far (rad or m) from its first value
 QUANTITIES = (  # JointLog attribute, tolerance name, unit
     ("position_rad", "joints.position", "rad|m"),
@@ -155,6 +156,66 @@ def best_lag_s(pair: _Pair, a: JointLog, b: JointLog) -> float:
     return best
 
 
+def _stat(label: str, name: str, unit: str, limit: float, e: np.ndarray, t_a: np.ndarray):
+    """One row of the verdict from errors `e` at times `t_a` (s of A)."""
+    worst = int(np.argmax(e))
+    over = np.nonzero(e > limit)[0]
+    return JointStat(
+        label,
+        name,
+        unit,
+        limit,
+        float(np.sqrt(np.mean(e**2))),
+        float(e[worst]),
+        float(t_a[worst]),
+        float(t_a[over[0]]) if len(over) else None,
+    )
+
+
+def _joint_stats(pair: _Pair, a, b, tol, lag_s: float, keep, notes: list[str]) -> list[JointStat]:
+    """Each common joint's position, and velocity and effort where both logs carry them."""
+    t_a = pair.dense_times(lag_s)[keep] if pair.b_is_sparse else pair.ts[keep]
+    stats = []
+    for attr, name, unit in QUANTITIES:
+        missing = [log.path or "a log" for log in (a, b) if getattr(log, attr) is None]
+        if missing:
+            notes.append(f"{name} not compared: {missing[0]} has none")
+            continue
+        if tol[name] == np.inf:
+            continue
+        err = pair.error(attr, lag_s, keep)
+        stats += [
+            _stat(joint, name, unit, tol[name], err[:, k], t_a)
+            for k, joint in enumerate(pair.common)
+        ]
+    return stats
+
+
+def _frame_stats(a: JointLog, b: JointLog, tol: Tolerances, lag_s: float) -> list[JointStat]:
+    """Each /tf frame both logs have (the pad tip, the objects by name): the distance between its
+    positions at the sparser series' times, the denser interpolated linearly there."""
+    stats = []
+    for frame in sorted(set(a.tf) & set(b.tf)):
+        name = "pad.position" if frame == PAD_FRAME else "objects.position"
+        (ta, pa), (tb, pb) = a.tf[frame], b.tf[frame]
+        if len(ta) < 2 or len(tb) < 2 or tol[name] == np.inf:
+            continue
+        ua = (ta - a.t_ns[0]).astype(np.float64) * 1e-9
+        ub = (tb - b.t_ns[0]).astype(np.float64) * 1e-9 - lag_s  # on A's clock
+        if len(tb) <= len(ta):
+            keep = (ub >= ua[0]) & (ub <= ua[-1])
+            at, sparse = ub[keep], pb[keep, :3]
+            dense = _interp(ua, at, pa[:, :3])
+        else:
+            keep = (ua >= ub[0]) & (ua <= ub[-1])
+            at, sparse = ua[keep], pa[keep, :3]
+            dense = _interp(ub, at, pb[:, :3])
+        if len(at):
+            e = np.linalg.norm(sparse - dense, axis=1)
+            stats.append(_stat(frame, name, "m", tol[name], e, at))
+    return stats
+
+
 def compare_logs(
     a: JointLog,
     b: JointLog,
@@ -175,7 +236,6 @@ def compare_logs(
             f"with a lag of {lag_s:.6f} s the logs do not overlap; expected a lag within "
             f"their lengths ({pair.td[-1]:.3f} s and {pair.ts[-1]:.3f} s)"
         )
-    t_a = pair.dense_times(lag_s)[keep] if pair.b_is_sparse else pair.ts[keep]
     result = LogComparison(
         a.path,
         b.path,
@@ -186,34 +246,8 @@ def compare_logs(
         a.rate_hz,
         b.rate_hz,
     )
-    for attr, name, unit in QUANTITIES:
-        if getattr(a, attr) is None or getattr(b, attr) is None:
-            if attr == "position_rad":
-                continue
-            result.notes.append(
-                f"{name} not compared: {a.path if getattr(a, attr) is None else b.path} has none"
-            )
-            continue
-        limit = tol[name]
-        if limit == np.inf:
-            continue
-        err = pair.error(attr, lag_s, keep)
-        for k, joint in enumerate(pair.common):
-            e = err[:, k]
-            worst = int(np.argmax(e))
-            over = np.nonzero(e > limit)[0]
-            result.stats.append(
-                JointStat(
-                    joint,
-                    name,
-                    unit,
-                    limit,
-                    float(np.sqrt(np.mean(e**2))),
-                    float(e[worst]),
-                    float(t_a[worst]),
-                    float(t_a[over[0]]) if len(over) else None,
-                )
-            )
+    result.stats += _joint_stats(pair, a, b, tol, lag_s, keep, result.notes)
+    result.stats += _frame_stats(a, b, tol, lag_s)
     extra = [n for n in (*a.names, *b.names) if n not in pair.common]
     if extra:
         result.notes.append(f"not compared (in one log only): {', '.join(dict.fromkeys(extra))}")
@@ -239,7 +273,8 @@ def render_log_comparison(result: LogComparison) -> str:
             f"(of A): beyond {first.tolerance:g} {first.unit}"
         )
     lines.append(
-        f"{'joint':<16} {'field':<16} {'rms':>11} {'worst':>11} {'at t (s)':>9} {'tol':>9}  ok"
+        f"{'joint|frame':<16} {'field':<16} {'rms':>11} {'worst':>11} {'at t (s)':>9} "
+        f"{'tol':>9}  ok"
     )
     for s in result.stats:
         ok = "yes" if s.passed else f"NO, from {s.parts_t_s:.3f} s"

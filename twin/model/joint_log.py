@@ -51,8 +51,13 @@ class JointLog:
 
     @staticmethod
     def from_recording(rec: Recording) -> JointLog:
-        """A twin run's joints at its recorded frames (simulated time)."""
+        """A twin run's joints at its recorded frames (simulated time), and the pad tip's and each
+        object's poses as an exported bag's /tf names them (pad_tip, the object's name)."""
         frames = rec.frames
+        t_ns = np.asarray(frames.t_ns, dtype=np.int64)
+        tf = {"pad_tip": (t_ns, np.asarray(frames.pad_pose, dtype=np.float64))}
+        for k, obj in enumerate(rec.config.objects):
+            tf.setdefault(obj.name, (t_ns, np.asarray(frames.object_poses[:, k], dtype=np.float64)))
         return JointLog(
             tuple(rec.config.profile.joint_names),
             np.asarray(frames.t_ns, dtype=np.int64),
@@ -60,6 +65,7 @@ class JointLog:
             np.asarray(frames.joint_qd, dtype=np.float64),
             np.asarray(frames.joint_effort, dtype=np.float64),
             path=rec.path,
+            tf=tf,
         )
 
     def renamed(self, joint_map: dict[str, str]) -> JointLog:

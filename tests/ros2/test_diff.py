@@ -150,3 +150,25 @@ def test_an_exported_bag_is_judged_on_its_tf_frames_too(run, tmp_path, capsys):
     assert (failed.joint, failed.quantity) == ("pad_tip", "pad.position")
     assert failed.worst == pytest.approx(0.001, abs=1e-9)
     assert failed.parts_t_s == pytest.approx((t_ns[len(t_ns) // 2] - t_ns[0]) * 1e-9)
+
+
+def _damage(bag, how: str) -> None:
+    (mcap_file,) = bag.glob("*.mcap")
+    if how == "metadata":
+        (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
+    elif how == "cut":
+        mcap_file.write_bytes(mcap_file.read_bytes()[:50_000])
+    else:  # flipped bytes inside a message: a sequence length no message can have
+        data = bytearray(mcap_file.read_bytes())
+        for i in range(len(data) // 3, len(data) // 3 + 4000):
+            data[i] ^= 0x5A
+        mcap_file.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("how", ["metadata", "cut", "flipped"])
+def test_a_damaged_bag_is_one_line_and_exit_2(run, tmp_path, capsys, how):
+    bag = joint_bag(run, tmp_path / "bag", rate_hz=50.0)
+    _damage(bag, how)
+    code, out, err = twin(capsys, "diff", run.path, bag)
+    assert code == 2 and not out and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"twin: error: cannot read ROS 2 bag '{bag}'"), err

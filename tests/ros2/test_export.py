@@ -195,3 +195,11 @@ def test_several_recordings_one_bag_each(exported, camera_run, tmp_path, capsys)
             info = TYPESTORE.deserialize_cdr(data, info_conn.msgtype)
             assert (info.width, info.height) == (track.width_px, track.height_px)
             assert info.k[2] == track.width_px / 2
+
+
+def test_a_bag_is_not_exported_again(exported, tmp_path, capsys):
+    _, bag = exported
+    code, _, err = twin(
+        capsys, "export", bag / "bag.mcap", "--format", "ros2", "-o", tmp_path / "b"
+    )
+    assert code == 2 and "is a ROS 2 bag already" in err and not (tmp_path / "b").exists()

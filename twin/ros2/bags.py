@@ -14,7 +14,7 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 
-from twin.model.errors import RecordingError
+from twin.model.errors import RecordingError, TwinError
 from twin.model.joint_log import JointLog
 from twin.record.mcap.scan import profile
 from twin.ros2.export import METADATA
@@ -123,12 +123,12 @@ def read_bag(path: str | os.PathLike) -> JointLog:
                         tf.setdefault(t.child_frame_id, []).append(
                             (_stamp_ns(t.header.stamp), pose)
                         )
-    except ReaderError as err:
-        raise RecordingError(f"cannot read ROS 2 bag {where!r}: {err}") from err
-    except (OSError, ValueError, KeyError, IndexError) as err:
-        raise RecordingError(
-            f"cannot read ROS 2 bag {where!r}: {type(err).__name__}: {err}"
-        ) from err
+    except TwinError:
+        raise
+    except Exception as err:  # a foreign file: rosbags' YAML, CDR and MCAP errors
+        kind = "" if isinstance(err, ReaderError) else f"{type(err).__name__}: "
+        text = " ".join(str(err).split())[:200]  # one line, however long the parser's message
+        raise RecordingError(f"cannot read ROS 2 bag {where!r}: {kind}{text}") from err
     if not samples.names:
         raise RecordingError(f"bag {where!r} has no {JOINT_STATES} messages; expected at least one")
     tf_arrays = {

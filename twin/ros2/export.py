@@ -241,7 +241,13 @@ def export_bags(
     """Each recording as a bag (bag_targets); (bag, messages, topics) of each. All recordings are
     loaded before any bag is written, so a bad one leaves nothing half done."""
     from twin.record.mcap.reader import load
+    from twin.ros2.bags import is_bag
 
+    for path in paths:
+        if is_bag(path):
+            raise ConfigError(
+                f"{path!r} is a ROS 2 bag already; expected a twin recording (.mcap) to export"
+            )
     targets = bag_targets(paths, output, force)
     recordings = [load(p) for p in paths]
     if len(paths) > 1:

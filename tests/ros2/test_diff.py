@@ -172,3 +172,26 @@ def test_a_damaged_bag_is_one_line_and_exit_2(run, tmp_path, capsys, how):
     code, out, err = twin(capsys, "diff", run.path, bag)
     assert code == 2 and not out and len(err.strip().splitlines()) == 1, err
     assert err.startswith(f"twin: error: cannot read ROS 2 bag '{bag}'"), err
+
+
+def test_an_object_named_like_a_robot_link_keeps_its_frame_apart(run, tmp_path):
+    """The export names such an object `object_NAME` in /tf (the link keeps its name); the run's
+    side of a diff names it the same, so the box is never judged against the robot's base."""
+    import dataclasses
+
+    from twin.ros2.bags import read_bag, run_log
+    from twin.ros2.export import write_bag
+
+    (box,) = run.config.objects
+    config = dataclasses.replace(run.config, objects=(dataclasses.replace(box, name="MTB_base"),))
+    renamed = dataclasses.replace(run, config=config)
+    bag = tmp_path / "renamed"
+    write_bag(renamed, bag)
+    log = read_bag(bag)
+    assert {"MTB_base", "object_MTB_base"} <= set(log.tf)
+    result = compare_logs(run_log(renamed), log, Tolerances.from_preset("physical"), revolute={})
+    frames = {(s.joint, s.quantity) for s in result.stats if not s.joint.startswith("MTB_axis")}
+    assert result.passed and frames == {
+        ("object_MTB_base", "objects.position"),
+        ("pad_tip", "pad.position"),
+    }, frames

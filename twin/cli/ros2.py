@@ -39,13 +39,12 @@ def add_bag_options(p: argparse.ArgumentParser) -> None:
 def _log(path: str, joint_map: dict[str, str]):
     """A side as a JointLog and which of its joints are revolute (a twin run knows; a bag not)."""
     from twin.compare.metrics import REVOLUTE
-    from twin.model.joint_log import JointLog
     from twin.record.mcap.reader import load
-    from twin.ros2.bags import is_bag, read_bag
+    from twin.ros2.bags import is_bag, read_bag, run_log
 
     if is_bag(path):
         return read_bag(path).renamed(joint_map), {}
-    log = JointLog.from_recording(load(path))
+    log = run_log(load(path))
     return log, {name: bool(REVOLUTE[k]) for k, name in enumerate(log.names)}
 
 

@@ -50,14 +50,16 @@ class JointLog:
         return float(1e9 / np.median(np.diff(self.t_ns)))
 
     @staticmethod
-    def from_recording(rec: Recording) -> JointLog:
-        """A twin run's joints at its recorded frames (simulated time), and the pad tip's and each
-        object's poses as an exported bag's /tf names them (pad_tip, the object's name)."""
+    def from_recording(rec: Recording, object_frames: tuple[str, ...] | None = None) -> JointLog:
+        """A twin run's joints at its recorded frames (simulated time), with the pad tip's and
+        each object's poses as `tf` (`pad_tip`, and each object by `object_frames`, the names an
+        exported bag's /tf gives them; by default the objects' own names)."""
         frames = rec.frames
         t_ns = np.asarray(frames.t_ns, dtype=np.int64)
+        names = object_frames or tuple(o.name for o in rec.config.objects)
         tf = {"pad_tip": (t_ns, np.asarray(frames.pad_pose, dtype=np.float64))}
-        for k, obj in enumerate(rec.config.objects):
-            tf.setdefault(obj.name, (t_ns, np.asarray(frames.object_poses[:, k], dtype=np.float64)))
+        for k, name in enumerate(names):
+            tf.setdefault(name, (t_ns, np.asarray(frames.object_poses[:, k], dtype=np.float64)))
         return JointLog(
             tuple(rec.config.profile.joint_names),
             np.asarray(frames.t_ns, dtype=np.int64),

@@ -16,7 +16,9 @@ from rosbags.rosbag2.errors import ReaderError
 
 from twin.model.errors import RecordingError, TwinError
 from twin.model.joint_log import JointLog
+from twin.model.recording import Recording
 from twin.record.mcap.scan import profile
+from twin.record.mcap.scene_tf import SceneTransforms
 from twin.ros2.export import METADATA
 from twin.ros2.messages import TYPESTORE
 
@@ -31,6 +33,17 @@ def is_bag(path: str | os.PathLike) -> bool:
     if p.is_dir():
         return (p / METADATA).is_file()
     return p.is_file() and profile(p) == "ros2"
+
+
+def run_log(rec: Recording) -> JointLog:
+    """A twin run as a JointLog whose /tf frames are named as its exported bag names them (an
+    object named like a robot link is `object_NAME` there)."""
+    scene = SceneTransforms(
+        rec.urdf,
+        tuple(rec.config.profile.joint_names),
+        tuple(o.name for o in rec.config.objects),
+    )
+    return JointLog.from_recording(rec, scene.object_frames)
 
 
 def _stamp_ns(stamp) -> int:

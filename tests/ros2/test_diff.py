@@ -195,3 +195,14 @@ def test_an_object_named_like_a_robot_link_keeps_its_frame_apart(run, tmp_path):
         ("object_MTB_base", "objects.position"),
         ("pad_tip", "pad.position"),
     }, frames
+
+
+def test_a_grippers_own_joint_states_are_left_out_and_said(run, tmp_path, capsys):
+    bag = joint_bag(run, tmp_path / "with_gripper", gripper_every=10)
+    log = twin_pkg.load(bag)
+    assert log.names == tuple(run.config.profile.joint_names)
+    code, out, _ = twin(capsys, "diff", run.path, bag)
+    assert code == 0, out
+    assert re.search(
+        r"note: .*: \d+ /joint_states messages of other joints \(gripper\) left out", out
+    )

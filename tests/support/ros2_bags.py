@@ -27,11 +27,14 @@ def joint_bag(
     bias: tuple[str, float] | None = None,
     names: list[str] | None = None,
     velocity: bool = False,
+    gripper_every: int = 0,
     seed: int = 0,
 ) -> Path:
     """The run's joints sampled at rate_hz from -lead_s (at rest until 0) to its end, each message
     stamped EPOCH_NS + lead_s + its time and logged 3 ms later; noise_rad Gaussian on each position;
-    bias (joint, rad) added to one joint; names instead of the twin's; velocity: also velocities.
+    bias (joint, rad) added to one joint; names instead of the twin's; velocity: also velocities;
+    gripper_every: every that many samples also a message of a gripper joint alone (its own
+    controller's).
     Returns out (a new bag folder, MCAP storage, metadata version 8)."""
     t_s = rec.frames.t_ns * 1e-9
     q, qd = rec.frames.joint_q, rec.frames.joint_qd
@@ -57,4 +60,14 @@ def joint_bag(
             writer.write(
                 conn, ns + 3_000_000, TYPESTORE.serialize_cdr(msg, JOINT_STATE.__msgtype__)
             )
+            if gripper_every and round(u * rate_hz) % gripper_every == 0:
+                grip = JOINT_STATE(
+                    header=HEADER(stamp=TIME(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""),
+                    name=["gripper"],
+                    position=np.array([0.01]),
+                    velocity=np.zeros(0),
+                    effort=np.zeros(0),
+                )
+                data = TYPESTORE.serialize_cdr(grip, JOINT_STATE.__msgtype__)
+                writer.write(conn, ns + 4_000_000, data)
     return out

@@ -248,6 +248,7 @@ def compare_logs(
     )
     result.stats += _joint_stats(pair, a, b, tol, lag_s, keep, result.notes)
     result.stats += _frame_stats(a, b, tol, lag_s)
+    result.notes += [*a.notes, *b.notes]
     extra = [n for n in (*a.names, *b.names) if n not in pair.common]
     if extra:
         result.notes.append(f"not compared (in one log only): {', '.join(dict.fromkeys(extra))}")

@@ -28,6 +28,7 @@ class JointLog:
         path: where it was read from ("" in memory).
         topics: the source's topics and types (a bag's), for `twin info`-like summaries.
         tf: other frames' poses by child frame: (t_ns (m,), poses (m, 7)) where the source has /tf.
+        notes: what reading it left out, said in a comparison's report.
     """
 
     names: tuple[str, ...]
@@ -38,6 +39,7 @@ class JointLog:
     path: str = ""
     topics: dict[str, str] = field(default_factory=dict)
     tf: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -89,6 +91,7 @@ class JointLog:
             self.path,
             self.topics,
             self.tf,
+            self.notes,
         )
 
 

@@ -112,9 +112,10 @@ class _Samples:
 
 def read_bag(path: str | os.PathLike) -> JointLog:
     """The bag's /joint_states (and /tf) as a JointLog; RecordingError naming the bag and what is
-    wrong with it (unreadable, no /joint_states, joints that change between messages)."""
+    wrong with it (unreadable, no /joint_states, stamps that repeat). Messages of another set of
+    joints than the most common one's (a gripper's own controller) are left out (its notes say)."""
     where = str(path)
-    samples = _Samples(where)
+    groups: dict[frozenset[str], _Samples] = {}  # by joint names: a controller may log its own
     tf: dict[str, list] = {}
     try:
         with Reader(Path(path)) as reader:
@@ -128,7 +129,7 @@ def read_bag(path: str | os.PathLike) -> JointLog:
             for connection, log_ns, data in reader.messages(connections=wanted):
                 msg = TYPESTORE.deserialize_cdr(data, connection.msgtype)
                 if connection.topic == JOINT_STATES:
-                    samples.take(log_ns, msg)
+                    groups.setdefault(frozenset(msg.name), _Samples(where)).take(log_ns, msg)
                 elif connection.msgtype == "tf2_msgs/msg/TFMessage":
                     for t in msg.transforms:
                         tr, q = t.transform.translation, t.transform.rotation
@@ -142,8 +143,15 @@ def read_bag(path: str | os.PathLike) -> JointLog:
         kind = "" if isinstance(err, ReaderError) else f"{type(err).__name__}: "
         text = " ".join(str(err).split())[:200]  # one line, however long the parser's message
         raise RecordingError(f"cannot read ROS 2 bag {where!r}: {kind}{text}") from err
-    if not samples.names:
+    if not groups:
         raise RecordingError(f"bag {where!r} has no {JOINT_STATES} messages; expected at least one")
+    samples = max(groups.values(), key=lambda g: len(g.log_ns))  # the first of the most common
+    notes = [
+        f"{where}: {len(g.log_ns)} {JOINT_STATES} messages of other joints "
+        f"({', '.join(g.names)}) left out"
+        for g in groups.values()
+        if g is not samples
+    ]
     tf_arrays = {
         child: (
             np.array([t for t, _ in rows], dtype=np.int64),
@@ -151,4 +159,6 @@ def read_bag(path: str | os.PathLike) -> JointLog:
         )
         for child, rows in tf.items()
     }
-    return samples.log(topics, tf_arrays)
+    log = samples.log(topics, tf_arrays)
+    log.notes = notes
+    return log

@@ -1,8 +1,9 @@
 """ROS 2 message types and QoS of a twin bag: each topic, its standard message type and offered QoS,
 and the messages built from a recording's values (rosbags' typestore; CDR serialization).
 
-Message definitions and type hashes are ROS 2 Jazzy's (identical for these types on Humble, Jazzy
-and Kilted; only the type hash, which Humble does not read, is Jazzy's own).
+Message definitions and type hashes are ROS 2 Jazzy's. In rosbags' typestores, Humble's, Jazzy's
+and Kilted's definitions and hashes of these types are the same, but for rcl_interfaces/msg/Log's
+level constants (`byte` on Humble, `uint8` since): the same bytes on the wire.
 """
 
 from __future__ import annotations

@@ -203,3 +203,11 @@ def test_a_bag_is_not_exported_again(exported, tmp_path, capsys):
         capsys, "export", bag / "bag.mcap", "--format", "ros2", "-o", tmp_path / "b"
     )
     assert code == 2 and "is a ROS 2 bag already" in err and not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("command", ["info", "replay", "check"])
+def test_twins_own_commands_say_a_bag_is_one(exported, capsys, command):
+    _, bag = exported
+    for target in (bag, bag / "bag.mcap"):
+        code, out, err = twin(capsys, command, target)
+        assert code == 2 and "ROS 2 bag" in (err + out) and "twin diff and twin.load" in err + out

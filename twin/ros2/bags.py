@@ -17,9 +17,8 @@ from rosbags.rosbag2.errors import ReaderError
 from twin.model.errors import RecordingError, TwinError
 from twin.model.joint_log import JointLog
 from twin.model.recording import Recording
-from twin.record.mcap.scan import profile
+from twin.record.mcap.scan import ROS2_PROFILE, is_bag_folder, profile
 from twin.record.mcap.scene_tf import SceneTransforms
-from twin.ros2.export import METADATA
 from twin.ros2.messages import TYPESTORE
 
 JOINT_STATES = "/joint_states"
@@ -30,9 +29,7 @@ TF = ("/tf", "/tf_static")
 def is_bag(path: str | os.PathLike) -> bool:
     """A ROS 2 bag: a folder holding metadata.yaml, or an MCAP file whose profile is `ros2`."""
     p = Path(path)
-    if p.is_dir():
-        return (p / METADATA).is_file()
-    return p.is_file() and profile(p) == "ros2"
+    return is_bag_folder(p) or (p.is_file() and profile(p) == ROS2_PROFILE)
 
 
 def run_log(rec: Recording) -> JointLog:

@@ -17,12 +17,12 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from twin.model.errors import ConfigError
 from twin.model.recording import Recording
+from twin.record.mcap.scan import BAG_METADATA, is_bag_folder
 from twin.record.mcap.scene_tf import PAD_TIP, SceneTransforms
 from twin.record.outputs import fsync_file, publish
 from twin.ros2 import messages as m
 
 BAG_VERSION = 9  # rosbag2's metadata version since Jazzy
-METADATA = "metadata.yaml"
 
 # topic -> (message type, latched: transient-local QoS); the order messages of one time go in
 TOPICS: dict[str, tuple[str, bool]] = {
@@ -42,10 +42,6 @@ CAMERA_TOPICS = {
 }
 
 
-def is_bag_folder(path: str | os.PathLike) -> bool:
-    return Path(path).is_dir() and (Path(path) / METADATA).is_file()
-
-
 def check_bag_target(out: Path, force: bool) -> None:
     """A bag may be written at `out`: its folder exists, and it is new, an empty folder, or (with
     force) an earlier bag. ConfigError saying which otherwise (before any work)."""
@@ -58,7 +54,7 @@ def check_bag_target(out: Path, force: bool) -> None:
         return
     if not is_bag_folder(out):
         raise ConfigError(
-            f"cannot write bag {str(out)!r}: it exists and is no ROS 2 bag (no {METADATA}); "
+            f"cannot write bag {str(out)!r}: it exists and is no ROS 2 bag (no {BAG_METADATA}); "
             "expected a new or empty folder"
         )
     if not force:

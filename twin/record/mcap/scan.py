@@ -330,6 +330,15 @@ def records(
             return
 
 
+ROS2_PROFILE = "ros2"  # a ROS 2 bag's MCAP file (rosbag2's MCAP storage)
+BAG_METADATA = "metadata.yaml"  # what makes a folder a ROS 2 bag
+
+
+def is_bag_folder(path: str | os.PathLike) -> bool:
+    """A ROS 2 bag's folder: a folder holding metadata.yaml."""
+    return os.path.isdir(path) and os.path.isfile(os.path.join(path, BAG_METADATA))
+
+
 def profile(path: str | os.PathLike) -> str | None:
     """The profile of an MCAP file's header ("ros2" for a ROS 2 bag's file, "" for a twin
     recording), or None for anything that is no readable MCAP file with a header."""

@@ -57,14 +57,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     # `head` that stopped reading) must not turn a good run's recording into an error, nor leave the
     # twin (and its camera process) open.
     try:
-        with open_recorders(
-            config,
-            run,
-            mcap_path=mcap_path,
-            rrd_path=rrd_path,
-            rate=args.rate,
-            engine=engine_versions(),
-        ) as sinks:
+        with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path, rate=args.rate,
+                            engine=engine_versions()) as sinks:
             # the limit last: recorders see its frame
             twin = Twin(config, gui=args.gui, sinks=[summary, *sinks, *limit])
             wall0 = time.perf_counter()

@@ -29,7 +29,7 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
         help="recordings as Parquet, CSV (one row per frame), a LeRobot v3.0 dataset or ROS 2 bags",
         description="parquet/csv: one recording's frames (or --table events|commands) in one file. "
         "lerobot: every recording (or pick-place cycle) an episode, resampled to --fps. "
-        "ros2: each recording a rosbag2 bag (MCAP storage) that ros2 bag info and play accept.",
+        "ros2: each recording a ROS 2 bag (rosbag2's MCAP storage and metadata.yaml).",
     )
     p.add_argument(
         "files", nargs="+", metavar="FILE.mcap", help="recordings (parquet and csv: exactly one)"

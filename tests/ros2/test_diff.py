@@ -206,3 +206,17 @@ def test_a_grippers_own_joint_states_are_left_out_and_said(run, tmp_path, capsys
     assert re.search(
         r"note: .*: \d+ /joint_states messages of other joints \(gripper\) left out", out
     )
+
+
+def test_nan_efforts_are_not_compared_and_a_nan_position_fails(run, tmp_path):
+    """ROS drivers without effort sensing send NaN efforts; a NaN position is a sample the log
+    lacks, never a match."""
+    log = twin_pkg.load(joint_bag(run, tmp_path / "nan", rate_hz=60.0, velocity=True))
+    log.effort_nm = np.full_like(log.position_rad, np.nan)
+    tol = Tolerances.from_preset("physical")
+    result = compare_logs(JointLog.from_recording(run), log, tol, revolute={})
+    assert result.passed and any("joints.effort not compared" in n for n in result.notes)
+    log.position_rad[100, 2] = np.nan
+    result = compare_logs(JointLog.from_recording(run), log, tol, revolute={})
+    (failed,) = [s for s in result.stats if not s.passed]
+    assert (failed.joint, failed.quantity, failed.worst) == ("MTB_axis3", "joints.position", np.inf)

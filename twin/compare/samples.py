@@ -11,6 +11,7 @@ taken out first, so that a constant offset on a joint does not move the lag).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -138,7 +139,10 @@ class _Pair:
         if keep.sum() < 2:
             return np.inf
         d = self.difference("position_rad", lag_s, keep)
-        return float(np.mean((d - d.mean(axis=0)) ** 2))
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a joint all NaN: no fit from it
+            cost = np.nanmean((d - np.nanmean(d, axis=0)) ** 2)
+        return float(cost) if np.isfinite(cost) else np.inf
 
 
 def best_lag_s(pair: _Pair, a: JointLog, b: JointLog) -> float:
@@ -157,7 +161,9 @@ def best_lag_s(pair: _Pair, a: JointLog, b: JointLog) -> float:
 
 
 def _stat(label: str, name: str, unit: str, limit: float, e: np.ndarray, t_a: np.ndarray):
-    """One row of the verdict from errors `e` at times `t_a` (s of A)."""
+    """One row of the verdict from errors `e` at times `t_a` (s of A); a NaN (a value one log
+    lacks at that sample) is beyond any tolerance."""
+    e = np.where(np.isnan(e), np.inf, e)
     worst = int(np.argmax(e))
     over = np.nonzero(e > limit)[0]
     return JointStat(
@@ -177,8 +183,12 @@ def _joint_stats(pair: _Pair, a, b, tol, lag_s: float, keep, notes: list[str]) -
     t_a = pair.dense_times(lag_s)[keep] if pair.b_is_sparse else pair.ts[keep]
     stats = []
     for attr, name, unit in QUANTITIES:
-        missing = [log.path or "a log" for log in (a, b) if getattr(log, attr) is None]
-        if missing:
+        missing = [
+            log.path or "a log"
+            for log in (a, b)
+            if getattr(log, attr) is None or np.isnan(getattr(log, attr)).all()
+        ]
+        if missing:  # a driver without effort sensing sends NaN, or nothing
             notes.append(f"{name} not compared: {missing[0]} has none")
             continue
         if tol[name] == np.inf:

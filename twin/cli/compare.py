@@ -10,6 +10,7 @@ import os
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, whole_number
+from twin.cli.ros2 import add_bag_options, diff_with_bag
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
 
@@ -104,6 +105,9 @@ def cmd_diff(args: argparse.Namespace) -> int:
     from twin.verify.check import remade
     from twin.verify.noise import judge
 
+    bag_code = diff_with_bag(args, _tolerances)  # a side is a ROS 2 bag: joint logs compared
+    if bag_code is not None:
+        return bag_code
     tol = _tolerances(args)
     _check_outputs(args, [args.golden, args.candidate])
     golden, candidate = load(args.golden), load(args.candidate)
@@ -227,9 +231,10 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
         help="compare two recordings by content (exit 0 match, 1 mismatch, 2 bad input, "
         "3 not comparable)",
     )
-    p.add_argument("golden", help="the reference recording (.mcap)")
-    p.add_argument("candidate", help="the recording to check (.mcap)")
+    p.add_argument("golden", help="the reference recording (.mcap, or a ROS 2 bag)")
+    p.add_argument("candidate", help="the recording to check (.mcap, or a ROS 2 bag)")
     _add_tolerance_options(p, DEFAULT)
+    add_bag_options(p)
     p.add_argument(
         "--force",
         action="store_true",

@@ -1,5 +1,5 @@
-"""`twin export`: recordings out as Parquet, CSV or a LeRobot v3.0 dataset (the work is in
-twin.export).
+"""`twin export`: recordings out as Parquet, CSV, a LeRobot v3.0 dataset (the work is in
+twin.export) or ROS 2 bags (twin.ros2).
 
 Exit codes: 0 written; 1 with --verify, a recording whose replay is not exact was left out (the rest
 is written; nothing is written if none is left); 2 bad input, checked before any work.
@@ -14,7 +14,7 @@ from twin.cli.args import whole_number
 from twin.export.episodes import MAX_FPS
 from twin.model.errors import ConfigError, TwinError
 
-FORMATS = ("parquet", "csv", "lerobot")
+FORMATS = ("parquet", "csv", "lerobot", "ros2")
 
 
 class _LeftOut(TwinError):
@@ -26,20 +26,23 @@ class _LeftOut(TwinError):
 def add_export_command(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
-        help="recordings as Parquet, CSV (one row per frame) or a LeRobot v3.0 dataset",
+        help="recordings as Parquet, CSV (one row per frame), a LeRobot v3.0 dataset or ROS 2 bags",
         description="parquet/csv: one recording's frames (or --table events|commands) in one file. "
-        "lerobot: every recording (or pick-place cycle) an episode, resampled to --fps.",
+        "lerobot: every recording (or pick-place cycle) an episode, resampled to --fps. "
+        "ros2: each recording a ROS 2 bag (rosbag2's MCAP storage and metadata.yaml).",
     )
     p.add_argument(
         "files", nargs="+", metavar="FILE.mcap", help="recordings (parquet and csv: exactly one)"
     )
-    p.add_argument("--format", required=True, choices=FORMATS, help="parquet, csv or lerobot")
+    p.add_argument("--format", required=True, choices=FORMATS, help="parquet, csv, lerobot or ros2")
     p.add_argument(
         "-o",
         "--output",
         required=True,
         metavar="OUT",
-        help="FILE.parquet, FILE.csv, or the dataset's folder (new, or empty) for lerobot",
+        help="FILE.parquet, FILE.csv, the dataset's folder (new, or empty) for lerobot; for ros2 "
+        "the bag's folder (new, or empty), or with several recordings a folder of bags named "
+        "after them",
     )
     p.add_argument(
         "--table",
@@ -78,12 +81,24 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
         help="lerobot: replace an existing dataset folder (one holding meta/info.json) once "
         "the new one is complete",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="ros2: replace an existing bag (a folder holding metadata.yaml) once the new one is "
+        "complete",
+    )
     p.set_defaults(func=cmd_export)
 
 
 def cmd_export(args: argparse.Namespace) -> int:
     if args.format == "lerobot":
         return _export_lerobot(args)
+    if args.format == "ros2":
+        from twin.cli.ros2 import cmd_export_ros2
+
+        options = ("--table", "--fps", "--episodes", "--task", "--verify", "--overwrite")
+        _refuse(args, options, "--format parquet, csv and lerobot")
+        return cmd_export_ros2(args.files, args.output, force=args.force)
     return _export_table(args)
 
 
@@ -102,6 +117,7 @@ def _export_table(args: argparse.Namespace) -> int:
     from twin.record.outputs import check_output
 
     _refuse(args, ("--fps", "--episodes", "--task", "--verify", "--overwrite"), "--format lerobot")
+    _refuse(args, ("--force",), "--format ros2")
     if len(args.files) != 1:
         raise ConfigError(
             f"--format {args.format} writes one recording; got {len(args.files)} files "
@@ -121,6 +137,7 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     from twin.export.pipeline import export_lerobot
 
     _refuse(args, ("--table",), "--format parquet and csv")
+    _refuse(args, ("--force",), "--format ros2")
     if args.fps is None:
         raise ConfigError("--format lerobot needs --fps N (a whole number of frames per second)")
     # before loading anything; each recording's own physics rate is checked once loaded

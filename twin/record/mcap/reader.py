@@ -113,7 +113,12 @@ def open_checked(path: str | Path) -> tuple[str, int]:
             f"cannot read recording {where!r}: {getattr(err, 'strerror', None) or err}"
         ) from err
     if stat.S_ISDIR(mode):
-        raise RecordingError(f"recording {where!r} is a directory; expected an MCAP file")
+        bag = (
+            " (a ROS 2 bag: twin diff and twin.load read it)"
+            if mcap_scan.is_bag_folder(path)
+            else ""
+        )
+        raise RecordingError(f"recording {where!r} is a directory{bag}; expected an MCAP file")
     if not stat.S_ISREG(mode):
         raise RecordingError(
             f"recording {where!r} is not a regular file (a FIFO, socket or device); expected an "
@@ -134,6 +139,11 @@ def open_checked(path: str | Path) -> tuple[str, int]:
             )
         raise RecordingError(
             f"{where!r} is not an MCAP file (it does not start with the MCAP magic bytes)"
+        )
+    if mcap_scan.profile(path) == mcap_scan.ROS2_PROFILE:
+        raise RecordingError(
+            f"{where!r} is a ROS 2 bag's MCAP file (profile ros2), not a twin recording; twin diff "
+            "and twin.load read it"
         )
     return where, size
 

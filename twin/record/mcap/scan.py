@@ -24,6 +24,7 @@ caller does not interpret costs: memory does not grow with the number of message
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from collections.abc import Container, Iterator
@@ -335,3 +336,35 @@ def records(
                     f"closing magic bytes"
                 )
             return
+
+
+ROS2_PROFILE = "ros2"  # a ROS 2 bag's MCAP file (rosbag2's MCAP storage)
+BAG_METADATA = "metadata.yaml"  # what makes a folder a ROS 2 bag
+
+
+def is_bag_folder(path: str | os.PathLike) -> bool:
+    """A ROS 2 bag's folder: a folder holding metadata.yaml."""
+    return os.path.isdir(path) and os.path.isfile(os.path.join(path, BAG_METADATA))
+
+
+def profile(path: str | os.PathLike) -> str | None:
+    """The profile of an MCAP file's header ("ros2" for a ROS 2 bag's file, "" for a twin
+    recording), or None for anything that is no readable MCAP file with a header."""
+    try:
+        with open(path, "rb") as f:
+            if f.read(len(MAGIC)) != MAGIC:
+                return None
+            head = f.read(9)
+            if len(head) < 9:
+                return None
+            opcode, length = _RECORD_HEAD.unpack(head)
+            body = f.read(min(length, 1 << 16))
+    except (OSError, ValueError):
+        return None
+    if opcode != Opcode.HEADER or len(body) < min(length, 4):
+        return None
+    try:
+        header = _parse(opcode, body)
+    except Damaged:
+        return None
+    return header.profile if isinstance(header, Header) else None

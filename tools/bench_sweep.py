@@ -25,9 +25,9 @@ import sys
 import time
 from pathlib import Path
 
+from twin.jobs.executors import DaskExecutor, LocalExecutor
 from twin.model.errors import TwinError
 from twin.sim.twin import Twin
-from twin.sweep.executors import DaskExecutor, LocalExecutor
 from twin.sweep.keys import apply_values, task_values
 from twin.sweep.runner import run_sweep
 from twin.sweep.sampling import RandomSampler

@@ -13,6 +13,9 @@ from twin.cli.args import add_executor_options, whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
 
+# what a local Dask cluster's workers import as they start: the goldens' and sweeps' code
+PRELOAD = ("twin.verify.check", "twin.sweep.worker")
+
 _TOL_HELP = (
     "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: "
     + ", ".join(f"{name} [{unit}]" if unit else name for name, (unit, _) in FIELDS.items())
@@ -177,16 +180,17 @@ def cmd_check(args: argparse.Namespace) -> int:
 def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep) -> list:
     """Every golden checked: the recordings in --jobs processes (or on Dask), then each sweep
     spread over the executor's workers, then each search golden; outcomes in that order."""
-    from twin.sweep.executors import make_executor
+    from twin.jobs.executors import make_executor
+    from twin.search.golden import check_search
     from twin.sweep.golden import check_sweep
-    from twin.sweep.search_golden import check_search
     from twin.verify.check import Progress, check_all
 
     keep = keep or {}
     progress = Progress(len(goldens))
+    fans_out = args.executor == "dask" or args.jobs > 1 or goldens.sweeps
     executor = (
-        make_executor(args.executor, args.jobs, args.scheduler)
-        if goldens.sweeps or args.executor == "dask"
+        make_executor(args.executor, args.jobs, args.scheduler, preload=PRELOAD)
+        if fans_out
         else None
     )
     try:
@@ -198,7 +202,7 @@ def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep) -> 
                 jobs=args.jobs,
                 progress=progress,
                 allow_error=args.allow_error,
-                run_many=executor.map_unordered if args.executor == "dask" else None,
+                executor=executor if args.executor == "dask" or args.jobs > 1 else None,
                 keep=keep,
             )
             if goldens.recordings

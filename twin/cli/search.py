@@ -1,5 +1,5 @@
 """The `twin search` command: argument parsing, progress and printing only (the work is
-twin.sweep.search; a saved failure is twin.sweep.search_golden)."""
+twin.search.search; a saved failure is twin.search.golden)."""
 
 from __future__ import annotations
 
@@ -100,9 +100,9 @@ def add_search_command(sub) -> None:
 
 
 def cmd_search(args: argparse.Namespace) -> int:
-    from twin.sweep.executors import make_executor
-    from twin.sweep.search import Search, prepare_search
-    from twin.sweep.search_golden import check_name
+    from twin.jobs.executors import make_executor
+    from twin.search.golden import check_name
+    from twin.search.search import Search, prepare_search
     from twin.sweep.spec import SweepSpec, parse_vary
 
     spec = SweepSpec(
@@ -121,7 +121,9 @@ def cmd_search(args: argparse.Namespace) -> int:
     if args.save_golden is not None:
         check_name(args.save_golden)
     out = _out_dir(args.out)
-    executor = make_executor(args.executor, args.jobs, args.scheduler)
+    executor = make_executor(
+        args.executor, args.jobs, args.scheduler, preload=("twin.search.search",)
+    )
     search = Search(spec, ranges, executor, args.budget, progress=None if args.quiet else _progress)
     t0 = time.perf_counter()
     try:
@@ -149,8 +151,8 @@ def _finish(
     """Write search.json (and, unless interrupted, the smallest failure's recording and golden);
     print the summary."""
     from twin.record.outputs import write_atomic
-    from twin.sweep.search import probe_spec, result_json
-    from twin.sweep.search_golden import record_scenario, save_golden
+    from twin.search.golden import record_scenario, save_golden
+    from twin.search.search import probe_spec, result_json
 
     data = result_json(result)
     write_atomic(out / RESULT, json.dumps(data, indent=2, allow_nan=False) + "\n")

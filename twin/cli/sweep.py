@@ -13,7 +13,7 @@ from pathlib import Path
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
 from twin.model.errors import ConfigError, TwinError
 
-# a scenario that gave no result (twin.sweep.guard)
+# a scenario that gave no result (twin.jobs.guard)
 NO_RESULT = ("worker died", "killed: ", "timed out: ")
 
 
@@ -358,8 +358,8 @@ def sweep_spec(args: argparse.Namespace):
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from twin.jobs.executors import make_executor
     from twin.sweep import folder
-    from twin.sweep.executors import make_executor
     from twin.sweep.journal import JOURNAL
     from twin.sweep.spec import prepare
 
@@ -377,7 +377,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     jobs = max(1, min(args.jobs, the_plan.count)) if args.executor == "local" else args.jobs
-    executor = make_executor(args.executor, jobs, args.scheduler, dashboard=args.dashboard)
+    executor = make_executor(
+        args.executor,
+        jobs,
+        args.scheduler,
+        dashboard=args.dashboard,
+        preload=("twin.sweep.worker",),
+    )
     if getattr(executor, "dashboard_url", None):
         print(f"Dask dashboard: {executor.dashboard_url}", file=sys.stderr)
     progress = Progress(the_plan.count, quiet=args.quiet)

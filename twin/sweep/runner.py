@@ -68,7 +68,7 @@ def run_sweep(
     size = batch_size_n or batch_size(count, executor.jobs, per_job)
     stopped_by = None
     try:
-        for row in executor.run_scenarios(job, batches(scenarios, count, size), scenario_timeout_s):
+        for _, row in executor.run(job, batches(scenarios, count, size), scenario_timeout_s):
             rows.append(row)
             if on_row is not None:
                 on_row(row)

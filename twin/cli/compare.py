@@ -12,6 +12,7 @@ from pathlib import Path
 from twin.cli.args import add_executor_options, whole_number
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
+from twin.signals import Terminated
 
 # what a local Dask cluster's workers import as they start: the goldens' and sweeps' code
 PRELOAD = ("twin.verify.check", "twin.sweep.worker")
@@ -144,7 +145,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from twin.verify.check import exit_code, find_goldens, summary_table
+    from twin.verify.check import Progress, exit_code, find_goldens, summary_table
 
     tol = _tolerances(args)
     if args.junit and not args.junit.endswith(".xml"):
@@ -158,7 +159,13 @@ def cmd_check(args: argparse.Namespace) -> int:
 
         keep = plan_keep(args.keep, goldens, force=args.force)  # before any work
     print(goldens.count_line(), flush=True)
-    outcomes = _check_goldens(args, goldens, tol, keep)
+    progress = Progress(len(goldens))
+    try:
+        outcomes = _check_goldens(args, goldens, tol, keep, progress)
+    except (KeyboardInterrupt, Terminated):  # what finished, then 130 or 128 + the signal
+        print(summary_table(progress.outcomes), end="")
+        print(f"interrupted: {len(progress.outcomes)} of {len(goldens)} goldens checked")
+        raise
     if args.junit:
         from twin.compare.report import render_check_junit
         from twin.record.outputs import write_atomic
@@ -177,16 +184,15 @@ def cmd_check(args: argparse.Namespace) -> int:
     return exit_code(outcomes)
 
 
-def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep) -> list:
+def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, progress) -> list:
     """Every golden checked: the recordings in --jobs processes (or on Dask), then each sweep
     spread over the executor's workers, then each search golden; outcomes in that order."""
     from twin.jobs.executors import make_executor
     from twin.search.golden import check_search
     from twin.sweep.golden import check_sweep
-    from twin.verify.check import Progress, check_all
+    from twin.verify.check import check_all
 
     keep = keep or {}
-    progress = Progress(len(goldens))
     fans_out = args.executor == "dask" or args.jobs > 1 or goldens.sweeps
     executor = (
         make_executor(args.executor, args.jobs, args.scheduler, preload=PRELOAD)
@@ -310,4 +316,4 @@ def _add_check_command(sub: argparse._SubParsersAction) -> None:
         help="also write a JUnit report, one case per golden",
     )
     _add_tolerance_options(p, DEFAULT)
-    p.set_defaults(func=cmd_check)
+    p.set_defaults(func=cmd_check, interrupt=True)  # Ctrl-C even as a background job

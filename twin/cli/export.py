@@ -78,7 +78,7 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
         help="lerobot: replace an existing dataset folder (one holding meta/info.json) once "
         "the new one is complete",
     )
-    p.set_defaults(func=cmd_export)
+    p.set_defaults(func=cmd_export, interrupt=True)  # Ctrl-C even as a background job
 
 
 def cmd_export(args: argparse.Namespace) -> int:

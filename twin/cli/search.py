@@ -96,7 +96,7 @@ def add_search_command(sub) -> None:
         "NAME.mcap (its recording) and NAME.expect.json; `twin check` then runs it",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
-    p.set_defaults(func=cmd_search)
+    p.set_defaults(func=cmd_search, interrupt=True)  # Ctrl-C even as a background job
 
 
 def cmd_search(args: argparse.Namespace) -> int:

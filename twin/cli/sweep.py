@@ -90,7 +90,7 @@ def add_sweep_command(sub) -> None:
         "Dask; at most 16)",
     )
     _add_output_options(p)
-    p.set_defaults(func=cmd_sweep)
+    p.set_defaults(func=cmd_sweep, interrupt=True)  # Ctrl-C even as a background job
     p.epilog = (
         "twin sweep compare A B: two sweeps' results compared (paired when they ran "
         "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
@@ -234,7 +234,7 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
         metavar="FILE.png",
         help="also write a picture with the flips ringed (needs matplotlib)",
     )
-    compare.set_defaults(func=cmd_compare)
+    compare.set_defaults(func=cmd_compare, interrupt=True)  # Ctrl-C even as a background job
     plot = kind(
         prog=f"{p.prog} plot",
         description="Draw a sweep: each scenario over the two "
@@ -251,7 +251,7 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
         metavar="FILE.png",
         help="the picture (default DIR/sweep.png; NAME.png for a golden)",
     )
-    plot.set_defaults(func=cmd_plot)
+    plot.set_defaults(func=cmd_plot, interrupt=True)  # Ctrl-C even as a background job
     extra = {"compare": compare, "plot": plot}
     parse_run = p.parse_known_args
 

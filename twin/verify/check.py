@@ -352,9 +352,11 @@ class Progress:
     def __init__(self, total: int, stream: TextIO | None = None) -> None:
         self.total, self.done, self.stream = total, 0, stream or sys.stderr
         self.tty = self.stream.isatty()
+        self.outcomes: list[Outcome] = []  # as they finished: what an interrupted check prints
 
     def __call__(self, outcome: Outcome) -> None:
         self.done += 1
+        self.outcomes.append(outcome)
         name = Path(outcome.path).name
         if self.tty:
             width = 30

@@ -37,14 +37,14 @@ def rate(text: str) -> float:
 
 
 def seconds(text: str) -> float:
-    """An argparse type: a wall-clock duration in seconds, finite and > 0."""
+    """An argparse type: a wall-clock duration in seconds, finite and >= 0 (0: no limit)."""
     try:
         value = float(text)
     except ValueError:
         value = -1.0
-    if not (math.isfinite(value) and value > 0):
+    if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(
-            f"--scenario-timeout {text!r} is invalid; expected seconds > 0"
+            f"--scenario-timeout {text!r} is invalid; expected seconds >= 0 (0: no limit)"
         )
     return value
 
@@ -141,8 +141,8 @@ def _add_what_options(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="S",
         help="a scenario that gives no result within S seconds of wall time (hung without "
-        "stepping) "
-        "is ended and fails with that reason",
+        "stepping) is ended and fails with that reason (default: 120 s plus 1 s per simulated "
+        "second of the task: its --timeout, else the longest scenario so far; 0: no limit)",
     )
 
 

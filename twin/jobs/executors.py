@@ -2,7 +2,8 @@
 scheduler: a cluster at --scheduler, or a TLS-secured cluster of its own on 127.0.0.1, cluster.py).
 Both run a `unit.Unit` with two calls: `run(unit, batches, timeout_s)`, which runs the batches of
 items (taken from the iterator only as workers free up) and yields (item, result) as each finishes,
-an item that kills its process or hangs becoming the unit's failed result (guard.py); and
+an item that kills its process or hangs past timeout_s becoming the unit's failed result (guard.py;
+timeout_s may be a callable, asked as the work goes: a limit that follows the results); and
 `map_unordered(unit, count, timeout_s)`, the same for items 0..count-1 one at a time (the goldens
 of `twin check`, a search round's points).
 """
@@ -14,7 +15,7 @@ import os
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
-from twin.jobs.guard import GuardedPool, run_batch_guarded
+from twin.jobs.guard import GuardedPool, Limit, limit_now, run_batch_guarded
 from twin.jobs.unit import Unit
 from twin.model.errors import ConfigError, TwinError
 
@@ -36,13 +37,13 @@ class LocalExecutor:
         self._guarded: GuardedPool | None = None
 
     def run(
-        self, unit: Unit, batches: Iterable[list[int]], timeout_s: float | None = None
+        self, unit: Unit, batches: Iterable[list[int]], timeout_s: Limit = None
     ) -> Iterator[tuple[int, Any]]:
         self._guarded = GuardedPool(unit, self.jobs, timeout_s)
         yield from self._guarded.run(batches)
 
     def map_unordered(
-        self, unit: Unit, count: int, timeout_s: float | None = None
+        self, unit: Unit, count: int, timeout_s: Limit = None
     ) -> Iterator[tuple[int, Any]]:
         return self.run(unit, ([i] for i in range(count)), timeout_s)
 
@@ -91,7 +92,7 @@ class DaskExecutor:
         return len(self._client.scheduler_info().get("workers", {}))
 
     def run(
-        self, unit: Unit, batches: Iterable[list[int]], timeout_s: float | None = None
+        self, unit: Unit, batches: Iterable[list[int]], timeout_s: Limit = None
     ) -> Iterator[tuple[int, Any]]:
         """(item, result) pairs, batch by batch, from at most DASK_WINDOW_PER_JOB batches per worker
         in flight. Each task runs its batch in a guarded child of the Dask worker; a batch whose
@@ -107,7 +108,13 @@ class DaskExecutor:
             key = f"twin-{token}-{next(counter)}"
             pending[key] = batch
             return self._client.submit(
-                run_batch_guarded, unit, batch, timeout_s, key=key, pure=False, retries=DASK_RETRIES
+                run_batch_guarded,
+                unit,
+                batch,
+                limit_now(timeout_s),  # the limit as the batch leaves
+                key=key,
+                pure=False,
+                retries=DASK_RETRIES,
             )
 
         window = max(1, self.jobs * DASK_WINDOW_PER_JOB)
@@ -136,7 +143,7 @@ class DaskExecutor:
             self._cancel(done)
 
     def map_unordered(
-        self, unit: Unit, count: int, timeout_s: float | None = None
+        self, unit: Unit, count: int, timeout_s: Limit = None
     ) -> Iterator[tuple[int, Any]]:
         return self.run(unit, ([i] for i in range(count)), timeout_s)
 

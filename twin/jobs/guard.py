@@ -20,13 +20,16 @@ import socket
 import sys
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from twin.helpers import TWINS_SIGNALS
 from twin.jobs.unit import Unit
 from twin.model.errors import TwinError
+
+# wall seconds an item may take: a number, None (no limit), or a callable that says it now
+Limit = float | Callable[[], float | None] | None
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
 # cgroup v2: oom_kill counts the processes the OOM killer ended
@@ -75,6 +78,7 @@ class Child:
         # running one item again, alone: why its first run ended
         self.confirm: str | None = None
         self.timed_out = False
+        self.limit_s = 0.0  # the limit it ran past, once timed_out
         self.oom_before = oom_kills()
 
     def send(self, items: list[int], *, confirm: str | None = None) -> None:
@@ -155,17 +159,27 @@ def oom_kills() -> int:
     return 0
 
 
+def limit_now(limit: Limit) -> float | None:
+    """The wall seconds an item may take now: the limit itself, or what the callable says."""
+    return limit() if callable(limit) else limit
+
+
 class GuardedPool:
     """`jobs` children running the batches of one unit; `run` yields (item, result) as each item
-    finishes. timeout_s: wall seconds an item may take (None: no limit)."""
+    finishes. timeout_s: wall seconds an item may take (None: no limit), or a callable asked each
+    time (a limit that follows the results so far)."""
 
-    def __init__(self, unit: Unit, jobs: int, timeout_s: float | None = None) -> None:
-        self.unit, self.jobs, self.timeout_s = unit, jobs, timeout_s
+    def __init__(self, unit: Unit, jobs: int, timeout_s: Limit = None) -> None:
+        self.unit, self.jobs, self.limit = unit, jobs, timeout_s
         self.busy: list[Child] = []
         self.idle: list[Child] = []
         self.again: deque[list[int]] = deque()  # the rest of a batch whose child died
         # items to run once more, alone: (i, first reason)
         self.to_confirm: deque[tuple[int, str]] = deque()
+
+    @property
+    def timeout_s(self) -> float | None:
+        return limit_now(self.limit)
 
     def run(self, batches: Iterable[list[int]]) -> Iterator[tuple[int, Any]]:
         source = iter(batches)
@@ -207,17 +221,16 @@ class GuardedPool:
     def _ready(self) -> list[Child]:
         """The busy children with a message (or dead), after waiting until one has; a child past the
         time limit is marked and returned too."""
-        timeout = None
-        if self.timeout_s is not None:
-            timeout = max(
-                0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic()
-            )
+        timeout, limit_s = None, self.timeout_s
+        if limit_s is not None:
+            timeout = max(0.0, min(c.started_s for c in self.busy) + limit_s - time.monotonic())
         ready = wait([c.conn for c in self.busy], timeout)
         out = [c for c in self.busy if c.conn in ready]
-        if self.timeout_s is not None:
+        if limit_s is not None:
             now = time.monotonic()
             for c in self.busy:
-                if c not in out and now - c.started_s >= self.timeout_s:
+                if c not in out and now - c.started_s >= limit_s:
+                    c.limit_s = limit_s
                     c.timed_out = True
                     out.append(c)
         return out
@@ -228,7 +241,7 @@ class GuardedPool:
         item = child.pending[0]
         if child.timed_out:
             child.kill()
-            reason = f"timed out: no result after {self.timeout_s:g} s of wall time"
+            reason = f"timed out: no result after {child.limit_s:g} s of wall time"
         else:
             try:
                 kind, value = child.conn.recv()
@@ -266,7 +279,7 @@ class GuardedPool:
 
 
 def run_batch_guarded(
-    unit: Unit, items: list[int], timeout_s: float | None = None
+    unit: Unit, items: list[int], timeout_s: Limit = None
 ) -> list[tuple[int, Any]]:
     """A batch's (item, result) pairs, run in a child of this process (what a Dask task runs): an
     item that kills its process or hangs is a failed one, the Dask worker lives on."""

@@ -1,8 +1,9 @@
 """Golden-recording checks: re-run each golden from the current code and diff it against the file.
 
 A golden with a task (run.source == "task") is re-run by resolving its task on the configuration
-in its metadata; one without (teleop, remote) has its commands replayed. Goldens are checked in
-parallel processes; `update` rewrites the ones that differ.
+in its metadata; one without (teleop, remote) has its commands replayed. With more than one job
+the goldens are a `Checks` unit that `twin.jobs` spreads over guarded processes (or Dask); `update`
+rewrites the ones that differ.
 """
 
 from __future__ import annotations

@@ -144,3 +144,38 @@ def test_a_search_started_with_sigint_ignored_ends_on_a_stop_signal(tmp_path, si
 def test_a_check_started_with_sigint_ignored_ends_on_a_stop_signal(signum):
     printed = _stops(_start(["check", *GOLDENS, "-j", "2"], sigint=signal.SIG_IGN), signum)
     assert "interrupted: " in printed  # what finished, as a table, before the exit
+
+
+CRASHING_TASK = '''import os
+
+
+def run(twin):
+    """Moves once; kills its own process when a file named crash sits beside it."""
+    twin.wait(0.2)
+    if os.path.exists(os.path.join(os.path.dirname(__file__), "crash")):
+        os._exit(9)
+    twin.wait(0.2)
+'''
+
+
+def test_check_j2_names_a_golden_whose_worker_died_and_checks_the_rest(tmp_path, capsys):
+    """A golden whose re-run kills its process is run once more alone, then one "error" line naming
+    how the worker died; the other goldens are checked as usual, and the exit code is 1."""
+    from support.cli import twin
+
+    (tmp_path / "task.py").write_text(CRASHING_TASK)
+    for name in ("a", "b"):
+        golden = tmp_path / f"{name}.mcap"
+        code, _, err = twin(capsys, "run", tmp_path / "task.py", "--record", golden)
+        assert code == 0, err
+    (tmp_path / "crash").write_text("")
+    (tmp_path / "other.py").write_text(CRASHING_TASK.replace('"crash"', '"never"'))
+    code, _, err = twin(capsys, "run", tmp_path / "other.py", "--record", tmp_path / "c.mcap")
+    assert code == 0, err
+    goldens = [tmp_path / f"{n}.mcap" for n in ("a", "b", "c")]
+    code, out, _ = twin(capsys, "check", *goldens, "-j", "2")
+    assert code == 1, out
+    lines = {Path(line.split()[0]).name: line for line in out.splitlines() if ".mcap " in line}
+    assert "worker died: exit code 9" in lines["a.mcap"] and " error " in lines["a.mcap"]
+    assert "worker died: exit code 9" in lines["b.mcap"]
+    assert " match " in lines["c.mcap"]

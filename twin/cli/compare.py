@@ -6,6 +6,7 @@ Exit codes: 0 match, 1 mismatch, 2 unreadable or bad input, 3 runs not comparabl
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 from pathlib import Path
 
@@ -185,14 +186,13 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, progress) -> list:
-    """Every golden checked: the recordings in --jobs processes (or on Dask), then each sweep
-    spread over the executor's workers, then each search golden; outcomes in that order."""
+    """Every golden checked (verify.check.check_goldens), on the executor --executor and --jobs
+    ask for when the work fans out."""
     from twin.jobs.executors import make_executor
     from twin.search.golden import check_search
     from twin.sweep.golden import check_sweep
-    from twin.verify.check import check_all
+    from twin.verify.check import check_goldens
 
-    keep = keep or {}
     fans_out = args.executor == "dask" or args.jobs > 1 or goldens.sweeps
     executor = (
         make_executor(args.executor, args.jobs, args.scheduler, preload=PRELOAD)
@@ -200,34 +200,20 @@ def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, pro
         else None
     )
     try:
-        outcomes = (
-            check_all(
-                goldens.recordings,
-                tol,
-                update=args.update,
-                jobs=args.jobs,
-                progress=progress,
-                allow_error=args.allow_error,
-                executor=executor if args.executor == "dask" or args.jobs > 1 else None,
-                keep=keep,
-            )
-            if goldens.recordings
-            else []
+        return check_goldens(
+            goldens,
+            tol,
+            executor=executor if args.executor == "dask" or args.jobs > 1 else None,
+            update=args.update,
+            allow_error=args.allow_error,
+            keep=keep,
+            progress=progress,
+            check_sweep=functools.partial(check_sweep, executor=executor),
+            check_search=check_search,
         )
-        # statistical goldens: each sweep spread over the executor's workers
-        for definition in goldens.sweeps:
-            outcomes.append(
-                check_sweep(definition, executor, update=args.update, keep=keep.get(definition))
-            )
-            progress(outcomes[-1])
-        # a failure found by `twin search`: does it still fail that way?
-        for definition in goldens.searches:
-            outcomes.append(check_search(definition, update=args.update, keep=keep.get(definition)))
-            progress(outcomes[-1])
     finally:
         if executor is not None:
             executor.close()
-    return outcomes
 
 
 def add_compare_commands(sub: argparse._SubParsersAction) -> None:

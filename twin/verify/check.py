@@ -440,6 +440,47 @@ def check_all(
     return [results[p] for p in paths]
 
 
+def check_goldens(
+    goldens: Goldens,
+    tolerances: Tolerances,
+    *,
+    executor=None,
+    jobs: int = 1,
+    update: bool = False,
+    allow_error: bool = False,
+    keep: dict[str, str] | None = None,
+    progress: Callable[[Outcome], None] | None = None,
+    check_sweep: Callable[..., Outcome] | None = None,
+    check_search: Callable[..., Outcome] | None = None,
+) -> list[Outcome]:
+    """Every golden of a `twin check`: the recordings (check_all: on the executor, or `jobs` local
+    processes), then each statistical golden with check_sweep(definition, update=, keep=), then
+    each search golden with check_search(definition, update=, keep=); outcomes in that order. The
+    two checkers come from the layers above (sweep, search), which this one does not import."""
+    keep = keep or {}
+    outcomes = (
+        check_all(
+            goldens.recordings,
+            tolerances,
+            update=update,
+            jobs=jobs,
+            progress=progress,
+            allow_error=allow_error,
+            executor=executor,
+            keep=keep,
+        )
+        if goldens.recordings
+        else []
+    )
+    later = [(d, check_sweep) for d in goldens.sweeps]
+    later += [(d, check_search) for d in goldens.searches]
+    for definition, checker in later:
+        outcomes.append(checker(definition, update=update, keep=keep.get(definition)))
+        if progress:
+            progress(outcomes[-1])
+    return outcomes
+
+
 def summary_table(outcomes: list[Outcome]) -> str:
     rows = [("golden", "status", "frames", "time", "detail")] + [
         (o.path, o.status, str(o.frames), f"{o.seconds:.2f} s", o.summary) for o in outcomes

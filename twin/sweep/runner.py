@@ -1,7 +1,8 @@
 """Running a sweep: the scenarios cut into batches (made one at a time, as workers free up), sent
-through an executor, each finished scenario's row kept and told to `on_row` (the journal, the
-progress) as it comes back. Ctrl-C (or SIGTERM/SIGHUP) stops the executor and keeps the rows that
-finished, so the caller can still write them."""
+through a `twin.jobs` executor (the sweep's `worker.Job` is the unit of work), each finished
+scenario's row kept and told to `on_row` (the journal, the progress) as it comes back. Ctrl-C (or
+SIGTERM/SIGHUP) stops the executor and keeps the rows that finished, so the caller can still write
+them."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
+from twin.jobs.guard import Limit
 from twin.signals import Terminated
 from twin.sweep.spec import SweepSpec
 from twin.sweep.worker import Job
@@ -93,7 +95,7 @@ def run_sweep(
     t0 = time.perf_counter()
     rows = list(rows or [])
     limit = ScenarioLimit(job.spec, rows) if scenario_timeout_s is None else None
-    timeout = limit if limit is not None else (scenario_timeout_s or None)
+    timeout: Limit = limit if limit is not None else (scenario_timeout_s or None)
     count = len(scenarios) if count is None else count
     per_job = getattr(executor, "batches_per_job", BATCHES_PER_JOB)
     size = batch_size_n or batch_size(count, executor.jobs, per_job)

@@ -25,9 +25,9 @@ import sys
 import time
 from pathlib import Path
 
+from twin.jobs.executors import DaskExecutor, LocalExecutor
 from twin.model.errors import TwinError
 from twin.sim.twin import Twin
-from twin.sweep.executors import DaskExecutor, LocalExecutor
 from twin.sweep.keys import apply_values, task_values
 from twin.sweep.runner import run_sweep
 from twin.sweep.sampling import RandomSampler
@@ -61,7 +61,7 @@ def _dask_rate(rates: list[float]) -> float:
     and its two workers took 4 % and 2 % and 2 % of a core (measured over 15 s), which the pool
     running beside it paid and Dask's own run did not."""
     t0 = time.perf_counter()
-    cluster = DaskExecutor(2)
+    cluster = DaskExecutor(2, preload=("twin.sweep.worker",))
     start_s = time.perf_counter() - t0
     try:
         run_sweep(Job(_spec(8), None, "none"), range(8), cluster)

@@ -1,6 +1,11 @@
 """SIGTERM and SIGHUP (CI cancelling a job, `timeout`, `docker stop`, a closed terminal) end a
 command the way Ctrl-C does: the stack unwinds, recordings are finalized as `interrupted`, the
-summary is printed, and the exit code is 128 + the signal's number."""
+summary is printed, and the exit code is 128 + the signal's number.
+
+A command started with SIGINT ignored (a background job of a script: the shell sets it so, and
+Python then leaves Ctrl-C ignored) would never end on Ctrl-C; the commands that run long unattended
+(`twin sweep`, `twin search`, `twin check`, `twin view`, `twin export`) ask for it back
+(`interrupt=True`), as `twin serve` sets its own."""
 
 from __future__ import annotations
 
@@ -38,9 +43,13 @@ def _raise(signum: int, _frame) -> None:
 
 
 @contextmanager
-def stop_signals_raise() -> Iterator[None]:
-    """Within the block, SIGTERM and SIGHUP raise Terminated in the main thread; restored after."""
+def stop_signals_raise(*, interrupt: bool = False) -> Iterator[None]:
+    """Within the block, SIGTERM and SIGHUP raise Terminated in the main thread; restored after.
+    interrupt: SIGINT raises KeyboardInterrupt too, even when this process started with it
+    ignored."""
     previous = {s: signal.signal(s, _raise) for s in STOP_SIGNALS}
+    if interrupt:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         yield
     finally:

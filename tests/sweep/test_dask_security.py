@@ -1,4 +1,4 @@
-"""twin.sweep.cluster on real Dask: a local cluster that only this process's client can use (TLS
+"""twin.jobs.cluster on real Dask: a local cluster that only this process's client can use (TLS
 with a throwaway certificate; a foreign client, plain or with its own certificate, is refused) and
 that serves no HTTP unless asked; connect() failing in bounded time on a port that is not Dask's;
 and a cluster secured with the user's own certificates (`dask scheduler` / `dask worker` with
@@ -26,8 +26,8 @@ from distributed.comm import connect as comm_connect
 from distributed.core import send_recv
 from distributed.security import Security
 
+from twin.jobs.cluster import connect, start_local
 from twin.model.errors import ConfigError
-from twin.sweep.cluster import connect, start_local
 
 # Dask's default HTTP port: its scheduler served /metrics, /health, /info there
 DASHBOARD_PORT = 8787
@@ -338,7 +338,7 @@ def _stop(proc: subprocess.Popen) -> None:
 CLIENT = """
 import sys
 from twin.model.errors import ConfigError
-from twin.sweep.cluster import connect
+from twin.jobs.cluster import connect
 try:
     client = connect(sys.argv[1], timeout_s=10)
 except ConfigError as err:

@@ -15,8 +15,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from twin.cli.main import main
+from twin.jobs.executors import make_executor
 from twin.sweep import power
-from twin.sweep.executors import make_executor
 from twin.sweep.golden import check_sweep
 
 DEFINITION = """\

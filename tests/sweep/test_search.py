@@ -17,8 +17,8 @@ import pytest
 from support.read_only import read_only
 
 from twin.cli.main import main
-from twin.sweep.executors import LocalExecutor
-from twin.sweep.search import probe_spec, run_probe
+from twin.jobs.executors import LocalExecutor
+from twin.search.search import Probes, probe_spec
 from twin.sweep.spec import SweepSpec
 
 FAST = ["--param", "cycles=1", "--param", "pause_s=0.1"]
@@ -77,7 +77,9 @@ def test_the_boundary_agrees_with_a_dense_sweep(reach):
     executor = LocalExecutor(2)
     try:
         done = dict(
-            executor.map_unordered(run_probe, [(probe_spec(spec, ["box.x_m"], [x]),) for x in grid])
+            executor.map_unordered(
+                Probes(tuple(probe_spec(spec, ["box.x_m"], [x]) for x in grid)), len(grid)
+            )
         )
     finally:
         executor.close()

@@ -16,6 +16,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from twin.cli.main import main
+from twin.sweep import runner
 from twin.sweep.sampling import RandomSampler
 from twin.sweep.spec import SweepSpec, prepare
 
@@ -104,7 +105,52 @@ def test_a_hung_scenario_ends_at_the_wall_clock_limit(tmp_path, capsys):
     assert "scenario 4: timed out: no result after 2 s of wall time" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "x"])
+def test_a_hung_scenario_ends_at_the_default_limit(tmp_path, capsys, monkeypatch):
+    """No --scenario-timeout: the floor (made 1 s here, 120 s as shipped) plus one wall second per
+    simulated second of the longest scenario finished before (0.4 s of simulated time each)."""
+    monkeypatch.setattr(runner, "SCENARIO_FLOOR_S", 1.0)
+    args = _task(tmp_path, hang=4)
+    assert main(["sweep", *args, "-j", "1", "--out", str(tmp_path / "out")]) == 0
+    rows = _rows(tmp_path / "out")
+    longest = max(r["sim_s"] for r in rows if r["scenario"] < 4)
+    assert 0.4 <= longest < 0.45
+    assert [(r["scenario"], r["error"]) for r in rows if r["outcome"] != "ok"] == [
+        (4, f"timed out: no result after {1.0 + longest:g} s of wall time")
+    ]
+    capsys.readouterr()
+    # with the sweep's --timeout, that simulated time is the one
+    args += ["--timeout", "2"]
+    assert main(["sweep", *args, "-j", "2", "--out", str(tmp_path / "bounded")]) == 0
+    assert [r["error"] for r in _rows(tmp_path / "bounded") if r["outcome"] != "ok"] == [
+        "timed out: no result after 3 s of wall time"
+    ]
+
+
+SLOW = '''import time
+
+
+def run(twin, k: float = 0.0):
+    twin.wait(0.1)
+    if k > 0.5:
+        time.sleep(2.5)  # slower than the limit, never hung
+'''
+
+
+def test_scenario_timeout_0_turns_the_limit_off(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(runner, "SCENARIO_FLOOR_S", 1.0)
+    (tmp_path / "slow.py").write_text(SLOW)
+    args = [str(tmp_path / "slow.py"), "--scenarios", "4", "--vary", "task.k=uniform(0,1)", "-q"]
+    assert main(["sweep", *args, "-j", "2", "--out", str(tmp_path / "limited")]) == 0
+    limited = _rows(tmp_path / "limited")
+    slow = [r["scenario"] for r in limited if r["task.k"] > 0.5]
+    assert slow and all(r["outcome"] != "ok" for r in limited if r["task.k"] > 0.5)
+    off = ["--scenario-timeout", "0", "--out", str(tmp_path / "off")]
+    assert main(["sweep", *args, "-j", "2", *off]) == 0
+    assert all(r["outcome"] == "ok" for r in _rows(tmp_path / "off"))
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf", "x"])
 def test_a_bad_scenario_timeout_is_refused(tmp_path, capsys, value):
     assert (
         main(
@@ -123,7 +169,7 @@ def test_a_bad_scenario_timeout_is_refused(tmp_path, capsys, value):
     )
     err = capsys.readouterr().err
     assert (
-        f"--scenario-timeout {value!r} is invalid; expected seconds > 0" in err
+        f"--scenario-timeout {value!r} is invalid; expected seconds >= 0 (0: no limit)" in err
         and err.count("\n") == 1
     )
 

@@ -6,6 +6,7 @@ Exit codes: 0 match, 1 mismatch, 2 unreadable or bad input, 3 runs not comparabl
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 from pathlib import Path
 
@@ -13,6 +14,10 @@ from twin.cli.args import add_executor_options, whole_number
 from twin.cli.ros2 import add_bag_options, diff_with_bag
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
+from twin.signals import Terminated
+
+# what a local Dask cluster's workers import as they start: the goldens' and sweeps' code
+PRELOAD = ("twin.verify.check", "twin.sweep.worker")
 
 _TOL_HELP = (
     "override one tolerance, CHANNEL.FIELD=VALUE (repeatable; VALUE a number or inf). Fields: "
@@ -145,7 +150,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from twin.verify.check import exit_code, find_goldens, summary_table
+    from twin.verify.check import Progress, exit_code, find_goldens, summary_table
 
     tol = _tolerances(args)
     if args.junit and not args.junit.endswith(".xml"):
@@ -159,7 +164,13 @@ def cmd_check(args: argparse.Namespace) -> int:
 
         keep = plan_keep(args.keep, goldens, force=args.force)  # before any work
     print(goldens.count_line(), flush=True)
-    outcomes = _check_goldens(args, goldens, tol, keep)
+    progress = Progress(len(goldens))
+    try:
+        outcomes = _check_goldens(args, goldens, tol, keep, progress)
+    except (KeyboardInterrupt, Terminated):  # what finished, then 130 or 128 + the signal
+        print(summary_table(progress.outcomes), end="")
+        print(f"interrupted: {len(progress.outcomes)} of {len(goldens)} goldens checked")
+        raise
     if args.junit:
         from twin.compare.report import render_check_junit
         from twin.record.outputs import write_atomic
@@ -178,50 +189,35 @@ def cmd_check(args: argparse.Namespace) -> int:
     return exit_code(outcomes)
 
 
-def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep) -> list:
-    """Every golden checked: the recordings in --jobs processes (or on Dask), then each sweep
-    spread over the executor's workers, then each search golden; outcomes in that order."""
-    from twin.sweep.executors import make_executor
+def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, progress) -> list:
+    """Every golden checked (verify.check.check_goldens), on the executor --executor and --jobs
+    ask for when the work fans out."""
+    from twin.jobs.executors import make_executor
+    from twin.search.golden import check_search
     from twin.sweep.golden import check_sweep
-    from twin.sweep.search_golden import check_search
-    from twin.verify.check import Progress, check_all
+    from twin.verify.check import check_goldens
 
-    keep = keep or {}
-    progress = Progress(len(goldens))
+    fans_out = args.executor == "dask" or args.jobs > 1 or goldens.sweeps
     executor = (
-        make_executor(args.executor, args.jobs, args.scheduler)
-        if goldens.sweeps or args.executor == "dask"
+        make_executor(args.executor, args.jobs, args.scheduler, preload=PRELOAD)
+        if fans_out
         else None
     )
     try:
-        outcomes = (
-            check_all(
-                goldens.recordings,
-                tol,
-                update=args.update,
-                jobs=args.jobs,
-                progress=progress,
-                allow_error=args.allow_error,
-                run_many=executor.map_unordered if args.executor == "dask" else None,
-                keep=keep,
-            )
-            if goldens.recordings
-            else []
+        return check_goldens(
+            goldens,
+            tol,
+            executor=executor if args.executor == "dask" or args.jobs > 1 else None,
+            update=args.update,
+            allow_error=args.allow_error,
+            keep=keep,
+            progress=progress,
+            check_sweep=functools.partial(check_sweep, executor=executor),
+            check_search=check_search,
         )
-        # statistical goldens: each sweep spread over the executor's workers
-        for definition in goldens.sweeps:
-            outcomes.append(
-                check_sweep(definition, executor, update=args.update, keep=keep.get(definition))
-            )
-            progress(outcomes[-1])
-        # a failure found by `twin search`: does it still fail that way?
-        for definition in goldens.searches:
-            outcomes.append(check_search(definition, update=args.update, keep=keep.get(definition)))
-            progress(outcomes[-1])
     finally:
         if executor is not None:
             executor.close()
-    return outcomes
 
 
 def add_compare_commands(sub: argparse._SubParsersAction) -> None:
@@ -311,4 +307,4 @@ def _add_check_command(sub: argparse._SubParsersAction) -> None:
         help="also write a JUnit report, one case per golden",
     )
     _add_tolerance_options(p, DEFAULT)
-    p.set_defaults(func=cmd_check)
+    p.set_defaults(func=cmd_check, interrupt=True)  # Ctrl-C even as a background job

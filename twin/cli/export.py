@@ -87,7 +87,7 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
         help="ros2: replace an existing bag (a folder holding metadata.yaml) once the new one is "
         "complete",
     )
-    p.set_defaults(func=cmd_export)
+    p.set_defaults(func=cmd_export, interrupt=True)  # Ctrl-C even as a background job
 
 
 def cmd_export(args: argparse.Namespace) -> int:

@@ -261,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         return done.code if isinstance(done.code, int) else 2
     try:
         # SIGTERM and SIGHUP unwind like Ctrl-C: recordings are finalized
-        with stop_signals_raise():
+        with stop_signals_raise(interrupt=getattr(args, "interrupt", False)):
             return args.func(args)
     except TwinError as err:
         print(f"twin: error: {err}", file=sys.stderr)

@@ -1,19 +1,12 @@
-"""The `twin search` command: argument parsing, progress and printing only (the work is
-twin.sweep.search; a saved failure is twin.sweep.search_golden)."""
+"""The `twin search` command: argument parsing, progress and printing only (the run and its files
+are twin.search.folder, the rounds twin.search.search, a saved failure twin.search.golden)."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
-from pathlib import Path
 
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
-from twin.model.errors import ConfigError
-from twin.signals import Terminated
-
-RESULT, MINIMAL = "search.json", "minimal.mcap"
 
 
 def fraction(text: str) -> float:
@@ -96,13 +89,14 @@ def add_search_command(sub) -> None:
         "NAME.mcap (its recording) and NAME.expect.json; `twin check` then runs it",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
-    p.set_defaults(func=cmd_search)
+    p.set_defaults(func=cmd_search, interrupt=True)  # Ctrl-C even as a background job
 
 
 def cmd_search(args: argparse.Namespace) -> int:
-    from twin.sweep.executors import make_executor
-    from twin.sweep.search import Search, prepare_search
-    from twin.sweep.search_golden import check_name
+    from twin.jobs.executors import make_executor
+    from twin.search import folder
+    from twin.search.golden import check_name
+    from twin.search.search import prepare_search
     from twin.sweep.spec import SweepSpec, parse_vary
 
     spec = SweepSpec(
@@ -115,23 +109,31 @@ def cmd_search(args: argparse.Namespace) -> int:
         rate_hz=args.rate_hz,
         timeout_s=args.timeout,
     )
-    _, ranges = prepare_search(
-        spec, args.precision
-    )  # every key, range and parameter, before anything runs
+    # every key, range and parameter, before anything runs
+    _, ranges = prepare_search(spec, args.precision)
     if args.save_golden is not None:
         check_name(args.save_golden)
-    out = _out_dir(args.out)
-    executor = make_executor(args.executor, args.jobs, args.scheduler)
-    search = Search(spec, ranges, executor, args.budget, progress=None if args.quiet else _progress)
-    t0 = time.perf_counter()
+    out = folder.prepare_folder(args.out)
+    executor = make_executor(
+        args.executor, args.jobs, args.scheduler, preload=("twin.search.search",)
+    )
     try:
-        result = search.run()
-    except (KeyboardInterrupt, Terminated):
-        _finish(search.result, out, args, time.perf_counter() - t0, executor, record=False)
-        raise
+        done = folder.run(
+            spec,
+            ranges,
+            executor,
+            args.budget,
+            out=out,
+            save_as=args.save_golden,
+            progress=None if args.quiet else _progress,
+        )
     finally:
         executor.close()
-    _finish(result, out, args, time.perf_counter() - t0, executor, record=True)
+    for line in summary_lines(done.data, executor, done.wall_s):
+        print(line)
+    print("wrote " + ", ".join(str(p) for p in done.wrote))
+    if done.stopped_by is not None:
+        raise done.stopped_by  # 130 (Ctrl-C) or 128 + the signal, after search.json is written
     return 0
 
 
@@ -141,36 +143,6 @@ def _progress(phase: str, result) -> None:
         file=sys.stderr,
         flush=True,
     )
-
-
-def _finish(
-    result, out: Path, args: argparse.Namespace, wall_s: float, executor, *, record: bool
-) -> None:
-    """Write search.json (and, unless interrupted, the smallest failure's recording and golden);
-    print the summary."""
-    from twin.record.outputs import write_atomic
-    from twin.sweep.search import probe_spec, result_json
-    from twin.sweep.search_golden import record_scenario, save_golden
-
-    data = result_json(result)
-    write_atomic(out / RESULT, json.dumps(data, indent=2, allow_nan=False) + "\n")
-    minimal = result.minimal
-    wrote = [out / RESULT]
-    if record and minimal is not None:
-        spec = probe_spec(result.spec, [r.name for r in result.ranges], minimal.values)
-        record_scenario(spec, out / MINIMAL)
-        wrote.append(out / MINIMAL)
-        if args.save_golden:
-            wrote += save_golden(
-                args.save_golden,
-                spec,
-                minimal.outcome,
-                minimal.error,
-                {k: data[k] for k in ("keys", "size", "minimal", "boundary", "runs")},
-            )
-    for line in summary_lines(data, executor, wall_s):
-        print(line)
-    print("wrote " + ", ".join(str(p) for p in wrote))
 
 
 def summary_lines(data: dict, executor, wall_s: float) -> list[str]:
@@ -220,19 +192,3 @@ def summary_lines(data: dict, executor, wall_s: float) -> list[str]:
 def _offset(value: float, key: dict) -> str:
     offset = value - key["nominal"]
     return f"nominal {offset:+.4g}, {abs(offset) / key['half_width']:.3f} of the half-width"
-
-
-def _out_dir(path: str) -> Path:
-    from twin.record.outputs import make_default_folder
-
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {path!r} is a file; expected a folder")
-    if not make_default_folder(out.parent):
-        raise ConfigError(f"--out {path!r}: folder {str(out.parent)!r} does not exist")
-    try:
-        out.mkdir(exist_ok=True)
-        (out / MINIMAL).unlink(missing_ok=True)  # an earlier search's failure is not this one's
-    except OSError as err:
-        raise ConfigError(f"--out {path!r}: {err.strerror or err}") from err
-    return out

@@ -13,7 +13,7 @@ from pathlib import Path
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
 from twin.model.errors import ConfigError, TwinError
 
-# a scenario that gave no result (twin.sweep.guard)
+# a scenario that gave no result (twin.jobs.guard)
 NO_RESULT = ("worker died", "killed: ", "timed out: ")
 
 
@@ -37,14 +37,14 @@ def rate(text: str) -> float:
 
 
 def seconds(text: str) -> float:
-    """An argparse type: a wall-clock duration in seconds, finite and > 0."""
+    """An argparse type: a wall-clock duration in seconds, finite and >= 0 (0: no limit)."""
     try:
         value = float(text)
     except ValueError:
         value = -1.0
-    if not (math.isfinite(value) and value > 0):
+    if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(
-            f"--scenario-timeout {text!r} is invalid; expected seconds > 0"
+            f"--scenario-timeout {text!r} is invalid; expected seconds >= 0 (0: no limit)"
         )
     return value
 
@@ -90,7 +90,7 @@ def add_sweep_command(sub) -> None:
         "Dask; at most 16)",
     )
     _add_output_options(p)
-    p.set_defaults(func=cmd_sweep)
+    p.set_defaults(func=cmd_sweep, interrupt=True)  # Ctrl-C even as a background job
     p.epilog = (
         "twin sweep compare A B: two sweeps' results compared (paired when they ran "
         "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
@@ -141,8 +141,8 @@ def _add_what_options(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="S",
         help="a scenario that gives no result within S seconds of wall time (hung without "
-        "stepping) "
-        "is ended and fails with that reason",
+        "stepping) is ended and fails with that reason (default: 120 s plus 1 s per simulated "
+        "second of the task: its --timeout, else the longest scenario so far; 0: no limit)",
     )
 
 
@@ -234,7 +234,7 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
         metavar="FILE.png",
         help="also write a picture with the flips ringed (needs matplotlib)",
     )
-    compare.set_defaults(func=cmd_compare)
+    compare.set_defaults(func=cmd_compare, interrupt=True)  # Ctrl-C even as a background job
     plot = kind(
         prog=f"{p.prog} plot",
         description="Draw a sweep: each scenario over the two "
@@ -251,7 +251,7 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
         metavar="FILE.png",
         help="the picture (default DIR/sweep.png; NAME.png for a golden)",
     )
-    plot.set_defaults(func=cmd_plot)
+    plot.set_defaults(func=cmd_plot, interrupt=True)  # Ctrl-C even as a background job
     extra = {"compare": compare, "plot": plot}
     parse_run = p.parse_known_args
 
@@ -358,8 +358,8 @@ def sweep_spec(args: argparse.Namespace):
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from twin.jobs.executors import make_executor
     from twin.sweep import folder
-    from twin.sweep.executors import make_executor
     from twin.sweep.journal import JOURNAL
     from twin.sweep.spec import prepare
 
@@ -377,7 +377,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     jobs = max(1, min(args.jobs, the_plan.count)) if args.executor == "local" else args.jobs
-    executor = make_executor(args.executor, jobs, args.scheduler, dashboard=args.dashboard)
+    executor = make_executor(
+        args.executor,
+        jobs,
+        args.scheduler,
+        dashboard=args.dashboard,
+        preload=("twin.sweep.worker",),
+    )
     if getattr(executor, "dashboard_url", None):
         print(f"Dask dashboard: {executor.dashboard_url}", file=sys.stderr)
     progress = Progress(the_plan.count, quiet=args.quiet)

@@ -49,7 +49,7 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help="with --screenshot: the simulated time to show (default: the end of the first hold)",
     )
-    p.set_defaults(func=cmd_view)
+    p.set_defaults(func=cmd_view, interrupt=True)  # Ctrl-C even as a background job
 
 
 def cmd_view(args: argparse.Namespace) -> int:

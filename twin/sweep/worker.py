@@ -34,11 +34,25 @@ FAILURES, SCENARIOS = "failures", "scenarios"
 @dataclass(frozen=True)
 class Job:
     """What every batch of one sweep shares: the definition, the output folder (None: write no
-    files) and what to record."""
+    files) and what to record. A `twin.jobs` unit: its items are scenarios, its results rows."""
 
     spec: SweepSpec
     out_dir: str | None
     save: str = "failures"
+
+    def warm(self) -> None:
+        warm(self)
+
+    def run(self, scenario: int) -> dict:
+        keep_freed_memory()  # in the process that runs scenarios, once
+        return run_scenario(self, scenario)
+
+    def confirm(self, scenario: int) -> dict:
+        keep_freed_memory()
+        return confirm_scenario(self, scenario)
+
+    def failed(self, scenario: int, reason: str, wall_s: float) -> dict:
+        return failed_row(self, scenario, reason, wall_s)
 
 
 # per worker process: a definition is prepared once

@@ -1,19 +1,18 @@
 """Golden-recording checks: re-run each golden from the current code and diff it against the file.
 
 A golden with a task (run.source == "task") is re-run by resolving its task on the configuration
-in its metadata; one without (teleop, remote) has its commands replayed. Goldens are checked in
-parallel processes; `update` rewrites the ones that differ.
+in its metadata; one without (teleop, remote) has its commands replayed. With more than one job
+the goldens are a `Checks` unit that `twin.jobs` spreads over guarded processes (or Dask); `update`
+rewrites the ones that differ.
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
@@ -32,6 +31,8 @@ from twin.verify.noise import judge
 from twin.verify.replay import collected, replay, replayed_event_kinds
 
 DEFAULT_DIR = "recordings"
+# a golden whose check killed its process (twice): a failed check, not bad input
+WORKER_DIED_EXIT = 1
 
 
 def record_task(
@@ -352,9 +353,11 @@ class Progress:
     def __init__(self, total: int, stream: TextIO | None = None) -> None:
         self.total, self.done, self.stream = total, 0, stream or sys.stderr
         self.tty = self.stream.isatty()
+        self.outcomes: list[Outcome] = []  # as they finished: what an interrupted check prints
 
     def __call__(self, outcome: Outcome) -> None:
         self.done += 1
+        self.outcomes.append(outcome)
         name = Path(outcome.path).name
         if self.tty:
             width = 30
@@ -371,6 +374,31 @@ class Progress:
         self.stream.flush()
 
 
+@dataclass(frozen=True)
+class Checks:
+    """The goldens of one check as a `twin.jobs` unit: item i checks paths[i] (check_one) and gives
+    its Outcome; a golden whose check killed its process twice is an "error" outcome saying how."""
+
+    paths: tuple[str, ...]
+    tolerances: Tolerances
+    update: bool = False
+    allow_error: bool = False
+    keep: tuple[str | None, ...] = ()
+
+    def warm(self) -> None:
+        from twin.record.mcap.reader import load  # noqa: F401 - imported once, before the fork
+
+    def run(self, item: int) -> Outcome:
+        keep = self.keep[item] if self.keep else None
+        return check_one(self.paths[item], self.tolerances, self.update, self.allow_error, keep)
+
+    def confirm(self, item: int) -> Outcome:
+        return self.run(item)
+
+    def failed(self, item: int, reason: str, wall_s: float) -> Outcome:
+        return Outcome(self.paths[item], "error", WORKER_DIED_EXIT, reason, "", 0, wall_s)
+
+
 def check_all(
     paths: Sequence[str],
     tolerances: Tolerances,
@@ -379,39 +407,78 @@ def check_all(
     jobs: int = 1,
     progress: Callable[[Outcome], None] | None = None,
     allow_error: bool = False,
-    run_many: Callable | None = None,
+    executor=None,
     keep: dict[str, str] | None = None,
 ) -> list[Outcome]:
-    """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which
-    yields (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order
-    of paths. keep: DIR/NAME by golden (verify.keep.plan_keep), written by the process that checks
-    it."""
+    """Check every golden: here, one after the other, with jobs == 1 and no executor; else spread
+    over `executor` (a `twin.jobs` executor, the caller's to close) or `jobs` guarded local
+    processes. Outcomes in the order of paths. keep: DIR/NAME by golden (verify.keep.plan_keep),
+    written by the process that checks it."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
-    if run_many is None:
-        run_many = _in_turn if jobs == 1 or len(paths) <= 1 else functools.partial(_in_pool, jobs)
-    results: dict[str, Outcome] = {}
     keep = keep or {}
-    items = [(p, tolerances, update, allow_error, keep.get(p)) for p in paths]
-    for i, outcome in run_many(check_one, items):
-        results[paths[i]] = outcome
-        if progress:
-            progress(outcome)
+    unit = Checks(tuple(paths), tolerances, update, allow_error, tuple(keep.get(p) for p in paths))
+    results: dict[str, Outcome] = {}
+    own = None
+    if executor is None and jobs > 1 and len(paths) > 1:
+        from twin.jobs.executors import LocalExecutor
+
+        executor = own = LocalExecutor(min(jobs, len(paths)))
+    try:
+        done = (
+            ((i, unit.run(i)) for i in range(len(paths)))
+            if executor is None
+            else executor.map_unordered(unit, len(paths))
+        )
+        for i, outcome in done:
+            results[paths[i]] = outcome
+            if progress:
+                progress(outcome)
+    finally:
+        if own is not None:
+            own.close()
     return [results[p] for p in paths]
 
 
-def _in_turn(fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Outcome]]:
-    """fn(*item) for each item here, in order: (index, result)."""
-    for i, item in enumerate(items):
-        yield i, fn(*item)
-
-
-def _in_pool(jobs: int, fn: Callable, items: Sequence[tuple]) -> Iterator[tuple[int, Outcome]]:
-    """fn(*item) for each item in a pool of `jobs` processes: (index, result) as each finishes."""
-    with ProcessPoolExecutor(max_workers=min(jobs, len(items))) as pool:
-        futures = {pool.submit(fn, *item): i for i, item in enumerate(items)}
-        for fut in as_completed(futures):
-            yield futures[fut], fut.result()
+def check_goldens(
+    goldens: Goldens,
+    tolerances: Tolerances,
+    *,
+    executor=None,
+    jobs: int = 1,
+    update: bool = False,
+    allow_error: bool = False,
+    keep: dict[str, str] | None = None,
+    progress: Callable[[Outcome], None] | None = None,
+    check_sweep: Callable[..., Outcome] | None = None,
+    check_search: Callable[..., Outcome] | None = None,
+) -> list[Outcome]:
+    """Every golden of a `twin check`: the recordings (check_all: on the executor, or `jobs` local
+    processes), then each statistical golden with check_sweep(definition, update=, keep=), then
+    each search golden with check_search(definition, update=, keep=); outcomes in that order. The
+    two checkers come from the layers above (sweep, search), which this one does not import."""
+    keep = keep or {}
+    outcomes = (
+        check_all(
+            goldens.recordings,
+            tolerances,
+            update=update,
+            jobs=jobs,
+            progress=progress,
+            allow_error=allow_error,
+            executor=executor,
+            keep=keep,
+        )
+        if goldens.recordings
+        else []
+    )
+    later = [(d, check_sweep) for d in goldens.sweeps]
+    later += [(d, check_search) for d in goldens.searches]
+    for definition, checker in later:
+        outcomes.append(checker(definition, update=update, keep=keep.get(definition)))
+        if progress:
+            progress(outcomes[-1])
+    return outcomes
 
 
 def summary_table(outcomes: list[Outcome]) -> str:

@@ -18,8 +18,8 @@ from twin.model.errors import ConfigError, TwinError
 from twin.model.golden_files import expect_path
 from twin.model.json_values import load_json_text
 from twin.record.outputs import write_atomic
+from twin.search.search import run_probe
 from twin.sweep.sampling import RandomSampler
-from twin.sweep.search import run_probe
 from twin.sweep.spec import SweepSpec, dump_spec, load_spec, prepare
 from twin.sweep.stats import reason
 from twin.sweep.worker import _run  # the run a sweep records for a scenario, byte for byte

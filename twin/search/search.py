@@ -1,5 +1,5 @@
-"""Search for the smallest perturbation that breaks a task (`twin search`), on the sweep's
-executors.
+"""Search for the smallest perturbation that breaks a task (`twin search`), its rounds fanned out
+through `twin.jobs` (a round's points are a `Probes` unit).
 
 Each searched key has a range LOW..HIGH around its nominal value (the scene's, the pad's, the
 robot's or the task's default). A scenario's size is measured in each key's own scale: the sum over
@@ -24,17 +24,18 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from twin.jobs.guard import run_batch_guarded
+from twin.search.keys import DEFAULT_PRECISION, Range, prepare_search
 from twin.signals import Terminated
 from twin.sweep.dists import Dist
-from twin.sweep.guard import run_batch_guarded
 from twin.sweep.sampling import RandomSampler
-from twin.sweep.search_keys import DEFAULT_PRECISION, Range, prepare_search
 from twin.sweep.spec import SweepSpec
 from twin.sweep.stats import reason
 from twin.sweep.worker import Job
 
 __all__ = [
     "DEFAULT_PRECISION",
+    "Probes",
     "Range",
     "Search",
     "SearchResult",
@@ -150,10 +151,31 @@ def probe_spec(spec: SweepSpec, names: Sequence[str], values: Sequence[float]) -
     return dataclasses.replace(spec, scenarios=1, vary=vary)
 
 
+@dataclass(frozen=True)
+class Probes:
+    """A round's points as a `twin.jobs` unit: item i runs the one scenario of specs[i] (a
+    constant-valued definition), recording nothing; its result is (outcome, error line)."""
+
+    specs: tuple[SweepSpec, ...]
+
+    def warm(self) -> None:
+        if self.specs:  # the task resolved and twin imported before the children fork
+            Job(self.specs[0], None, "none").warm()
+
+    def run(self, item: int) -> tuple[str, str]:
+        row = Job(self.specs[item], None, "none").run(0)
+        return row["outcome"], row["error"]
+
+    def confirm(self, item: int) -> tuple[str, str]:
+        return self.run(item)
+
+    def failed(self, item: int, reason: str, wall_s: float) -> tuple[str, str]:
+        return "error", reason
+
+
 def run_probe(spec: SweepSpec, timeout_s: float | None = None) -> tuple[str, str]:
     """One scenario (a constant-valued definition), in a guarded child: (outcome, error line)."""
-    row = run_batch_guarded(Job(spec, None, "none"), [0], timeout_s)[0]
-    return row["outcome"], row["error"]
+    return run_batch_guarded(Probes((spec,)), [0], timeout_s)[0][1]
 
 
 class Search:
@@ -202,8 +224,8 @@ class Search:
         if self.result.runs + len(new) > self.result.budget:
             raise BudgetSpent
         names = [r.name for r in self.ranges]
-        specs = [(probe_spec(self.result.spec, names, p), self.timeout_s) for p in new]
-        for i, (outcome, error) in self.executor.map_unordered(run_probe, specs):
+        probes = Probes(tuple(probe_spec(self.result.spec, names, p) for p in new))
+        for i, (outcome, error) in self.executor.map_unordered(probes, len(new), self.timeout_s):
             probe = Probe(new[i], outcome, error)
             self.cache[new[i]] = probe
         for p in new:  # in the round's order, not the order they finished

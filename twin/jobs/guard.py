@@ -1,14 +1,14 @@
-"""Scenarios run in child processes that may die without taking the sweep along.
+"""A unit's items run in child processes that may die without taking the job along.
 
-A `Child` is a forked process that runs the batches of scenarios sent to it, one row back per
-scenario, in order, so the parent always knows which scenario is running. It dies with its parent
-(PR_SET_PDEATHSIG) and leaves Ctrl-C to it. `GuardedPool` keeps `jobs` children busy with batches
-taken from an iterator (only as many as it has children: the window is bounded whatever the sweep's
-size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs past the
-wall-clock limit into a failed scenario: that scenario is run once more, alone in a fresh child and
-recorded per the job's --save; if it dies or hangs again, its row says why, the rest of its batch
-goes on in another child and so does the sweep. The local executor runs a pool of `jobs` children; a
-Dask task runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
+A `Child` is a forked process that runs the batches of items sent to it, one result back per item,
+in order, so the parent always knows which item is running. It dies with its parent
+(PR_SET_PDEATHSIG, also on `kill -9`) and leaves Ctrl-C to it. `GuardedPool` keeps `jobs` children
+busy with batches taken from an iterator (only as many as it has children: the window is bounded
+whatever the job's size), and turns a child that dies (a segfault, os._exit, the OOM killer) or runs
+past the wall-clock limit into a failed item: the item is run once more, alone in a fresh child
+(`unit.confirm`); if it dies or hangs again, `unit.failed` says why, the rest of its batch goes on
+in another child and so does the job. The local executor runs a pool of `jobs` children; a Dask
+task runs its batch in a pool of one (`run_batch_guarded`), so the same holds on a cluster.
 """
 
 from __future__ import annotations
@@ -20,19 +20,16 @@ import socket
 import sys
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from multiprocessing.connection import Connection, wait
+from typing import Any
 
 from twin.helpers import TWINS_SIGNALS
+from twin.jobs.unit import Unit
 from twin.model.errors import TwinError
-from twin.sweep.worker import (
-    Job,
-    confirm_scenario,
-    failed_row,
-    keep_freed_memory,
-    run_scenario,
-    warm,
-)
+
+# wall seconds an item may take: a number, None (no limit), or a callable that says it now
+Limit = float | Callable[[], float | None] | None
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
 # cgroup v2: oom_kill counts the processes the OOM killer ended
@@ -43,10 +40,10 @@ _PARENT_ENDS: set[int] = set()
 
 
 class Child:
-    """One forked worker and the scenarios it was sent and has not answered yet (`pending`, in the
+    """One forked worker and the items it was sent and has not answered yet (`pending`, in the
     order it runs them)."""
 
-    def __init__(self, job: Job) -> None:
+    def __init__(self, unit: Unit) -> None:
         parent_end, child_end = socket.socketpair()
         parent_pid = os.getpid()
         sys.stdout.flush()
@@ -67,7 +64,7 @@ class Child:
                 parent_end.close()
                 for fd in _PARENT_ENDS:
                     os.close(fd)
-                _serve(Connection(child_end.detach()), job, parent_pid, mask)
+                _serve(Connection(child_end.detach()), unit, parent_pid, mask)
             except BaseException:  # noqa: BLE001 - a child must end here, whatever happened
                 code = 70
             finally:
@@ -77,17 +74,18 @@ class Child:
         self.conn = Connection(parent_end.detach())
         _PARENT_ENDS.add(self.conn.fileno())
         self.pending: deque[int] = deque()
-        self.started_s = time.monotonic()  # when the scenario pending[0] started
-        # running one scenario again, alone: why its first run ended
+        self.started_s = time.monotonic()  # when the item pending[0] started
+        # running one item again, alone: why its first run ended
         self.confirm: str | None = None
         self.timed_out = False
+        self.limit_s = 0.0  # the limit it ran past, once timed_out
         self.oom_before = oom_kills()
 
-    def send(self, scenarios: list[int], *, confirm: str | None = None) -> None:
-        self.pending.extend(scenarios)
+    def send(self, items: list[int], *, confirm: str | None = None) -> None:
+        self.pending.extend(items)
         self.confirm = confirm
         self.started_s = time.monotonic()
-        self.conn.send((scenarios, confirm is not None))
+        self.conn.send((items, confirm is not None))
 
     def kill(self) -> str:
         """End the process now (if it still runs) and say how it ended."""
@@ -98,7 +96,7 @@ class Child:
         return self.reap()
 
     def reap(self) -> str:
-        """Wait for the process to end; how it ended, as a failed scenario's reason."""
+        """Wait for the process to end; how it ended, as a failed item's reason."""
         _PARENT_ENDS.discard(self.conn.fileno())
         self.conn.close()
         try:
@@ -118,8 +116,8 @@ class Child:
         return f"worker died: signal {sig} ({name})"
 
 
-def _serve(conn: Connection, job: Job, parent_pid: int, mask: set) -> None:
-    """The child's loop: batches in, one message per scenario out, ("row", row) or ("stop",
+def _serve(conn: Connection, unit: Unit, parent_pid: int, mask: set) -> None:
+    """The child's loop: batches in, one message per item out, ("done", result) or ("stop",
     error). mask: the signal mask to restore once the child's own handlers are set."""
     libc = ctypes.CDLL(None, use_errno=True)
     prctl = getattr(libc, "prctl", None)
@@ -131,21 +129,20 @@ def _serve(conn: Connection, job: Job, parent_pid: int, mask: set) -> None:
     for signum in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-    keep_freed_memory()
     while True:
         try:
-            scenarios, confirm = conn.recv()
+            items, confirm = conn.recv()
         except EOFError:
             return
-        for i in scenarios:
+        for i in items:
             try:
-                row = confirm_scenario(job, i) if confirm else run_scenario(job, i)
-            except TwinError as err:  # a file that cannot be written: the sweep stops (one line)
+                result = unit.confirm(i) if confirm else unit.run(i)
+            except TwinError as err:  # a file that cannot be written: the job stops (one line)
                 conn.send(("stop", err))
                 return
-            except Exception as err:  # noqa: BLE001 - a bug in the task's code fails its scenario only
-                row = failed_row(job, i, f"{type(err).__name__}: {err}", 0.0)
-            conn.send(("row", row))
+            except Exception as err:  # noqa: BLE001 - a bug in the task's code fails its item only
+                result = unit.failed(i, f"{type(err).__name__}: {err}", 0.0)
+            conn.send(("done", result))
         sys.stdout.flush()
 
 
@@ -162,21 +159,31 @@ def oom_kills() -> int:
     return 0
 
 
-class GuardedPool:
-    """`jobs` children running the batches of one sweep; `run` yields each scenario's row as it
-    finishes. scenario_timeout_s: wall seconds a scenario may take (None: no limit)."""
+def limit_now(limit: Limit) -> float | None:
+    """The wall seconds an item may take now: the limit itself, or what the callable says."""
+    return limit() if callable(limit) else limit
 
-    def __init__(self, job: Job, jobs: int, scenario_timeout_s: float | None = None) -> None:
-        self.job, self.jobs, self.timeout_s = job, jobs, scenario_timeout_s
+
+class GuardedPool:
+    """`jobs` children running the batches of one unit; `run` yields (item, result) as each item
+    finishes. timeout_s: wall seconds an item may take (None: no limit), or a callable asked each
+    time (a limit that follows the results so far)."""
+
+    def __init__(self, unit: Unit, jobs: int, timeout_s: Limit = None) -> None:
+        self.unit, self.jobs, self.limit = unit, jobs, timeout_s
         self.busy: list[Child] = []
         self.idle: list[Child] = []
         self.again: deque[list[int]] = deque()  # the rest of a batch whose child died
-        # scenarios to run once more, alone: (i, first reason)
+        # items to run once more, alone: (i, first reason)
         self.to_confirm: deque[tuple[int, str]] = deque()
 
-    def run(self, batches: Iterable[list[int]]) -> Iterator[dict]:
+    @property
+    def timeout_s(self) -> float | None:
+        return limit_now(self.limit)
+
+    def run(self, batches: Iterable[list[int]]) -> Iterator[tuple[int, Any]]:
         source = iter(batches)
-        warm(self.job)  # once here, not in every child
+        self.unit.warm()  # once here, not in every child
         try:
             while True:
                 while len(self.busy) < self.jobs and self._send(source):
@@ -184,29 +191,29 @@ class GuardedPool:
                 if not self.busy:
                     return
                 for child in self._ready():
-                    row = self._answer(child)
+                    done = self._answer(child)
                     if child.conn.closed or not child.pending:
                         self.busy.remove(child)
                         if not child.conn.closed:
                             self.idle.append(child)
-                    if row is not None:
-                        yield row
+                    if done is not None:
+                        yield done
         finally:
             self.close()
 
     def _send(self, source: Iterator[list[int]]) -> bool:
-        """Give the next work to an idle (or new) child: a scenario to confirm, the rest of a batch,
+        """Give the next work to an idle (or new) child: an item to confirm, the rest of a batch,
         or the next batch. False when there is none now."""
         if self.to_confirm:
-            scenario, reason = self.to_confirm.popleft()
-            work, confirm = [scenario], reason
+            item, reason = self.to_confirm.popleft()
+            work, confirm = [item], reason
         elif self.again:
             work, confirm = self.again.popleft(), None
         else:
             work, confirm = next(source, None), None
             if work is None:
                 return False
-        child = self.idle.pop() if self.idle else Child(self.job)
+        child = self.idle.pop() if self.idle else Child(self.unit)
         child.send(work, confirm=confirm)
         self.busy.append(child)
         return True
@@ -214,27 +221,27 @@ class GuardedPool:
     def _ready(self) -> list[Child]:
         """The busy children with a message (or dead), after waiting until one has; a child past the
         time limit is marked and returned too."""
-        timeout = None
-        if self.timeout_s is not None:
-            timeout = max(
-                0.0, min(c.started_s for c in self.busy) + self.timeout_s - time.monotonic()
-            )
+        timeout, limit_s = None, self.timeout_s
+        if limit_s is not None:
+            timeout = max(0.0, min(c.started_s for c in self.busy) + limit_s - time.monotonic())
         ready = wait([c.conn for c in self.busy], timeout)
         out = [c for c in self.busy if c.conn in ready]
-        if self.timeout_s is not None:
+        if limit_s is not None:
             now = time.monotonic()
             for c in self.busy:
-                if c not in out and now - c.started_s >= self.timeout_s:
+                if c not in out and now - c.started_s >= limit_s:
+                    c.limit_s = limit_s
                     c.timed_out = True
                     out.append(c)
         return out
 
-    def _answer(self, child: Child) -> dict | None:
-        """Take one message from a child, or its death or time-out; the finished row, if one is."""
-        scenario = child.pending[0]
+    def _answer(self, child: Child) -> tuple[int, Any] | None:
+        """Take one message from a child, or its death or time-out; (item, result) if one
+        finished."""
+        item = child.pending[0]
         if child.timed_out:
             child.kill()
-            reason = f"timed out: no result after {self.timeout_s:g} s of wall time"
+            reason = f"timed out: no result after {child.limit_s:g} s of wall time"
         else:
             try:
                 kind, value = child.conn.recv()
@@ -242,10 +249,10 @@ class GuardedPool:
                 kind, value = "died", child.reap()
             if kind == "stop":
                 raise value
-            if kind == "row":
+            if kind == "done":
                 child.pending.popleft()
                 child.started_s = time.monotonic()
-                return value
+                return item, value
             reason = value
         wall_s = time.monotonic() - child.started_s
         child.pending.popleft()
@@ -254,14 +261,14 @@ class GuardedPool:
             child.pending.clear()
         # first time: run it once more, alone, before calling it a failure
         if child.confirm is None:
-            self.to_confirm.append((scenario, reason))
+            self.to_confirm.append((item, reason))
             return None
         why = reason if reason == child.confirm else f"{reason} (first run: {child.confirm})"
-        return failed_row(self.job, scenario, why, wall_s)
+        return item, self.unit.failed(item, why, wall_s)
 
     def close(self) -> None:
         """End the children: an idle one when it reads the end of its pipe, a busy one (Ctrl-C, an
-        error) at once, its unanswered scenarios dropped."""
+        error) at once, its unanswered items dropped."""
         busy, idle, self.busy, self.idle = self.busy, self.idle, [], []
         for child in busy:
             if not child.conn.closed:
@@ -272,8 +279,8 @@ class GuardedPool:
 
 
 def run_batch_guarded(
-    job: Job, scenarios: list[int], scenario_timeout_s: float | None = None
-) -> list[dict]:
-    """A batch's rows, run in a child of this process (what a Dask task runs): a scenario that kills
-    its process or hangs is a failed row, the Dask worker lives on."""
-    return list(GuardedPool(job, 1, scenario_timeout_s).run([scenarios]))
+    unit: Unit, items: list[int], timeout_s: Limit = None
+) -> list[tuple[int, Any]]:
+    """A batch's (item, result) pairs, run in a child of this process (what a Dask task runs): an
+    item that kills its process or hangs is a failed one, the Dask worker lives on."""
+    return list(GuardedPool(unit, 1, timeout_s).run([items]))

@@ -46,7 +46,7 @@ CA, and a certificate with its key per role signed by it (Dask checks the chain,
 --dashboard-address keeps the port on loopback. A client without the CA's client certificate is
 refused in the TLS handshake.
 
-This module imports Dask only when called (`import twin.sweep.cluster` stays cheap); the classes
+This module imports Dask only when called (`import twin.jobs.cluster` stays cheap); the classes
 QuietScheduler and QuietWorker are made on first use (module __getattr__), also when a spawned
 worker process unpickles its class by name.
 """
@@ -129,7 +129,7 @@ def _define_quiet_classes() -> tuple[type, type]:
                     "__module__": __name__,
                     "start_http_server": _no_http_server,
                     "__doc__": f"Dask's {base.__name__} without its HTTP server "
-                    f"(twin.sweep.cluster).",
+                    f"(twin.jobs.cluster).",
                 },
             )
     return globals()[_QUIET[0]], globals()[_QUIET[1]]
@@ -151,7 +151,7 @@ def start_local(
     jobs: int,
     *,
     dashboard: bool = False,
-    preload: Sequence[str] = ("twin.sweep.worker",),
+    preload: Sequence[str] = (),
     config: Mapping[str, object] = WORKER_CONFIG,
 ):
     """A TLS-secured cluster of `jobs` single-threaded worker processes on 127.0.0.1 and this

@@ -95,6 +95,12 @@ def add_search_command(sub) -> None:
         help="keep the smallest failure as a test: recordings/search/NAME.toml (the scenario), "
         "NAME.mcap (its recording) and NAME.expect.json; `twin check` then runs it",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write into an --out folder that is not empty and over an existing --save-golden "
+        "NAME's files (without it either is refused before any work)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_search)
 
@@ -120,7 +126,9 @@ def cmd_search(args: argparse.Namespace) -> int:
     )  # every key, range and parameter, before anything runs
     if args.save_golden is not None:
         check_name(args.save_golden)
-    out = _out_dir(args.out)
+        if not args.force:
+            _refuse_golden(args.save_golden)
+    out = _out_dir(args.out, force=args.force)
     executor = make_executor(args.executor, args.jobs, args.scheduler)
     search = Search(spec, ranges, executor, args.budget, progress=None if args.quiet else _progress)
     t0 = time.perf_counter()
@@ -222,12 +230,25 @@ def _offset(value: float, key: dict) -> str:
     return f"nominal {offset:+.4g}, {abs(offset) / key['half_width']:.3f} of the half-width"
 
 
-def _out_dir(path: str) -> Path:
-    from twin.record.outputs import make_default_folder
+def _refuse_golden(name: str) -> None:
+    """--save-golden NAME refused (exit 2) when any of its three files exists, before any work."""
+    from twin.model.golden_files import expect_path
+    from twin.record.outputs import refuse_existing
+    from twin.sweep.search_golden import SEARCH_DIR
+
+    definition = SEARCH_DIR / f"{name}.toml"
+    for path in (definition, definition.with_suffix(".mcap"), expect_path(definition)):
+        refuse_existing(path, f"--save-golden {name}:")
+
+
+def _out_dir(path: str, *, force: bool) -> Path:
+    from twin.record.outputs import make_default_folder, refuse_existing
 
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {path!r} is a file; expected a folder")
+    if not force:
+        refuse_existing(out, "--out", folder=True)
     if not make_default_folder(out.parent):
         raise ConfigError(f"--out {path!r}: folder {str(out.parent)!r} does not exist")
     try:

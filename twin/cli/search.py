@@ -179,12 +179,22 @@ def _finish(
     for line in summary_lines(data, executor, wall_s):
         print(line)
     print("wrote " + ", ".join(str(p) for p in wrote))
+    if not record and minimal is not None:
+        print(
+            f"not recorded: {out / MINIMAL}"
+            + (" and the --save-golden files" if args.save_golden else "")
+            + " (the search was interrupted; search.json holds the smallest failure so far)"
+        )
 
 
 def summary_lines(data: dict, executor, wall_s: float) -> list[str]:
-    stopped = {"budget": " (budget spent)", "interrupted": " (interrupted)"}.get(
-        data["stopped"], ""
+    left = data["budget"] - data["runs"]
+    budget = (
+        f" (budget: the next round needs more than the {left} run{'s' * (left != 1)} left)"
+        if left > 0
+        else " (budget spent)"
     )
+    stopped = {"budget": budget, "interrupted": " (interrupted)"}.get(data["stopped"], "")
     head = (
         f"search {data['task']} on {data['robot']}: {data['runs']} runs of "
         f"{data['budget']}{stopped}, "

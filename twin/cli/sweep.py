@@ -459,6 +459,13 @@ def _print_only(rows: list[dict], out: Path, save: str) -> None:
         )
         if folder is not None:
             print(f"recorded {scenario_path(out, folder, r['scenario'])}")
+        elif save == "none":
+            print(f"scenario {r['scenario']} not recorded (--save none)")
+        else:  # a passing scenario under --save failures
+            print(
+                f"scenario {r['scenario']} not recorded: it passed, and --save failures records "
+                "failing scenarios only (--save all records it)"
+            )
 
 
 def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> list[str]:
@@ -506,7 +513,8 @@ def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> 
         for r in lost[:5]:
             cut = out / "failures" / f"scenario-{r['scenario']}.mcap.partial"
             hint = (
-                f"; twin recover {cut.with_suffix('')} restores its recording"
+                f"; its recording was cut short as {cut} (`twin recover "
+                f"{cut.with_suffix('')}` restores it)"
                 if cut.exists()
                 else ""
             )

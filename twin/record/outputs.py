@@ -61,8 +61,8 @@ def check_output(
 ) -> Path:
     """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder
     exists (runs/ is made if missing: make_default_folder), it is none of `inputs` (nor the same
-    file through a link), and, with force=False, it does not exist yet (refuse_existing). ConfigError
-    (exit 2) otherwise."""
+    file through a link), and, with force=False, it does not exist yet (refuse_existing).
+    ConfigError (exit 2) otherwise."""
     p = Path(path)
     if p.suffix != suffix:
         raise ConfigError(f"{option} {str(path)!r} should end in {suffix}")

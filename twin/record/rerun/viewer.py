@@ -208,8 +208,7 @@ def screenshot(
     from rerun.experimental import ViewerClient
 
     check_target(out_png, "screenshot", "a .png file path", error=ViewerError)
-    missing = missing_driver()
-    if missing:
+    if missing := missing_driver():
         raise ViewerError(missing)
     out = Path(out_png).resolve()
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
@@ -263,17 +262,21 @@ def screenshot(
                 _settled_screenshot(client, out, Path(work_dir) / "again.png")
                 problems = [f"{v.name}: {r}" for v in client.get_state().views for r in v.reports]
             except (RuntimeError, ValueError, OSError) as err:
-                why = last_log_line(log)
-                raise ViewerError(
-                    f"the headless Rerun viewer failed to take the screenshot: {err}"
-                    f"{' (its log: ' + why + ')' if why else ''}; if it has no renderer: "
-                    f"{INSTALL_HINT}"
-                ) from err
+                raise _failed(err, log) from err
         finally:
             stop(proc)
     if not out.is_file():
         raise ViewerError(f"the headless viewer did not write {str(out)!r}")
     return (None if at_ns is None else at_ns * 1e-9), problems
+
+
+def _failed(err: Exception, log) -> ViewerError:
+    """The screenshot's failure with the viewer's last log line and what to install."""
+    why = last_log_line(log)
+    return ViewerError(
+        f"the headless Rerun viewer failed to take the screenshot: {err}"
+        f"{' (its log: ' + why + ')' if why else ''}; if it has no renderer: {INSTALL_HINT}"
+    )
 
 
 def _settled_screenshot(client, out: Path, again: Path) -> None:

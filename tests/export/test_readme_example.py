@@ -23,7 +23,7 @@ def test_readme_pandas_example(tmp_path):
         r"<!-- doctest: output -->\n```text.*\n(.*?)\n```", page[page.index(code) :]
     ).group(1)
     (tmp_path / "recordings").symlink_to(ROOT / "recordings")
-    (tmp_path / "docs" / "img").mkdir(parents=True)
+    (tmp_path / "runs").mkdir()
     done = subprocess.run(
         [sys.executable, "-c", code],
         cwd=tmp_path,
@@ -35,5 +35,5 @@ def test_readme_pandas_example(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == claimed
-    png = (tmp_path / "docs" / "img" / "pick_place_joints.png").read_bytes()
+    png = (tmp_path / "runs" / "pick_place_joints.png").read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 10_000

@@ -69,10 +69,47 @@ def test_an_explicit_missing_folder_is_an_error_before_any_work(tmp_path):
     _one_line_error(_twin("run", "pick_place", "--record", str(folder)), "is a folder")
 
 
-def test_the_default_folder_is_still_created(tmp_path):
+def test_the_default_folder_is_still_created_and_its_file_not_replaced(tmp_path):
     done = _twin("run", "pick_place", "--cycles", "1", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    assert twin.load(tmp_path / "runs" / "pick_place_mtb.mcap").finalized
+    path = tmp_path / "runs" / "pick_place_mtb.mcap"
+    assert twin.load(path).finalized
+    before = path.read_bytes()
+    _one_line_error(
+        _twin("run", "pick_place", "--cycles", "1", cwd=tmp_path),
+        "runs/pick_place_mtb.mcap",
+        "--force",
+    )
+    assert path.read_bytes() == before
+
+
+def test_an_existing_output_is_refused_and_left_byte_identical_until_force(golden, tmp_path):
+    """run --record, replay --record, export -o and view --rrd onto an existing file: exit 2, one
+    line naming it, the file unchanged; --force replaces it with the new one."""
+    src = tmp_path / "src.mcap"
+    shutil.copy(golden, src)
+    taken = {suffix: tmp_path / f"taken{suffix}" for suffix in (".mcap", ".parquet", ".rrd")}
+    for path in taken.values():
+        path.write_bytes(b"the user's own bytes")
+    commands = [
+        ("run", "pick_place", "--cycles", "1", "--record", str(taken[".mcap"])),
+        ("run", "pick_place", "--cycles", "1", "--no-record", "--rrd", str(taken[".rrd"])),
+        ("replay", str(src), "--record", str(taken[".mcap"])),
+        ("export", str(src), "--format", "parquet", "-o", str(taken[".parquet"])),
+        ("view", str(src), "--rrd", str(taken[".rrd"])),
+    ]
+    for command in commands:
+        done = _twin(*command)
+        _one_line_error(done, repr(str(command[-1])), "exists already", "--force")
+        assert done.stdout == ""  # refused before any work
+    assert all(p.read_bytes() == b"the user's own bytes" for p in taken.values())
+    done = _twin(*commands[0], "--force")
+    assert done.returncode == 0, done.stderr
+    assert twin.load(taken[".mcap"]).frames.t_ns[-1] > 0  # the new recording, complete
+    done = _twin(*commands[3], "--force")
+    assert done.returncode == 0, done.stderr
+    assert taken[".parquet"].read_bytes()[:4] == b"PAR1"
+    assert not list(tmp_path.glob(".*.tmp")) and not list(tmp_path.glob("*.partial"))
 
 
 def _start_endless(tmp_path: Path, *record: str) -> subprocess.Popen:
@@ -101,7 +138,11 @@ def test_a_killed_re_record_leaves_the_old_file_and_a_partial_file_recover_finds
     target = tmp_path / "g.mcap"
     shutil.copy(golden, target)
     before = target.read_bytes()
-    _kill_group(_start_endless(tmp_path, "--record", str(target), "--rrd", str(tmp_path / "g.rrd")))
+    _kill_group(
+        _start_endless(
+            tmp_path, "--record", str(target), "--rrd", str(tmp_path / "g.rrd"), "--force"
+        )
+    )
     assert target.read_bytes() == before  # the golden is untouched
     partial = tmp_path / "g.mcap.partial"
     assert (

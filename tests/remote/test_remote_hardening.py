@@ -6,6 +6,7 @@ its reply.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import struct
 import threading
@@ -20,6 +21,7 @@ from support.raw_client import RawClient
 from support.server import ServerProcess
 
 from twin.remote.protocol import (
+    DEFAULT_MAX_HELD_BYTES,
     MAX_FRAME_BYTES,
     MAX_ITEMS,
     MAX_NAME_CHARS,
@@ -456,6 +458,59 @@ def test_a_multipart_flood_is_cut_off_after_one_frames_worth():
         finally:
             stop.set()
             dealer.close()
+            context.term()
+
+
+FLOODERS, FLOOD_MESSAGE_PARTS, FLOOD_BIG_PART = 8, 6, 200 << 20
+
+
+def test_many_flooding_connections_stay_under_the_server_wide_cap():
+    """8 connections each sending a multipart message of 6 x 200 MiB: per connection each may
+    hold one frame's worth, but all of them together stay within the server-wide cap (256 MiB by
+    default): the connection holding the most is closed, the official client is served
+    throughout, and the server's peak memory stays under 700 MB."""
+    assert DEFAULT_MAX_HELD_BYTES == 256 << 20
+    with ServerProcess("--stepped") as server:
+        sim = server.client().require("sim")
+        context = zmq.Context()
+        part = bytes(FLOOD_BIG_PART)  # one buffer, sent zero-copy by every dealer
+        dealers = []
+        stop, errors = threading.Event(), []
+        try:
+            with PeakRss(server.proc.pid) as rss:
+                caller = keep_calling(sim, stop, errors)
+                t0 = time.monotonic()
+                for _ in range(FLOODERS):
+                    dealer = context.socket(zmq.DEALER)
+                    dealer.setsockopt(zmq.LINGER, 0)
+                    dealer.setsockopt(zmq.RECONNECT_IVL, -1)  # a closed flooder stays closed
+                    dealer.connect(f"tcp://127.0.0.1:{server.port}")
+                    dealer.send_multipart([b"", *[part] * FLOOD_MESSAGE_PARTS], copy=False)
+                    dealers.append(dealer)
+                closed = 0
+                while closed < FLOODERS:
+                    assert time.monotonic() - t0 < 60.0, "\n".join(server.lines[-5:])
+                    with contextlib.suppress(AssertionError):  # read the output for 0.2 s
+                        server.wait_for(r"(?!)", 0.2)
+                    closed = sum("closed the connection from" in line for line in server.lines)
+                elapsed_s = time.monotonic() - t0
+                time.sleep(0.2)
+                stop.set()
+                caller.join(10)
+            cut_all = [line for line in server.lines if "over the server's limit" in line]
+            print(
+                f"{FLOODERS} multipart floods: peak RSS {rss.peak / 1e6:.0f} MB (base "
+                f"{rss.base / 1e6:.0f} MB, +{rss.growth_mb():.0f} MB), {elapsed_s:.2f} s, "
+                f"{len(cut_all)} of {closed} closed by the server-wide cap"
+            )
+            assert rss.peak < 700e6
+            assert cut_all, server.lines[-FLOODERS:]
+            assert not errors, errors  # the official client was answered all along
+            assert_serving(server)
+        finally:
+            stop.set()
+            for dealer in dealers:
+                dealer.close()
             context.term()
 
 

@@ -6,6 +6,7 @@ where the seeds differ, --report Markdown or JSON, --fail-if-worse, and the pict
 from __future__ import annotations
 
 import json
+import math
 import sys
 
 import pyarrow.parquet as pq
@@ -160,3 +161,48 @@ def test_sweep_plot_and_bad_input(runs, tmp_path, capsys, monkeypatch):
     )  # before it runs
     capsys.readouterr()
     assert not (tmp_path / "never" / "results.parquet").exists()
+
+
+def _tampered(runs, tmp_path, name: str, change) -> str:
+    """A copy of folder b whose results.parquet `change` rewrote (table -> table)."""
+    import shutil
+
+    folder = tmp_path / name
+    shutil.copytree(runs / "b", folder)
+    table = pq.read_table(folder / "results.parquet")
+    pq.write_table(change(table), folder / "results.parquet")
+    return str(folder)
+
+
+def _column(table, name, values):
+    import pyarrow as pa
+
+    return table.set_column(table.column_names.index(name), name, pa.array(values))
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda t: _column(t, "scenario", [str(i) for i in range(t.num_rows)]),
+         "column 'scenario' row 1 holds '0'; expected whole numbers"),
+        (lambda t: _column(t, "outcome", ["ok"] * 5 + ["banana"] * (t.num_rows - 5)),
+         "column 'outcome' row 6 holds 'banana'; expected one of ok, error"),
+        (lambda t: _column(t, "placement_error_mm", [1.0, -math.inf] + [1.0] * (t.num_rows - 2)),
+         "column 'placement_error_mm' row 2 holds -inf; expected a finite number"),
+        (lambda t: _column(t, "placement_error_mm", [float("nan")] * t.num_rows),
+         "column 'placement_error_mm' row 1 holds nan"),
+        (lambda t: _column(t, "scenario", [0] + list(range(t.num_rows - 1))),
+         "column 'scenario': scenario 0 is in two rows"),
+        (lambda t: _column(t, "box.x_m", [v + 0.01 for v in t.column("box.x_m").to_pylist()]),
+         "column 'box.x_m': scenario 0 has another value than in"),
+    ],
+)
+def test_a_bad_results_file_is_one_line_naming_file_column_and_row(
+    runs, tmp_path, capsys, change, message
+):
+    bad = _tampered(runs, tmp_path, "bad", change)
+    capsys.readouterr()
+    assert main(["sweep", "compare", str(runs / "a"), bad]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("twin: error: results ") and err.count("\n") == 1, err
+    assert message in err and "bad" in err, err

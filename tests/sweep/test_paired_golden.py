@@ -198,7 +198,9 @@ def test_a_golden_without_results_checks_by_its_summary(golden, tmp_path, capsys
     (tmp_path / "old.summary.json").write_text(json.dumps(summary))
     capsys.readouterr()
     assert main(["check", str(tmp_path / "old.toml")]) == 1
-    assert "placement_error_mm.p50 moved -0.700 mm" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "placement_error_mm.p50 moved -0.700 mm" in out
+    assert "judged by its summary only (no old.results.parquet)" in out
     assert not (tmp_path / "old.results.parquet").exists()
 
 
@@ -215,6 +217,18 @@ def test_another_seed_or_a_bad_results_file_is_named(golden, tmp_path, capsys):
     assert main(["check", str(definition)]) == 2
     out = capsys.readouterr().out
     assert "g.results.parquet' cannot be read as Parquet" in out and "Traceback" not in out
+    for column, values, message in (
+        ("scenario", [str(i) for i in range(20)], "column 'scenario' row 1 holds '0'"),
+        ("outcome", ["banana"] * 20, "column 'outcome' row 1 holds 'banana'"),
+        ("placement_error_mm", [float("-inf")] * 20, "column 'placement_error_mm' row 1"),
+    ):
+        table = pq.read_table(golden / "small.results.parquet")
+        table = table.set_column(table.column_names.index(column), column, pa.array(values))
+        meta = pq.read_schema(golden / "small.results.parquet").metadata
+        pq.write_table(table.replace_schema_metadata(meta), tmp_path / "g.results.parquet")
+        assert main(["check", str(definition)]) == 2
+        out = capsys.readouterr().out
+        assert "g.results.parquet' " + message in out and "Traceback" not in out, out
 
 
 def test_the_paired_verdict_is_the_same_whatever_the_executor(golden, tmp_path):

@@ -67,7 +67,7 @@ def test_cycles_default_still_reaches_tasks_that_take_it(tmp_path):
     out = tmp_path / "s.mcap"
     assert main(["run", "seed002", "--robot", "seed002", "--record", str(out)]) == 0
     assert load(out).run["params"] == {}
-    assert main(["run", "pick_place", "--record", str(out)]) == 0
+    assert main(["run", "pick_place", "--record", str(out), "--force"]) == 0
     assert load(out).run["params"] == {"cycles": 2}
 
 

@@ -152,6 +152,9 @@ def test_ctrl_c_keeps_what_was_found(tmp_path):
     data = json.loads((out / "search.json").read_text())
     assert data["stopped"] == "interrupted" and data["runs"] >= 5
     assert data["nominal"]["outcome"] == "ok" and "(interrupted)" in stdout
+    if data["minimal"] is not None:  # said, not left for the user to find missing
+        assert f"not recorded: {out / 'minimal.mcap'}" in stdout
+    assert not (out / "minimal.mcap").exists()
 
 
 def test_a_saved_failure_checks_green_then_red_when_the_boundary_moves(
@@ -189,6 +192,13 @@ def test_a_saved_failure_checks_green_then_red_when_the_boundary_moves(
     )
     assert main(["replay", "recordings/search/placement.mcap"]) == 0
     capsys.readouterr()
+    before = definition.read_bytes()
+    again = ["search", "pick_place", "--vary", "box.x_m=0.19..0.21", *FAST, "--budget", "20"]
+    assert main([*again, "--save-golden", "placement", "--out", "runs/other"]) == 2
+    assert "'recordings/search/placement.toml' exists already" in capsys.readouterr().err
+    assert main([*again, "--out", "runs/placement"]) == 2  # not empty
+    assert "--out 'runs/placement' is a folder that is not empty" in capsys.readouterr().err
+    assert definition.read_bytes() == before and not (tmp_path / "runs" / "other").exists()
 
     assert main(["check", "recordings/search"]) == 0
     assert "fails the same way: cycle 1: placed" in capsys.readouterr().out

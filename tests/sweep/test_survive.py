@@ -81,8 +81,11 @@ def test_a_scenario_that_kills_its_process_is_one_named_failure(tmp_path, capsys
     assert [r["scenario"] for r in rows] == list(range(SCENARIOS))
     assert [r["scenario"] for r in rows if r["outcome"] != "ok"] == [BAD]
     assert rows[BAD]["error"] == "worker died: exit code 7"
-    assert f"scenario {BAD}: worker died: exit code 7; twin recover" in out
     partial = tmp_path / "out" / "failures" / f"scenario-{BAD}.mcap.partial"
+    assert (
+        f"scenario {BAD}: worker died: exit code 7; its recording was cut short as {partial} "
+        f"(`twin recover {partial.with_suffix('')}` restores it)"
+    ) in out  # the file on disk, by its name
     assert partial.exists()  # what its recorded run flushed before it died
     assert main(["recover", str(partial.with_suffix(""))]) == 0
     assert main(["info", str(partial.with_suffix(""))]) == 0

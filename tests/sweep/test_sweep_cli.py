@@ -141,6 +141,19 @@ def test_missing_folder_and_fail_under(tmp_path, capsys):
     assert (tmp_path / "gate" / "summary.json").exists() and not (
         tmp_path / "gate" / "failures"
     ).exists()
+    # the folder of a sweep: the same sweep again continues only with --resume, another is
+    # refused (the summary left byte-identical) until --force
+    before = (tmp_path / "gate" / "summary.json").read_bytes()
+    again = ["sweep", *SWEEP, "--save", "none", "--out", str(tmp_path / "gate")]
+    assert main(again) == 2
+    assert "holds this sweep already; expected --resume" in capsys.readouterr().err
+    other = [*again, "--seed", "6", "--scenarios", "1"]
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--out {str(tmp_path / 'gate')!r} is a folder that" in err
+    assert (tmp_path / "gate" / "summary.json").read_bytes() == before
+    assert main([*other, "--force"]) == 0
+    assert json.loads((tmp_path / "gate" / "summary.json").read_text())["scenarios"] == 1
 
 
 def test_ctrl_c_stops_cleanly_and_keeps_the_results_so_far(tmp_path):

@@ -138,6 +138,67 @@ def params_dict(pairs: list[tuple[str, object]]) -> dict:
     return out
 
 
+def add_scene_options(p: argparse.ArgumentParser) -> None:
+    """--scene FILE.toml and --set KEY=VALUE (repeatable): the scene and settings a run starts
+    from, stored in its recording's configuration."""
+    p.add_argument(
+        "--scene",
+        metavar="FILE.toml",
+        help="the objects on the floor: one [[box]] table each (name, size_m, mass_kg, pos_m, "
+        "yaw_rad, friction, rgba); default: one box named box at (0.2, 0.7)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        type=set_pair,
+        default=[],
+        dest="settings",
+        metavar="KEY=VALUE",
+        help="one setting (repeatable), with the keys of `twin sweep --vary`: <object>.x_m, "
+        "<object>.y_m, <object>.z_m, <object>.yaw_rad, <object>.mass_kg, <object>.friction, "
+        "pad.<field>, robot.<field>, engine.<field>; applied after --scene",
+    )
+
+
+def set_pair(text: str) -> tuple[str, object, str]:
+    """An argparse type: KEY=VALUE, VALUE read as --param's are; (key, value, raw text)."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(
+            f"--set {_short(text)!r} is invalid; expected KEY=VALUE, e.g. box.x_m=0.21"
+        )
+    try:
+        value = read_value(raw)
+    except BadValue as err:
+        raise argparse.ArgumentTypeError(f"--set {key}={_short(raw)} is invalid: {err}") from None
+    return key, value, raw
+
+
+def scene_config(config: TwinConfig, args: argparse.Namespace, fn, task: str) -> TwinConfig:
+    """config with --scene's objects, then each --set applied (checked against the configuration's
+    schema, as a recording's is); unchanged without them, so such a run records what it did."""
+    from dataclasses import replace
+
+    from twin.model.scene import read_scene
+    from twin.sweep.keys import apply_values, resolve_key
+
+    if getattr(args, "scene", None):
+        config = replace(config, objects=read_scene(args.scene))
+    seen: set[str] = set()
+    for name, value, raw in getattr(args, "settings", []):
+        if name in seen:
+            raise ConfigError(f"--set {name} is given twice; expected each key once")
+        seen.add(name)
+        key = resolve_key(name, config, fn, task, option="--set")
+        if key.part == "task":
+            raise ConfigError(
+                f"--set {name}: task parameters go in --param {key.field}=VALUE; expected a "
+                "scene, pad, robot or engine key"
+            )
+        config = apply_values(config, {key: value}, where=f"--set {name}={_short(raw)}")
+    return config
+
+
 def whole_number(minimum: int = 1) -> Callable[[str], int]:
     """An argparse type: an integer >= minimum that fits int64."""
 

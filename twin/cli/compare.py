@@ -12,6 +12,7 @@ from pathlib import Path
 
 from twin.cli.args import add_executor_options, whole_number
 from twin.cli.ros2 import add_bag_options, diff_with_bag
+from twin.cli.record import add_force_option
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
 from twin.signals import Terminated
@@ -68,19 +69,22 @@ def _add_report_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
+def _check_outputs(
+    args: argparse.Namespace, inputs: list[str], *, force: bool | None = None
+) -> None:
     """Every output path (--report, --rrd, replay's --record) checked before any work: the right
-    suffix, an existing folder, never one of the inputs (also through a link)."""
+    suffix, an existing folder, never one of the inputs (also through a link); with force=False
+    (replay without --force) none exists yet."""
     from twin.compare.report import report_format
     from twin.record.outputs import check_output
 
     for path in args.report:
-        check_output(path, Path(path).suffix, inputs=inputs, option="--report")
+        check_output(path, Path(path).suffix, inputs=inputs, option="--report", force=force)
         report_format(path)
     if args.rrd:
-        check_output(args.rrd, ".rrd", inputs=inputs, option="--rrd")
+        check_output(args.rrd, ".rrd", inputs=inputs, option="--rrd", force=force)
     if getattr(args, "record", None):
-        check_output(args.record, ".mcap", inputs=inputs, option="--record")
+        check_output(args.record, ".mcap", inputs=inputs, option="--record", force=force)
 
 
 def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
@@ -126,7 +130,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from twin.verify.replay import REPLAYED_EVENT_KINDS, replay, replay_run, replayed_event_kinds
 
     tol = _tolerances(args)
-    _check_outputs(args, [args.recording])
+    _check_outputs(args, [args.recording], force=args.force)
     rec = load(args.recording)
     if args.record:
         from twin.record import open_recorders
@@ -246,6 +250,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--record", default=None, metavar="NEW.mcap", help="also record the replayed run"
     )
+    add_force_option(p, "the --record, --rrd and --report files")
     _add_tolerance_options(p, DEFAULT)
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)

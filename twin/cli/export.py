@@ -76,16 +76,13 @@ def add_export_command(sub: argparse._SubParsersAction) -> None:
         help="lerobot: replay each recording first; export only those whose replay is exact",
     )
     p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="lerobot: replace an existing dataset folder (one holding meta/info.json) once "
-        "the new one is complete",
-    )
-    p.add_argument(
         "--force",
+        "--overwrite",
+        dest="force",
         action="store_true",
-        help="ros2: replace an existing bag (a folder holding metadata.yaml) once the new one is "
-        "complete",
+        help="replace an existing -o file (parquet, csv), dataset folder (lerobot: one holding "
+        "meta/info.json) or bag (ros2: one holding metadata.yaml) once the new one is complete; "
+        "without it, an existing one is refused before any work",
     )
     p.set_defaults(func=cmd_export, interrupt=True)  # Ctrl-C even as a background job
 
@@ -96,7 +93,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.format == "ros2":
         from twin.cli.ros2 import cmd_export_ros2
 
-        options = ("--table", "--fps", "--episodes", "--task", "--verify", "--overwrite")
+        options = ("--table", "--fps", "--episodes", "--task", "--verify")
         _refuse(args, options, "--format parquet, csv and lerobot")
         return cmd_export_ros2(args.files, args.output, force=args.force)
     return _export_table(args)
@@ -116,14 +113,15 @@ def _export_table(args: argparse.Namespace) -> int:
     from twin.record.mcap.reader import load
     from twin.record.outputs import check_output
 
-    _refuse(args, ("--fps", "--episodes", "--task", "--verify", "--overwrite"), "--format lerobot")
-    _refuse(args, ("--force",), "--format ros2")
+    _refuse(args, ("--fps", "--episodes", "--task", "--verify"), "--format lerobot")
     if len(args.files) != 1:
         raise ConfigError(
             f"--format {args.format} writes one recording; got {len(args.files)} files "
             "(export each on its own, or use --format lerobot)"
         )
-    out = check_output(args.output, SUFFIXES[args.format], inputs=args.files, option="output")
+    out = check_output(
+        args.output, SUFFIXES[args.format], inputs=args.files, option="output", force=args.force
+    )
     table = args.table or "frames"
     rec = load(args.files[0])
     # the frames table reads them (suction.command); a malformed one is exit 2 as in replay
@@ -137,7 +135,6 @@ def _export_lerobot(args: argparse.Namespace) -> int:
     from twin.export.pipeline import export_lerobot
 
     _refuse(args, ("--table",), "--format parquet and csv")
-    _refuse(args, ("--force",), "--format ros2")
     if args.fps is None:
         raise ConfigError("--format lerobot needs --fps N (a whole number of frames per second)")
     # before loading anything; each recording's own physics rate is checked once loaded
@@ -154,7 +151,7 @@ def _export_lerobot(args: argparse.Namespace) -> int:
         mode=args.episodes or "recording",
         task=args.task,
         verify_first=args.verify,
-        overwrite=args.overwrite,
+        overwrite=args.force,
         say=print,
     )
     left_out = sum(1 for s in sources if s.verified is False)

@@ -10,9 +10,11 @@ import time
 
 from twin.cli.args import (
     add_param_option,
+    add_scene_options,
     add_twin_options,
     camera_specs,
     params_dict,
+    scene_config,
     seconds,
     twin_config,
     whole_number,
@@ -43,7 +45,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from twin.verify.check import task_run
 
     fn = resolve(args.task)
-    config = twin_config(args)
+    config = scene_config(twin_config(args), args, fn, args.task)
     params = run_params(fn, args)
     mcap_path, rrd_path = record_paths(args, f"{Path(args.task).stem}_{config.profile.name}")
     # a task file by its path relative to the recording
@@ -232,6 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"pick-and-place cycles (default {DEFAULT_CYCLES} for a task that takes cycles)",
     )
     add_param_option(p)
+    add_scene_options(p)
     p.add_argument(
         "--timeout",
         type=seconds("--timeout", allow_zero=False),

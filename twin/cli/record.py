@@ -46,12 +46,25 @@ def add_record_options(
         "always kept); "
         "the .rrd view keeps every step",
     )
+    add_force_option(p, "the --record and --rrd files")
     p.set_defaults(record_by_default=record_by_default)
+
+
+def add_force_option(p: argparse.ArgumentParser, what: str) -> None:
+    """--force: replace `what` when it exists (without it, an existing one is refused, exit 2,
+    before any work); the new file is written beside it and renamed over it when complete."""
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help=f"replace {what} if it exists (without it an existing one is refused before any "
+        "work); the old one stays until the new one is complete",
+    )
 
 
 def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | None, Path | None]:
     """The MCAP and Rerun paths the options ask for (the MCAP default is runs/<default_stem>.mcap),
-    checked before any work (suffix, not a folder, the folder exists). Only runs/ is created when
+    checked before any work (suffix, not a folder, the folder exists, and no file there unless
+    --force). Only runs/ is created when
     missing (the default's folder, or one the user names: twin.record.outputs.make_default_folder);
     any other folder must exist."""
     mcap = args.record
@@ -61,8 +74,15 @@ def record_paths(args: argparse.Namespace, default_stem: str) -> tuple[Path | No
         and not getattr(args, "no_record", False)
     ):
         mcap = str(Path(DEFAULT_FOLDER) / f"{default_stem}.mcap")
-    mcap_path = check_output(mcap, ".mcap", option="recording") if mcap is not None else None
-    rrd_path = check_output(args.rrd, ".rrd", option="recording") if args.rrd is not None else None
+    force = bool(getattr(args, "force", False))
+    mcap_path = (
+        check_output(mcap, ".mcap", option="recording", force=force) if mcap is not None else None
+    )
+    rrd_path = (
+        check_output(args.rrd, ".rrd", option="recording", force=force)
+        if args.rrd is not None
+        else None
+    )
     return mcap_path, rrd_path
 
 

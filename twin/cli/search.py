@@ -88,6 +88,12 @@ def add_search_command(sub) -> None:
         help="keep the smallest failure as a test: recordings/search/NAME.toml (the scenario), "
         "NAME.mcap (its recording) and NAME.expect.json; `twin check` then runs it",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write into an --out folder that is not empty and over an existing --save-golden "
+        "NAME's files (without it either is refused before any work)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_search, interrupt=True)  # Ctrl-C even as a background job
 
@@ -113,7 +119,9 @@ def cmd_search(args: argparse.Namespace) -> int:
     _, ranges = prepare_search(spec, args.precision)
     if args.save_golden is not None:
         check_name(args.save_golden)
-    out = folder.prepare_folder(args.out)
+        if not args.force:
+            folder.refuse_golden(args.save_golden)
+    out = folder.prepare_folder(args.out, force=args.force)
     executor = make_executor(
         args.executor, args.jobs, args.scheduler, preload=("twin.search.search",)
     )
@@ -132,6 +140,12 @@ def cmd_search(args: argparse.Namespace) -> int:
     for line in summary_lines(done.data, executor, done.wall_s):
         print(line)
     print("wrote " + ", ".join(str(p) for p in done.wrote))
+    if done.stopped_by is not None and done.result.minimal is not None:
+        print(
+            f"not recorded: {out / folder.MINIMAL}"
+            + (" and the --save-golden files" if args.save_golden else "")
+            + " (the search was interrupted; search.json holds the smallest failure so far)"
+        )
     if done.stopped_by is not None:
         raise done.stopped_by  # 130 (Ctrl-C) or 128 + the signal, after search.json is written
     return 0
@@ -146,9 +160,13 @@ def _progress(phase: str, result) -> None:
 
 
 def summary_lines(data: dict, executor, wall_s: float) -> list[str]:
-    stopped = {"budget": " (budget spent)", "interrupted": " (interrupted)"}.get(
-        data["stopped"], ""
+    left = data["budget"] - data["runs"]
+    budget = (
+        f" (budget: the next round needs more than the {left} run{'s' * (left != 1)} left)"
+        if left > 0
+        else " (budget spent)"
     )
+    stopped = {"budget": budget, "interrupted": " (interrupted)"}.get(data["stopped"], "")
     head = (
         f"search {data['task']} on {data['robot']}: {data['runs']} runs of "
         f"{data['budget']}{stopped}, "

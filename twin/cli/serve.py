@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import argparse
 
-from twin.cli.args import add_twin_options, port, twin_config
+from twin.cli.args import add_twin_options, port, twin_config, whole_number
 from twin.cli.record import add_record_options, record_paths
 from twin.remote import DEFAULT_STEP_GRACE_S, STEP_GRACE_RANGE_S
+from twin.remote.protocol import DEFAULT_MAX_HELD_BYTES
 
 SERVE_HELP = """\
 Serve CoppeliaSim's ZeroMQ remote API (protocol v2) so its official Python client
@@ -20,7 +21,8 @@ a stepping client silent for --step-grace seconds (default 10) no longer holds t
 Runs: the scene waits stopped until a client calls sim.startSimulation(); sim.stopSimulation()
 ends the run and resets the scene. Each run is recorded (default runs/remote_<robot>.mcap;
 --record NAME.mcap, --no-record): the first to NAME.mcap, the next to NAME-2.mcap, NAME-3.mcap,
-... (each printed when it is finalized; an existing file of that name is replaced).
+... (each printed when it is finalized). An existing NAME.mcap is refused before the server
+starts unless --force is given; the later runs' NAME-2.mcap, ... replace files of those names.
 """
 
 
@@ -75,6 +77,15 @@ def add_serve_command(sub) -> None:
         f"(default {DEFAULT_STEP_GRACE_S:g}; {low:g}..{high:g})",
     )
     p.add_argument(
+        "--max-held-mib",
+        type=whole_number(1),
+        default=DEFAULT_MAX_HELD_BYTES >> 20,
+        metavar="MIB",
+        help="the most the server holds of requests not yet complete, all connections together "
+        f"(default {DEFAULT_MAX_HELD_BYTES >> 20} MiB); over it, the connection holding the most "
+        "is closed",
+    )
+    p.add_argument(
         "--start", action="store_true", help="start the simulation at launch, like pressing Play"
     )
     add_record_options(p, record_by_default=True, default_stem="remote_<robot>")
@@ -98,4 +109,5 @@ def cmd_serve(args: argparse.Namespace) -> int:
         rate=args.rate,
         start=args.start,
         log=lambda line: print(line, flush=True),
+        max_held_bytes=args.max_held_mib << 20,
     )

@@ -169,6 +169,13 @@ def _add_output_options(p: argparse.ArgumentParser) -> None:
         "DIR/journal.jsonl (same definition), then write the results as an uninterrupted sweep",
     )
     p.add_argument(
+        "--force",
+        action="store_true",
+        help="write over a folder that is not empty (an earlier sweep's results, summary, "
+        "definition and journal are replaced, each file atomically; other files stay); without "
+        "it such a folder is refused, and the same sweep's folder continues only with --resume",
+    )
+    p.add_argument(
         "--only",
         type=only_list,
         default=None,
@@ -369,7 +376,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if args.only is not None:
             raise ConfigError("--plot draws a whole sweep; expected it without --only")
         _plot_target("sweep.png")  # matplotlib is there, before anything runs
-    the_plan = folder.plan(spec, args.out, only=args.only, resume=args.resume)
+    the_plan = folder.plan(
+        spec, args.out, only=args.only, resume=args.resume, force=args.force
+    )
     out = the_plan.out
     if the_plan.resumed:
         print(
@@ -456,6 +465,13 @@ def _print_only(rows: list[dict], out: Path, save: str) -> None:
         )
         if folder is not None:
             print(f"recorded {scenario_path(out, folder, r['scenario'])}")
+        elif save == "none":
+            print(f"scenario {r['scenario']} not recorded (--save none)")
+        else:  # a passing scenario under --save failures
+            print(
+                f"scenario {r['scenario']} not recorded: it passed, and --save failures records "
+                "failing scenarios only (--save all records it)"
+            )
 
 
 def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> list[str]:
@@ -503,7 +519,8 @@ def summary_lines(spec, summary: dict, done, executor, out: Path, save: str) -> 
         for r in lost[:5]:
             cut = out / "failures" / f"scenario-{r['scenario']}.mcap.partial"
             hint = (
-                f"; twin recover {cut.with_suffix('')} restores its recording"
+                f"; its recording was cut short as {cut} (`twin recover "
+                f"{cut.with_suffix('')}` restores it)"
                 if cut.exists()
                 else ""
             )

@@ -7,6 +7,7 @@ import argparse
 import tempfile
 
 from twin.cli.args import port, seconds
+from twin.cli.record import add_force_option
 from twin.record.outputs import check_output
 
 
@@ -49,6 +50,7 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help="with --screenshot: the simulated time to show (default: the end of the first hold)",
     )
+    add_force_option(p, "the --rrd file")
     p.set_defaults(func=cmd_view, interrupt=True)  # Ctrl-C even as a background job
 
 
@@ -56,7 +58,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     from twin.record.rerun import viewer
 
     if args.rrd:
-        check_output(args.rrd, ".rrd", inputs=[args.file], option="--rrd")  # before any work
+        # before any work
+        check_output(args.rrd, ".rrd", inputs=[args.file], option="--rrd", force=args.force)
         frames = viewer.mcap_to_rrd(args.file, args.rrd)
         print(f"wrote {args.rrd}: {frames} frames")
         return 0

@@ -529,7 +529,7 @@ def _publish(tmp: Path, out: Path, overwrite: bool) -> None:
         if not overwrite:  # checked before any work too; a folder filled meanwhile is not replaced
             raise ConfigError(
                 f"output folder {str(out)!r} is not empty; expected a new or empty "
-                f"folder (or --overwrite)"
+                f"folder (or --force)"
             )
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
         publish(out, old / out.name)

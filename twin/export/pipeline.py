@@ -21,11 +21,11 @@ def check_folder(out: Path, inputs: list[str], overwrite: bool) -> Path:
         if not overwrite:
             raise ConfigError(
                 f"dataset folder {str(out)!r} is not empty; expected a new or empty folder "
-                "(or --overwrite to replace an earlier dataset)"
+                "(or --force to replace an earlier dataset)"
             )
         if not (out / "meta" / "info.json").is_file():
             raise ConfigError(
-                f"dataset folder {str(out)!r} holds no meta/info.json; --overwrite replaces only "
+                f"dataset folder {str(out)!r} holds no meta/info.json; --force replaces only "
                 "an earlier dataset"
             )
         inside = [p for p in inputs if out.resolve() in Path(p).resolve().parents]

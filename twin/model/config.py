@@ -114,6 +114,12 @@ class TwinConfig:
         )
 
 
+def scene_object(data: object, where: str) -> SceneObject:
+    """A scene object from a JSON-like dict (a scene file's [[box]] table), every field checked
+    against OBJECT_SCHEMA as a recording's are; missing fields take SceneObject's defaults."""
+    return SceneObject(**_record(data, OBJECT_SCHEMA, where))
+
+
 MIN_VIEW_M = 1e-6  # a camera's eye and target are at least this far apart
 # its up direction leans at least this much (sine of the angle) off the view direction
 MIN_UP_SINE = 1e-6

@@ -57,10 +57,12 @@ def check_output(
     *,
     inputs: Iterable[str | os.PathLike] = (),
     option: str = "output",
+    force: bool | None = None,
 ) -> Path:
     """`path` as a Path if it may be written: it ends in `suffix`, it is no folder, its folder
-    exists (runs/ is made if missing: make_default_folder), and it is none of `inputs` (nor the same
-    file through a link). ConfigError (exit 2) otherwise."""
+    exists (runs/ is made if missing: make_default_folder), it is none of `inputs` (nor the same
+    file through a link), and, with force=False, it does not exist yet (refuse_existing).
+    ConfigError (exit 2) otherwise."""
     p = Path(path)
     if p.suffix != suffix:
         raise ConfigError(f"{option} {str(path)!r} should end in {suffix}")
@@ -85,7 +87,26 @@ def check_output(
                 f"{option} {str(path)!r} would overwrite its input {str(source)!r}{link}; "
                 "expected another path"
             )
+    if force is False:
+        refuse_existing(p, option)
     return p
+
+
+def refuse_existing(path: str | os.PathLike, option: str, *, folder: bool = False) -> None:
+    """ConfigError (exit 2) naming `path` if it exists (with folder=True: a folder holding
+    anything): a user's file is replaced only with --force. A command's own unfinished output
+    (`NAME.partial`) is another path, so it never counts."""
+    p = Path(path)
+    if folder:
+        taken = p.is_dir() and any(p.iterdir())
+    else:
+        taken = p.exists() or p.is_symlink()
+    if taken:
+        what = "is a folder that is not empty" if folder else "exists already"
+        raise ConfigError(
+            f"{option} {str(path)!r} {what}; expected a new "
+            f"{'or empty folder' if folder else 'path'}, or --force to replace it"
+        )
 
 
 def check_target(

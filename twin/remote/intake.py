@@ -16,6 +16,13 @@ never ended). The measure is taken each time data arrives on a connection (edge-
 a thread of its own: the server's loop does not wake for it), so what one connection makes the
 server hold stays within about MAX_UNREAD_BYTES.
 
+All connections together are bounded too: the server keeps each connection's last measured unread
+bytes, and when their sum exceeds the server-wide limit (`twin serve --max-held-mib`, 256 MiB by
+default) it shuts down the connection holding the most, then the next, until the sum is within it.
+An ordinary client's requests are taken as they arrive (it holds next to nothing unread), so it is
+never the one cut while a flooding connection holds more; any number of connections then cannot
+make the server hold more than about that limit (plus what arrives while a measure reacts).
+
 Where TCP_INFO or epoll is missing (not Linux), nothing is measured: each frame is still bounded by
 MAX_FRAME_BYTES, a multipart message is not.
 """
@@ -47,20 +54,22 @@ class _Connection:
     peer: tuple
     family: int
     taken: int = 0  # wire bytes of the whole messages the server received from it
+    unread: int = 0  # received - taken at its last measure, less what was taken since
     cut: bool = False
 
 
 class Intake:
-    """Unread bytes per connection; over `limit`, the connection is shut down (see the module
-    docstring).
+    """Unread bytes per connection; over `limit`, the connection is shut down, and while all of
+    them together are over `total_limit`, the one holding the most is (see the module docstring).
 
     The server reports, in order, each connection ZMQ accepted (its descriptor, from the socket
     monitor), each one that closed, and each message it received (the descriptor it came over,
     ZMQ_SRCFD); a thread of ours measures a connection whenever data arrives on it. Its status lines
     wait in `lines()` for the server's loop to print them (one writer: lines never interleave)."""
 
-    def __init__(self, limit: int) -> None:
-        self.limit = limit
+    def __init__(self, limit: int, total_limit: int | None = None) -> None:
+        self.total_limit = limit if total_limit is None else total_limit
+        self.limit = min(limit, self.total_limit)
         self._conns: dict[int, _Connection] = {}
         self._lock = threading.Lock()  # _conns: the server's loop reports, the thread measures
         self._lines: list[str] = []
@@ -125,6 +134,7 @@ class Intake:
             conn = self._conns.get(fd)
             if conn is not None:
                 conn.taken += nbytes
+                conn.unread = max(0, conn.unread - nbytes)
 
     def close(self) -> None:
         """End the thread, release the epoll and the pipe (once: a second call does nothing)."""
@@ -171,9 +181,26 @@ class Intake:
         received = probe[2]
         # a message counted against the wrong connection gives no credit
         conn.taken = min(conn.taken, received)
-        unread = received - conn.taken
-        if unread <= self.limit:
+        conn.unread = received - conn.taken
+        if conn.unread > self.limit:
+            self._cut(fd, conn, f"over the limit of {self.limit} for one connection")
             return
+        total = sum(c.unread for c in self._conns.values() if not c.cut)
+        while total > self.total_limit:
+            victim_fd, victim = max(
+                ((f, c) for f, c in self._conns.items() if not c.cut), key=lambda fc: fc[1].unread
+            )
+            self._cut(
+                victim_fd,
+                victim,
+                f"while all connections together held {total} bytes, over the server's limit "
+                f"of {self.total_limit} (--max-held-mib)",
+            )
+            total -= victim.unread
+            victim.cut = True  # also when it was gone already: its bytes no longer count
+
+    def _cut(self, fd: int, conn: _Connection, why: str) -> None:
+        """Shut connection `fd` down (the peer it was measured with only) and say why."""
         try:
             s = socket.socket(conn.family, socket.SOCK_STREAM, 0, fd)
         except OSError:
@@ -190,9 +217,9 @@ class Intake:
         conn.cut = True
         where = ":".join(str(p) for p in conn.peer[:2])
         self._lines.append(
-            f"closed the connection from {where}: it sent {unread} bytes without completing a "
-            f"message, over the limit of {self.limit} (a request is one frame; multipart messages "
-            "and requests sent before the previous reply are refused once they exceed it)"
+            f"closed the connection from {where}: it sent {conn.unread} bytes without completing "
+            f"a message, {why} (a request is one frame; multipart messages and requests sent "
+            "before the previous reply are refused once they exceed it)"
         )
 
     def _probe(self, fd: int, family: int) -> tuple[tuple, int, int] | None:

@@ -26,6 +26,9 @@ MAX_FRAME_BYTES = 256 << 20  # hard cap: ZMQ closes a connection announcing a bi
 MAX_UNREAD_BYTES = MAX_FRAME_BYTES + (64 << 10)
 # took (one frame at the hard cap, its framing and the handshake); above, the connection is closed
 # (intake.py)
+# all connections together (twin serve --max-held-mib): any number of flooding connections cannot
+# make the server hold more than about this (intake.py)
+DEFAULT_MAX_HELD_BYTES = 256 << 20
 MAX_DEPTH = 32  # nested arrays/maps (a request map holding args is 2 deep)
 MAX_ITEMS = 100_000  # CBOR data items in one request (a request of n bytes holds at most n)
 MAX_ARGS = 64

@@ -17,7 +17,8 @@ Bounds on what peers can make the server hold:
   whole messages (one frame's worth). Over that, the server shuts the connection down (intake.py):
   ZMQ hands a multipart message over only once all its parts are in, so this is what stops a peer
   from making it buffer an endless multipart message (or requests sent without waiting for the
-  replies).
+  replies). All connections together may hold at most max_held_bytes (DEFAULT_MAX_HELD_BYTES, 256
+  MiB): over it, the connection holding the most is shut down, and the others are served.
 - Clients: at most MAX_CLIENTS uuids at once, MAX_CLIENTS_PER_CONNECTION per connection. A client is
   forgotten when its connection closes or after its own timeout; and when all MAX_CLIENTS slots are
   taken, a new uuid takes the slot of the least recently seen client that has been silent for at
@@ -42,6 +43,7 @@ from twin.model.errors import ConfigError, TwinError
 from twin.remote import DEFAULT_STEP_GRACE_S, STEP_GRACE_RANGE_S
 from twin.remote.intake import Intake, wire_bytes
 from twin.remote.protocol import (
+    DEFAULT_MAX_HELD_BYTES,
     EMPTY_REPLY,
     MAX_FRAME_BYTES,
     MAX_REQUEST_BYTES,
@@ -109,6 +111,7 @@ class Server:
         speed: float = 1.0,
         step_grace_s: float = DEFAULT_STEP_GRACE_S,
         log: Callable[[str], None] = print,
+        max_held_bytes: int = DEFAULT_MAX_HELD_BYTES,
     ) -> None:
         if mode not in MODES:
             raise ConfigError(
@@ -144,7 +147,7 @@ class Server:
         self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)
         self.socket.setsockopt(zmq.RCVHWM, RCVHWM)
         # what a connection sent beyond one frame: shut down
-        self._intake = Intake(MAX_UNREAD_BYTES)
+        self._intake = Intake(MAX_UNREAD_BYTES, max_held_bytes)
         try:
             if port == 0:
                 port = self.socket.bind_to_random_port(f"tcp://{host}")
@@ -523,12 +526,20 @@ def serve(
     rate: int = 1,
     start: bool = False,
     log: Callable[[str], None] = print,
+    max_held_bytes: int = DEFAULT_MAX_HELD_BYTES,
 ) -> int:
     """Run the server until SIGINT/SIGTERM; each start..stop run is recorded to its own file."""
     scene = Scene(config, mcap_path=mcap_path, rrd_path=rrd_path, rate=rate, mode=mode, log=log)
     try:
         server = Server(
-            scene, host=host, port=port, mode=mode, speed=speed, step_grace_s=step_grace_s, log=log
+            scene,
+            host=host,
+            port=port,
+            mode=mode,
+            speed=speed,
+            step_grace_s=step_grace_s,
+            log=log,
+            max_held_bytes=max_held_bytes,
         )
     except BaseException:
         scene.twin.close()

@@ -34,14 +34,17 @@ class SearchRun:
     stopped_by: BaseException | None = None
 
 
-def prepare_folder(path: str) -> Path:
-    """The output folder, created (its parent must exist, or be runs/); an earlier search's
-    minimal.mcap removed, as it is not this one's failure."""
-    from twin.record.outputs import make_default_folder
+def prepare_folder(path: str, *, force: bool = False) -> Path:
+    """The output folder, created (its parent must exist, or be runs/); one that holds anything is
+    refused unless `force`; an earlier search's minimal.mcap removed, as it is not this one's
+    failure."""
+    from twin.record.outputs import make_default_folder, refuse_existing
 
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {path!r} is a file; expected a folder")
+    if not force:
+        refuse_existing(out, "--out", folder=True)
     if not make_default_folder(out.parent):
         raise ConfigError(f"--out {path!r}: folder {str(out.parent)!r} does not exist")
     try:
@@ -102,3 +105,14 @@ def write(done: SearchRun, out: Path, *, save_as: str | None, record: bool) -> l
                 {k: data[k] for k in ("keys", "size", "minimal", "boundary", "runs")},
             )
     return wrote
+
+
+def refuse_golden(name: str) -> None:
+    """--save-golden NAME refused (exit 2) when any of its three files exists, before any work."""
+    from twin.model.golden_files import expect_path
+    from twin.record.outputs import refuse_existing
+    from twin.search.golden import SEARCH_DIR
+
+    definition = SEARCH_DIR / f"{name}.toml"
+    for path in (definition, definition.with_suffix(".mcap"), expect_path(definition)):
+        refuse_existing(path, f"--save-golden {name}:")

@@ -123,6 +123,16 @@ def compare(a: Run, b: Run) -> Comparison:
     elif keys_a != keys_b:
         why = f"varied keys differ: {', '.join(keys_a) or 'none'} and {', '.join(keys_b) or 'none'}"
     if why is None:
+        # the same distributions give the same values: another value is a changed file
+        same_vary = dict(a.spec.vary) == dict(b.spec.vary)
+        moved = paired.first_moved(a.side, b.side) if same_vary else None
+        if moved is not None:
+            key, scenario = moved
+            raise ConfigError(
+                f"results {b.label!r} column {key!r}: scenario {scenario} has another value than "
+                f"in {a.label!r}; expected the same varied values per scenario to pair them (the "
+                "results were changed, or made by another version)"
+            )
         result = paired.pair(a.side, b.side)
         if result.n == 0:
             raise ConfigError(f"{a.label!r} and {b.label!r} share no scenario numbers; expected "

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twin.model.errors import ConfigError
-from twin.sweep.journal import JOURNAL, Journal
+from twin.sweep.journal import JOURNAL, Journal, same_sweep
 from twin.sweep.results import write_definition, write_results
 from twin.sweep.runner import SweepRun, run_sweep
 from twin.sweep.spec import SweepSpec
@@ -43,6 +43,26 @@ def prepare_folder(path: str, *, clear: bool) -> Path:
     return out
 
 
+def refuse_taken(out_dir: str, spec: SweepSpec, *, only: bool) -> None:
+    """ConfigError (exit 2) naming out_dir if it holds anything, unless it is this sweep's own
+    folder and only: --only's scenarios go into their own sweep's folder. The same sweep's folder
+    continues with --resume; anything else is replaced only with --force."""
+    out = Path(out_dir)
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    if same_sweep(out, spec):
+        if only:
+            return
+        raise ConfigError(
+            f"--out {out_dir!r} holds this sweep already; expected --resume to continue it, or "
+            "--force to run it afresh"
+        )
+    raise ConfigError(
+        f"--out {out_dir!r} is a folder that is not empty (not this sweep's); expected a new or "
+        "empty folder, or --force to write this sweep's files over it"
+    )
+
+
 @dataclass
 class Plan:
     """The scenarios a sweep runs in its folder: all of them, the ones a resumed journal lacks, or
@@ -59,15 +79,20 @@ class Plan:
         return len(self.journal.rows) if self.journal is not None else 0
 
 
-def plan(spec: SweepSpec, out_dir: str, *, only: list[int] | None, resume: bool) -> Plan:
+def plan(
+    spec: SweepSpec, out_dir: str, *, only: list[int] | None, resume: bool, force: bool = True
+) -> Plan:
     """The folder made ready and what runs in it: --only's scenarios (the folder's results left
-    alone), or the whole sweep with its journal started afresh or, with resume, continued."""
+    alone), or the whole sweep with its journal started afresh or, with resume, continued. Without
+    force, a folder that holds anything is refused (refuse_taken) before it is touched."""
     if only is not None and resume:
         raise ConfigError("--only and --resume cannot go together; expected one of them")
     if only is not None and max(only) >= spec.scenarios:
         raise ConfigError(
             f"--only {max(only)} is out of range; the sweep has scenarios 0..{spec.scenarios - 1}"
         )
+    if not force and not resume:
+        refuse_taken(out_dir, spec, only=only is not None)
     out = prepare_folder(out_dir, clear=only is None and not resume)
     if only is not None:
         return Plan(out, only, len(only))

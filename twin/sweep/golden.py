@@ -142,6 +142,7 @@ def check_sweep(
         elif golden is not None:
             problems, report = judge(golden, new, spec.tolerances()), _report(golden, new)
             within = "" if new == golden else "within tolerance: " + _moves(golden, new)
+            notes = [f"judged by its summary only (no {scenarios_path.name})"]
         else:
             problems, report, within = ["no golden summary yet"], _report(golden, new), ""
         seconds = time.perf_counter() - t0

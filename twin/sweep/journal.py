@@ -30,6 +30,21 @@ def identity(spec: SweepSpec) -> dict:
             "timeout_s": spec.timeout_s}
 
 
+def same_sweep(out_dir: str | os.PathLike, spec: SweepSpec) -> bool:
+    """True if out_dir holds a journal whose first line names this sweep's definition."""
+    try:
+        with open(Path(out_dir) / JOURNAL, "rb") as f:
+            first = f.readline(1 << 20)
+        head = load_json_text(first, "journal")
+    except (OSError, ConfigError):
+        return False
+    return (
+        isinstance(head, dict)
+        and head.get("twin_sweep_journal") == FORMAT
+        and head.get("definition") == identity(spec)
+    )
+
+
 class Journal:
     """The journal of one sweep in out_dir. resume=False starts it afresh; resume=True keeps the
     rows of an earlier run of the same definition (`rows`; `done(i)` says whether scenario i has

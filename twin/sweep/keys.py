@@ -55,19 +55,22 @@ class Key:
     index: int | None = None
 
 
-def resolve_key(name: str, config: TwinConfig, fn: TaskFn, task: str) -> Key:
-    """The Key a name means on this configuration and task; ConfigError naming what is expected."""
+def resolve_key(
+    name: str, config: TwinConfig, fn: TaskFn, task: str, *, option: str = "--vary"
+) -> Key:
+    """The Key a name means on this configuration and task; ConfigError naming the option (--vary,
+    or twin run's --set) and what is expected."""
     head, dot, tail = name.partition(".")
     objects = [o.name for o in config.objects]
     if not dot or not tail:
         raise ConfigError(
-            f"--vary key {name!r} is invalid; expected PART.FIELD: {_expected(objects)}"
+            f"{option} key {name!r} is invalid; expected PART.FIELD: {_expected(objects)}"
         )
     if head == "task":
         known = task_params(fn)
         if known is not None and tail not in known:
             raise ConfigError(
-                f"--vary key {name!r}: task {task!r} takes no parameter {tail!r}; "
+                f"{option} key {name!r}: task {task!r} takes no parameter {tail!r}; "
                 f"its parameters: {', '.join(known) or 'none'}"
             )
         return Key(name, "task", tail)
@@ -75,19 +78,19 @@ def resolve_key(name: str, config: TwinConfig, fn: TaskFn, task: str) -> Key:
     if fields is not None:
         if tail not in fields:
             raise ConfigError(
-                f"--vary key {name!r} is unknown; expected {head}. followed by one of "
+                f"{option} key {name!r} is unknown; expected {head}. followed by one of "
                 f"{', '.join(fields)}"
             )
         return Key(name, head, tail)
     if head in objects:
         if tail not in OBJECT_FIELDS:
             raise ConfigError(
-                f"--vary key {name!r} is unknown; expected {head}. followed by one of "
+                f"{option} key {name!r} is unknown; expected {head}. followed by one of "
                 f"{', '.join(OBJECT_FIELDS)}"
             )
         field, index = OBJECT_FIELDS[tail]
         return Key(name, "object", field, head, index)
-    raise ConfigError(f"--vary key {name!r} is unknown; expected {_expected(objects)}")
+    raise ConfigError(f"{option} key {name!r} is unknown; expected {_expected(objects)}")
 
 
 def _expected(objects: list[str]) -> str:

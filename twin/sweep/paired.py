@@ -72,14 +72,65 @@ def side_from_table(table: pa.Table, label: str) -> Side:
                           "results.parquet")
     keys = [c for c in table.column_names if c not in NOT_VARIED]
     table = table.select([*RESULT_COLUMNS, *keys])
+    check_columns(table, label)
     table = table.take(pc.sort_indices(table, [("scenario", "ascending")]))
     scenario = table.column("scenario").to_numpy()
     if len(scenario) > 1 and not (np.diff(scenario) > 0).all():
-        raise ConfigError(f"results {label!r} hold a scenario twice; expected one row per scenario")
+        i = int(np.flatnonzero(np.diff(scenario) == 0)[0])
+        raise ConfigError(f"results {label!r} column 'scenario': scenario {scenario[i]} is in two "
+                          "rows; expected one row per scenario")
     ok = pc.equal(table.column("outcome"), "ok").fill_null(False).to_numpy(zero_copy_only=False)
     placement = table.column("placement_error_mm").cast(pa.float64())
     placement_mm = placement.to_numpy(zero_copy_only=False).astype(float)  # null -> NaN
     return Side(label, scenario, ok, placement_mm, table, keys)
+
+
+OUTCOMES = ("ok", "error")  # what a sweep's worker writes
+
+
+def check_columns(table: pa.Table, label: str) -> None:
+    """The result columns hold what a sweep writes, checked as columns (10M rows stay fast):
+    scenario whole numbers >= 0, outcome one of OUTCOMES, error text or null, placement_error_mm a
+    finite number >= 0 or null. ConfigError naming the file, the column and the first bad row
+    (row 1 is the file's first)."""
+
+    def bad(column: str, mask, expected: str) -> ConfigError:
+        row = int(np.flatnonzero(np.asarray(mask))[0]) if mask is not None else 0
+        value = table.column(column)[row].as_py()
+        shown = repr(value) if not isinstance(value, str) else repr(value[:40])
+        return ConfigError(f"results {label!r} column {column!r} row {row + 1} holds {shown}; "
+                           f"expected {expected}")
+
+    def nulls(column: str):
+        return pc.is_null(table.column(column)).to_numpy(zero_copy_only=False)
+
+    if table.num_rows == 0:
+        return
+    kinds = {c: table.schema.field(c).type for c in RESULT_COLUMNS}
+    if not pa.types.is_integer(kinds["scenario"]):
+        raise bad("scenario", None, "whole numbers (an integer column)")
+    scenario = table.column("scenario")
+    wrong = nulls("scenario") | pc.fill_null(pc.less(scenario, 0), False).to_numpy(
+        zero_copy_only=False)
+    if wrong.any():
+        raise bad("scenario", wrong, "a whole number >= 0")
+    if not (pa.types.is_string(kinds["outcome"]) or pa.types.is_large_string(kinds["outcome"])):
+        raise bad("outcome", None, f"text: {' or '.join(OUTCOMES)}")
+    known = pc.is_in(table.column("outcome"), value_set=pa.array(OUTCOMES))
+    wrong = ~pc.fill_null(known, False).to_numpy(zero_copy_only=False)
+    if wrong.any():
+        raise bad("outcome", wrong, f"one of {', '.join(OUTCOMES)}")
+    if not (pa.types.is_string(kinds["error"]) or pa.types.is_large_string(kinds["error"])
+            or pa.types.is_null(kinds["error"])):
+        raise bad("error", None, "text or null")
+    kind = kinds["placement_error_mm"]
+    if not (pa.types.is_floating(kind) or pa.types.is_integer(kind) or pa.types.is_null(kind)):
+        raise bad("placement_error_mm", None, "millimetres (a number column)")
+    mm = table.column("placement_error_mm").cast(pa.float64()).to_numpy(zero_copy_only=False)
+    with np.errstate(invalid="ignore"):
+        wrong = ~nulls("placement_error_mm") & ~(np.isfinite(mm) & (mm >= 0))
+    if wrong.any():
+        raise bad("placement_error_mm", wrong, "a finite number of millimetres >= 0, or null")
 
 
 def read_side(path: str | os.PathLike, label: str | None = None) -> Side:
@@ -217,6 +268,25 @@ def pair(reference: Side, new: Side) -> Paired:
         _flips(reference, new, ir, inew, np.flatnonzero(worse_mask)[:LISTED]),
         _flips(reference, new, ir, inew, np.flatnonzero(better_mask)[:LISTED]),
         moved, common, kind, power.detectable_drop_pct(n, worse + better))
+
+
+def first_moved(reference: Side, new: Side) -> tuple[str, int] | None:
+    """The first varied key (in reference's order) whose value differs in a scenario both hold, and
+    the first such scenario; None when every shared scenario has the same values."""
+    common, ir, inew = np.intersect1d(reference.scenario, new.scenario, assume_unique=True,
+                                      return_indices=True)
+    for key in reference.keys:
+        if key not in new.keys:
+            continue
+        a = reference.table.column(key).take(pa.array(ir))
+        b = new.table.column(key).take(pa.array(inew))
+        if a.type != b.type:
+            return key, int(common[0])
+        same = pc.or_(pc.equal(a, b).fill_null(False), pc.and_(pc.is_null(a), pc.is_null(b)))
+        differ = ~same.to_numpy(zero_copy_only=False)
+        if differ.any():
+            return key, int(common[np.flatnonzero(differ)[0]])
+    return None
 
 
 def _differs(a: pa.ChunkedArray, b: pa.ChunkedArray) -> int:

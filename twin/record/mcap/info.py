@@ -262,8 +262,8 @@ def format_info(info: Info, *, all_events: bool = False) -> list[str]:
 
 
 def setup_lines(config: TwinConfig, run: dict) -> list[str]:
-    """What the run was: the robot, each scene object with its mass and start pose, the pad's
-    strength and limits, the cameras, the task and its parameters."""
+    """What the run was: the robot, each scene object with its mass, size, start pose and colour,
+    the pad's strength and limits, the cameras, the task and its parameters."""
     p, pad = config.profile, config.suction
     lines = [
         "setup:",
@@ -274,7 +274,8 @@ def setup_lines(config: TwinConfig, run: dict) -> list[str]:
         x, y, z = o.pos_m
         lines.append(
             f"  object {o.name}: {o.mass_kg:g} kg, {' x '.join(f'{s:g}' for s in o.size_m)} m, at "
-            f"({x:g}, {y:g}, {z:g}) m, yaw {math.degrees(o.yaw_rad):g} deg, friction {o.friction:g}"
+            f"({x:g}, {y:g}, {z:g}) m, yaw {math.degrees(o.yaw_rad):g} deg, "
+            f"friction {o.friction:g}, colour rgba ({', '.join(f'{c:g}' for c in o.rgba)})"
         )
     strength = (
         "infinite strength"

@@ -33,6 +33,7 @@ from twin.record.rerun.process import (
     wait_listening,
 )
 from twin.record.rerun.rrd_file import file_kind, read_scalars, rerun_executable, verify_rrd
+from twin.record.rerun.vulkan import INSTALL_HINT, missing_driver
 from twin.record.rerun.writer import write_rrd
 
 __all__ = [
@@ -207,6 +208,8 @@ def screenshot(
     from rerun.experimental import ViewerClient
 
     check_target(out_png, "screenshot", "a .png file path", error=ViewerError)
+    if missing := missing_driver():
+        raise ViewerError(missing)
     out = Path(out_png).resolve()
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
     (port,) = loopback_ports(("--grpc-port", grpc_port))
@@ -259,14 +262,21 @@ def screenshot(
                 _settled_screenshot(client, out, Path(work_dir) / "again.png")
                 problems = [f"{v.name}: {r}" for v in client.get_state().views for r in v.reports]
             except (RuntimeError, ValueError, OSError) as err:
-                raise ViewerError(
-                    f"the headless Rerun viewer failed to take the screenshot: {err}"
-                ) from err
+                raise _failed(err, log) from err
         finally:
             stop(proc)
     if not out.is_file():
         raise ViewerError(f"the headless viewer did not write {str(out)!r}")
     return (None if at_ns is None else at_ns * 1e-9), problems
+
+
+def _failed(err: Exception, log) -> ViewerError:
+    """The screenshot's failure with the viewer's last log line and what to install."""
+    why = last_log_line(log)
+    return ViewerError(
+        f"the headless Rerun viewer failed to take the screenshot: {err}"
+        f"{' (its log: ' + why + ')' if why else ''}; if it has no renderer: {INSTALL_HINT}"
+    )
 
 
 def _settled_screenshot(client, out: Path, again: Path) -> None:
@@ -288,7 +298,7 @@ def _connect(client_cls, url: str, proc: subprocess.Popen, log):
             err = last_log_line(log)
             raise ViewerError(
                 f"the headless Rerun viewer exited with code {proc.returncode}"
-                f"{': ' + err if err else ''} (needs Vulkan, e.g. Debian's mesa-vulkan-drivers)"
+                f"{': ' + err if err else ''}; if it has no renderer: {INSTALL_HINT}"
             )
         try:
             client = client_cls.connect(url)

@@ -11,8 +11,8 @@ import os
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, whole_number
-from twin.cli.ros2 import add_bag_options, diff_with_bag
 from twin.cli.record import add_force_option
+from twin.cli.ros2 import add_bag_options, diff_with_bag
 from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
 from twin.signals import Terminated

@@ -122,6 +122,9 @@ class Outcome:
     frames: int = 0
     seconds: float = 0.0
     kept: list[str] = field(default_factory=list)  # the files --keep wrote for it
+    onset: str = ""  # "step N (t = T s)" of the first divergence ("" when none)
+    section: str = ""  # its HTML report section (twin.report), when asked for and it differs
+    recorded_on: str = ""  # the machine the golden was recorded on, in one line
 
 
 def check_one(
@@ -130,11 +133,13 @@ def check_one(
     update: bool = False,
     allow_error: bool = False,
     keep: str | None = None,
+    html: bool = False,
 ) -> Outcome:
     """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a
     run whose task failed unless allow_error (a crash is not a new golden). keep (DIR/NAME, from
     verify.keep.plan_keep): a golden that differs or is refused leaves its re-run, report and diff
-    view there; one that matches leaves nothing."""
+    view there; one that matches leaves nothing. html: a golden that differs or is refused gets
+    its HTML report section (twin.report.section), drawn here where both runs are."""
     from twin.record.mcap.reader import load
     from twin.verify.keep import KEPT, keep_recording, staging
 
@@ -150,12 +155,26 @@ def check_one(
                 publish(tmp, path)
             elif staged is not None and outcome.status in KEPT:
                 outcome.kept = keep_recording(staged, golden, new, result, record_to)
+            _describe(outcome, golden, new, result, html)
             outcome.seconds = time.perf_counter() - t0
             return outcome
         except TwinError as err:
             return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
         finally:
             tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+
+
+def _describe(outcome: Outcome, golden: Recording, new: Recording, result, html: bool) -> None:
+    """The report's part of an outcome: the onset, the machine the golden was recorded on, and
+    with html the section of a golden that differs or is refused."""
+    from twin.record.machine import machine_text
+    from twin.report.section import commands_for, golden_section, onset_text
+
+    outcome.onset = onset_text(result)
+    outcome.recorded_on = machine_text(golden.machine) if golden.machine else ""
+    if html and outcome.status in ("differ", "refused"):
+        commands = commands_for(outcome.path, outcome.kept)
+        outcome.section = golden_section(golden, new, result, outcome.path, commands)
 
 
 def _rerun_and_judge(golden: Recording, tolerances: Tolerances, record_to: Path | None):
@@ -381,18 +400,19 @@ def check_all(
     allow_error: bool = False,
     run_many: Callable | None = None,
     keep: dict[str, str] | None = None,
+    html: bool = False,
 ) -> list[Outcome]:
     """Check every golden, in `jobs` processes (or through run_many(fn, argument tuples), which
     yields (index, result) as each finishes: a sweep executor such as Dask's); outcomes in the order
     of paths. keep: DIR/NAME by golden (verify.keep.plan_keep), written by the process that checks
-    it."""
+    it. html: each golden that differs carries its HTML report section (Outcome.section)."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     if run_many is None:
         run_many = _in_turn if jobs == 1 or len(paths) <= 1 else functools.partial(_in_pool, jobs)
     results: dict[str, Outcome] = {}
     keep = keep or {}
-    items = [(p, tolerances, update, allow_error, keep.get(p)) for p in paths]
+    items = [(p, tolerances, update, allow_error, keep.get(p), html) for p in paths]
     for i, outcome in run_many(check_one, items):
         results[paths[i]] = outcome
         if progress:

@@ -6,6 +6,7 @@ where the seeds differ, --report Markdown or JSON, --fail-if-worse, and the pict
 from __future__ import annotations
 
 import json
+import re
 import sys
 
 import pyarrow.parquet as pq
@@ -160,3 +161,22 @@ def test_sweep_plot_and_bad_input(runs, tmp_path, capsys, monkeypatch):
     )  # before it runs
     capsys.readouterr()
     assert not (tmp_path / "never" / "results.parquet").exists()
+
+
+def test_compare_html_shows_the_flips_the_interval_and_the_map(runs, tmp_path, capsys):
+    a, b = _outcomes(runs / "a"), _outcomes(runs / "b")
+    worse = sorted(i for i in a if a[i] and not b[i])
+    page_path = tmp_path / "c.html"
+    assert main(["sweep", "compare", str(runs / "a"), str(runs / "b"), "--html",
+                 str(page_path)]) == 0
+    assert f"wrote {page_path}" in capsys.readouterr().out
+    page = page_path.read_text()
+    assert "<title>twin sweep compare</title>" in page
+    rows = re.findall(r"<tr><td>(\d+)</td><td>ok -&gt; failed</td>", page)
+    assert [int(s) for s in rows] == worse[: len(rows)] and rows  # the flips table
+    assert f"McNemar's exact p = {mcnemar_exact(len(worse), 0):.3g}" in page
+    assert "Newcombe's paired 95 % interval [" in page
+    assert "<img alt=\"success map\"" in page and "src=\"data:image/png;base64," in page
+    assert not re.search(r"(src|href)\s*=\s*[\"']?(https?:)?//", page)
+    assert main(["sweep", "compare", str(runs / "a"), str(runs / "b"), "--html", "c.htm"]) == 2
+    assert "--html 'c.htm' should end in .html" in capsys.readouterr().err

@@ -256,7 +256,8 @@ def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep) -> 
         # statistical goldens: each sweep spread over the executor's workers
         for definition in goldens.sweeps:
             outcomes.append(
-                check_sweep(definition, executor, update=args.update, keep=keep.get(definition))
+                check_sweep(definition, executor, update=args.update, keep=keep.get(definition),
+                            html=bool(args.html))
             )
             progress(outcomes[-1])
         # a failure found by `twin search`: does it still fail that way?

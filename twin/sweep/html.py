@@ -18,8 +18,7 @@ _FLIP_HEAD = ("scenario", "flip", "values", "before", "now", "placement before (
               "placement now (mm)")
 
 
-def _flips_table(comparison) -> str:
-    p = comparison.result
+def _flips_table(p) -> str:
     flips = [("ok -> failed", f) for f in p.worse_flips] + [("failed -> ok", f)
                                                             for f in p.better_flips]
     if not flips:
@@ -41,24 +40,21 @@ def _mm(x: float | None) -> str:
     return "" if x is None else f"{x:.3f}"
 
 
-def _interval(comparison) -> str:
-    p = comparison.result
+def _interval(p) -> str:
     lo, hi = p.interval
     return (f"<p>success rate {p.reference_rate:.1%} -> {p.new_rate:.1%} over {p.n} scenarios "
             f"(difference {p.difference:+.1%}, Newcombe's paired 95 % interval "
             f"[{lo:+.1%}, {hi:+.1%}], McNemar's exact p = {p.mcnemar_p:.3g})</p>")
 
 
-def _success_map(comparison) -> str:
+def _success_map(new, reference, paired, title: str) -> str:
     """sweep.plot's picture of the new sweep (flips ringed), inline; a line saying why not."""
     from twin.sweep.plot import plot_sweep
 
-    paired = comparison.result if comparison.is_paired else None
-    title = f"{comparison.new.label} against {comparison.reference.label}"
     with tempfile.TemporaryDirectory() as folder:
         png = Path(folder) / "map.png"
         try:
-            plot_sweep(comparison.new.side, str(png), title, paired, comparison.reference.side)
+            plot_sweep(new, str(png), title, paired, reference)
         except ConfigError as err:
             return f"<p>no success map: {html.escape(str(err))}</p>"
         data = base64.b64encode(png.read_bytes()).decode()
@@ -75,13 +71,27 @@ def write_compare_page(comparison, path: str) -> None:
     body = [(f"<section class='{'differ' if comparison.problems else 'same'}'>"
             f"<h2>{html.escape(name)}</h2><p class='changed'>{html.escape(verdict)}</p>")]
     if comparison.is_paired:
-        body += ["<h3>flips</h3>", _flips_table(comparison), _interval(comparison)]
+        body += ["<h3>flips</h3>", _flips_table(comparison.result), _interval(comparison.result)]
     diffs = comparison.differences or ["none"]
     body.append("<h3>definitions differ in</h3><ul>"
                 + "".join(f"<li>{html.escape(d)}</li>" for d in diffs) + "</ul>")
-    body += ["<h3>success map</h3>", _success_map(comparison),
+    paired = comparison.result if comparison.is_paired else None
+    success = _success_map(comparison.new.side, comparison.reference.side, paired, name)
+    body += ["<h3>success map</h3>", success,
              (f"<details><summary>the text report</summary><pre>"
              f"{html.escape(comparison.text())}</pre></details></section>")]
     entry = Entry(name, "differ" if comparison.problems else "match", verdict,
                   section="".join(body), text=comparison.text())
     write_page(path, render_page([entry], "twin sweep compare"))
+
+
+def golden_section(definition: str, summary: str, p, new, reference, report: str) -> str:
+    """A paired sweep golden that differs, in twin check's page: what failed, the flips, the
+    interval and p, and the success map of the new run (p: paired.Paired of new against the
+    golden's results)."""
+    return (f"<section class='differ'><h2>{html.escape(definition)}</h2>"
+            f"<p class='changed'>{html.escape(summary)}</p><h3>flips</h3>{_flips_table(p)}"
+            f"{_interval(p)}<h3>success map</h3>"
+            f"{_success_map(new, reference, p, f'{definition}: the new run against its golden')}"
+            f"<details><summary>the text report</summary><pre>{html.escape(report)}</pre>"
+            "</details></section>")

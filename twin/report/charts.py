@@ -124,8 +124,7 @@ def _error_chart(run: FieldRun, part: slice, chosen: list[int], title: str) -> d
         columns.append(({"label": f"error {run.elements[k]}".strip(),
                          "color": PALETTE[(k if len(chosen) > 1 else 3) % len(PALETTE)]},
                         run.error[part, k] * scale))
-    return _chart(title, run.t_s[part], columns, run, f"error ({unit})" if unit else "error",
-                  [[1, 2, ALLOWED]])
+    return _chart(title, run.t_s[part], columns, run, unit.replace("|", " | "), [[1, 2, ALLOWED]])
 
 
 def field_charts(run: FieldRun) -> list[dict]:

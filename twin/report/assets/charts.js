@@ -16,15 +16,17 @@
       ctx.setLineDash([5 * devicePixelRatio, 4 * devicePixelRatio]);
       ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, bottom); ctx.stroke();
       ctx.fillStyle = "#9467bd";
+      ctx.textAlign = "left";
+      ctx.textBaseline = "alphabetic";
       ctx.font = (11 * devicePixelRatio) + "px sans-serif";
-      ctx.fillText(spec.onset.label, x + 4 * devicePixelRatio, top + 12 * devicePixelRatio);
+      ctx.fillText(spec.onset.label, x + 4 * devicePixelRatio, bottom - 6 * devicePixelRatio);
       ctx.restore();
     };
   }
 
   function size(el, square) {
     var w = Math.max(240, el.clientWidth || 480);
-    return {width: w, height: square ? Math.min(w, 320) : 230};
+    return {width: w, height: square ? Math.min(w, 320) : 250};
   }
 
   function axes(spec) {
@@ -46,9 +48,11 @@
       legend: {live: false}, hooks: {draw: [onsetHook(spec)]}
     });
     var u = new uPlot(opts, data, el);
+    // the legend may leave out x: count its rows from the end
     var rows = u.root.querySelectorAll(".u-legend .u-series");
+    var skip = rows.length - spec.series.length;
     spec.series.forEach(function (s, i) {
-      if (s.legend === false && rows[i + 1]) rows[i + 1].style.display = "none";
+      if (s.legend === false && rows[i + skip]) rows[i + skip].style.display = "none";
     });
     return u;
   }
@@ -103,6 +107,8 @@
     function draw(u) {
       var ctx = u.ctx, r = devicePixelRatio;
       ctx.save();
+      ctx.textAlign = "left";
+      ctx.textBaseline = "alphabetic";
       ctx.font = (10 * r) + "px sans-serif";
       ["golden", "candidate"].forEach(function (side) {
         var y = u.valToPos(Y[side], "y", true);

@@ -126,7 +126,14 @@ def render_page(entries: list[Entry], title: str, checked_on: str = "") -> str:
 
 
 def _md(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    """Text in a Markdown table cell: pipes escaped, one line, no tag GitHub would take as HTML."""
+    return (text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+            .replace("|", "\\|").replace("\n", " "))
+
+
+def _code(text: str) -> str:
+    """Text in a code span of a table cell (taken literally there): pipes escaped, one line."""
+    return text.replace("|", "\\|").replace("\n", " ").replace("`", "'")
 
 
 def render_summary(entries: list[Entry], title: str) -> str:
@@ -136,7 +143,7 @@ def render_summary(entries: list[Entry], title: str) -> str:
     lines = ["| golden | status | verdict | onset | what changed |", "|---|---|---|---|---|"]
     size = len(head.encode()) + sum(len(x.encode()) + 1 for x in lines) + 200
     for n, e in enumerate(entries):
-        row = (f"| `{_md(e.name)}` | {e.status} | {'pass' if e.passed else '**FAIL**'} | "
+        row = (f"| `{_code(e.name)}` | {e.status} | {'pass' if e.passed else '**FAIL**'} | "
                f"{_md(e.onset)} | {_md(e.changed)} |")
         size += len(row.encode()) + 1
         if size > SUMMARY_LIMIT_BYTES:

@@ -109,7 +109,10 @@ def golden_section(golden, candidate, result, title: str, commands: list[str]) -
     parts.append(chart_html(events_chart(golden, candidate, result.event_diffs, dt_s, onset),
                             "chart wide"))
     parts.append(_event_table(result.event_diffs, dt_s))
-    parts.append(pictures_html(golden, candidate, onset))
+    # what a camera sees changes where the frames first diverge (a command may differ earlier)
+    seen = min((f.first.step for f in result.fields if f.first is not None and f.unit),
+               default=onset)
+    parts.append(pictures_html(golden, candidate, seen))
     parts.append(differences_html(result))
     cmds = "\n".join(html.escape(c) for c in commands)
     parts.append(f"<h4>see it again</h4><pre>{cmds}</pre>")

@@ -67,10 +67,36 @@ def events_chart(golden, candidate, diffs, dt_s: float, onset_step: int | None) 
                                                        "label": f"onset step {onset_step}"}}
 
 
+MAX_LOOKED_AT = 600  # picture pairs compared after the onset to find the first that differs
+
+
+def _first_differing(gt, ct, step: int):
+    """The indices (golden, candidate) of the first pair of pictures at one step, at or after
+    `step`, that differ (within MAX_LOOKED_AT pairs), and their pixels; the pair nearest `step`
+    when none does."""
+    from twin.pictures import track_rgb
+
+    gi = _nearest(gt.step, step)
+    first = None
+    for i in range(gi, min(len(gt), gi + MAX_LOOKED_AT)):
+        j = _nearest(ct.step, int(gt.step[i]))
+        if int(ct.step[j]) != int(gt.step[i]):
+            continue
+        a, b = track_rgb(gt, i), track_rgb(ct, j)
+        first = first or (i, j, a, b)
+        if a.shape != b.shape or not np.array_equal(a, b):
+            return i, j, a, b
+    if first is None:
+        j = _nearest(ct.step, step)
+        return gi, j, track_rgb(gt, gi), track_rgb(ct, j)
+    return first
+
+
 def pictures_html(golden, candidate, onset_step: int | None) -> str:
-    """Each camera both runs have: its pictures nearest the onset in each run and their absolute
-    difference (brightened), as inline PNGs; "" when the files have none."""
-    from twin.pictures import png_bytes, track_rgb
+    """Each camera both runs have: the first pictures at or after onset_step that differ between
+    the runs (the ones at the onset when none does), and their absolute difference (brightened),
+    as inline PNGs; "" when the files have none."""
+    from twin.pictures import png_bytes
 
     if onset_step is None:
         return ""
@@ -79,22 +105,23 @@ def pictures_html(golden, candidate, onset_step: int | None) -> str:
         ct = candidate.cameras.get(name)
         if ct is None or not len(gt) or not len(ct):
             continue
-        gi, ci = _nearest(gt.step, onset_step), _nearest(ct.step, onset_step)
-        a, b = track_rgb(gt, gi), track_rgb(ct, ci)
+        gi, ci, a, b = _first_differing(gt, ct, onset_step)
         cells = [(f"golden, step {int(gt.step[gi])}", a),
                  (f"candidate, step {int(ct.step[ci])}", b)]
         if a.shape == b.shape:
             diff = np.abs(a.astype(np.int16) - b.astype(np.int16))
-            peak = max(int(diff.max()), 1)
-            cells.append((f"difference (x{255 / peak:.3g})",
-                           (diff * (255.0 / peak)).clip(0, 255).astype(np.uint8)))
+            peak = int(diff.max())
+            what = (f"difference (brightened x{255 / peak:.3g})" if peak
+                    else "difference: none, the pictures are the same")
+            cells.append((what, (diff * (255.0 / max(peak, 1))).clip(0, 255).astype(np.uint8)))
         imgs = "".join(
             f'<figure class="pic"><img alt="{html.escape(cap)}" src="data:image/png;base64,'
             f'{base64.b64encode(png_bytes(rgb)).decode()}"><figcaption>{html.escape(cap)}'
             "</figcaption></figure>"
             for cap, rgb in cells
         )
-        out.append(f"<h4>camera {html.escape(name)} at the onset</h4><div class=pics>{imgs}</div>")
+        out.append(f"<h4>camera {html.escape(name)}: the first pictures after the onset (step "
+                   f"{onset_step}) that differ</h4><div class=pics>{imgs}</div>")
     return "".join(out)
 
 

@@ -80,6 +80,7 @@ def test_a_2mm_move_gives_a_self_contained_page_and_a_summary(moved):
     summary = (moved / "s.md").read_text()
     assert "report: r.html, s.md" in (moved / "out.txt").read_text()
     assert not REMOTE.search(page), REMOTE.search(page)
+    assert "http" not in page  # not even a comment names a host
     assert page.count('<div class="chart') >= 3
     onset = _onset(summary)
     assert f"step {onset} (t = " in page  # the onset in the page's text, not only drawn
@@ -184,6 +185,14 @@ def test_a_bad_report_path_is_one_line_before_any_work(work, capsys, monkeypatch
     assert code == 2
     assert expected in err and len(err.strip().splitlines()) == 1, err
     assert "checking" not in out  # refused before any golden was run
+
+
+def test_replay_html_of_a_golden_that_replays_the_same(work, tmp_path, capsys):
+    code, _, err = twin(capsys, "replay", work / "goldens/carry.mcap", "--html",
+                        tmp_path / "p.html")
+    assert code == 0, err
+    page = (tmp_path / "p.html").read_text()
+    assert "<title>twin replay</title>" in page and "every golden matched (1 of 1)" in page
 
 
 def test_diff_html_draws_two_files(work, moved, tmp_path, capsys):

@@ -16,6 +16,7 @@ from twin.report.charts import FieldRun, field_charts
 from twin.report.views import events_chart, paths_charts, pictures_html
 
 MAX_FIELDS = 4  # diverging fields drawn, in the order they diverge (the rest are in the table)
+MAX_ROWS = 40  # event differences and list items shown; the rest are counted
 
 
 def chart_html(spec: dict, css: str = "chart") -> str:
@@ -64,11 +65,16 @@ def field_runs(golden, candidate, result) -> list[FieldRun]:
     return out
 
 
+def _more(shown: int, total: int) -> str:
+    """"and N more" under a list or table cut at `shown` rows ("" when it was not cut)."""
+    return f"<p>and {total - shown} more</p>" if total > shown else ""
+
+
 def _list(title: str, items: list[str]) -> str:
     if not items:
         return ""
-    lis = "".join(f"<li>{html.escape(i)}</li>" for i in items)
-    return f"<h4>{html.escape(title)}</h4><ul>{lis}</ul>"
+    lis = "".join(f"<li>{html.escape(i)}</li>" for i in items[:MAX_ROWS])
+    return f"<h4>{html.escape(title)}</h4><ul>{lis}</ul>{_more(MAX_ROWS, len(items))}"
 
 
 def differences_html(result) -> str:
@@ -145,10 +151,10 @@ def _event_table(diffs, dt_s: float) -> str:
             d.kind, f"{d.event_kind} {d.body}".strip(),
             _at(d.expected_step, dt_s), _at(d.actual_step, dt_s),
         )) + "</tr>"
-        for d in diffs
+        for d in diffs[:MAX_ROWS]
     )
     return ("<table><tr><th>difference</th><th>event</th><th>golden step</th>"
-            f"<th>candidate step</th></tr>{rows}</table>")
+            f"<th>candidate step</th></tr>{rows}</table>{_more(MAX_ROWS, len(diffs))}")
 
 
 def diff_entry(golden, candidate, result, name: str, commands: list[str]):

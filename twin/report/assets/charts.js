@@ -105,36 +105,45 @@
   function eventsChart(el, spec) {
     var Y = {golden: 1, candidate: 0};
     function draw(u) {
-      var ctx = u.ctx, r = devicePixelRatio;
+      var ctx = u.ctx, r = devicePixelRatio, left = u.bbox.left, right = left + u.bbox.width;
+      // labels only where they do not run into each other (zoom in to see the rest)
+      var gap = 12 * r, ring = spec.marked.length > 40 ? 3 * r : 7 * r;
       ctx.save();
       ctx.textAlign = "left";
       ctx.textBaseline = "alphabetic";
       ctx.font = (10 * r) + "px sans-serif";
       ["golden", "candidate"].forEach(function (side) {
-        var y = u.valToPos(Y[side], "y", true);
+        var y = u.valToPos(Y[side], "y", true), last = -Infinity;
         spec[side].forEach(function (e) {
           var x = u.valToPos(e[0], "x", true);
+          if (x < left || x > right) return;
           ctx.strokeStyle = side === "golden" ? "#1f77b4" : "#d62728";
           ctx.lineWidth = 1.5 * r;
           ctx.beginPath(); ctx.moveTo(x, y - 8 * r); ctx.lineTo(x, y + 8 * r); ctx.stroke();
-          if (!e[2]) {
+          if (!e[2] && x - last >= gap) {
+            last = x;
             ctx.save(); ctx.translate(x + 2 * r, y - 10 * r); ctx.rotate(-Math.PI / 4);
             ctx.fillStyle = "#333"; ctx.fillText(e[1], 0, 0); ctx.restore();
           }
         });
       });
+      var lastMark = -Infinity;
       spec.marked.forEach(function (m) {
-        ctx.strokeStyle = m.color; ctx.lineWidth = 2.5 * r; ctx.beginPath();
         var ends = ["golden", "candidate"].filter(function (s) { return m[s] !== null; });
+        var xs = ends.map(function (s) { return u.valToPos(m[s], "x", true); });
+        if (Math.max.apply(null, xs) < left || Math.min.apply(null, xs) > right) return;
+        ctx.strokeStyle = m.color; ctx.lineWidth = 2 * r; ctx.beginPath();
         ends.forEach(function (s, i) {
-          var x = u.valToPos(m[s], "x", true), y = u.valToPos(Y[s], "y", true);
-          if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+          var y = u.valToPos(Y[s], "y", true);
+          if (i === 0) ctx.moveTo(xs[i], y); else ctx.lineTo(xs[i], y);
         });
         ctx.stroke();
-        ends.forEach(function (s) {
-          var x = u.valToPos(m[s], "x", true), y = u.valToPos(Y[s], "y", true);
-          ctx.beginPath(); ctx.arc(x, y, 7 * r, 0, 2 * Math.PI); ctx.stroke();
-          ctx.fillStyle = m.color; ctx.fillText(m.kind, x + 9 * r, y + 14 * r);
+        var named = xs[0] - lastMark >= 4 * gap;
+        if (named) lastMark = xs[0];
+        ends.forEach(function (s, i) {
+          var y = u.valToPos(Y[s], "y", true);
+          ctx.beginPath(); ctx.arc(xs[i], y, ring, 0, 2 * Math.PI); ctx.stroke();
+          if (named) { ctx.fillStyle = m.color; ctx.fillText(m.kind, xs[i] + 9 * r, y + 14 * r); }
         });
       });
       ctx.restore();

@@ -147,6 +147,7 @@ def test_the_ci_job_passes_then_fails_on_a_changed_task_and_keeps_its_artifacts(
     check = job.step("Check the goldens")
     assert not job.failed and check.code == 0, check.output
     assert 'failures="0"' in (work / "twin-check.xml").read_text()
+    assert check.summary.startswith("## twin check: every golden matched (1 of 1)\n"), check.summary
     when = {name: upload.when for name, upload in job.artifacts.items()}
     assert when == {"twin-check": "always()", "twin-diff": "failure()"}, when
     assert job.artifacts["twin-check"].runs and not job.artifacts["twin-diff"].runs
@@ -159,7 +160,11 @@ def test_the_ci_job_passes_then_fails_on_a_changed_task_and_keeps_its_artifacts(
     assert job.artifacts["twin-diff"].runs and job.reports[0].runs
     assert 'failures="1"' in (work / "twin-check.xml").read_text()
     assert "differ" in (work / "twin-check.txt").read_text()
-    assert _held(job, "twin-check", work) == {"twin-check.xml"}
+    assert _held(job, "twin-check", work) == {"twin-check.xml", "twin-check.html"}
+    page = (work / "twin-check.html").read_text()
+    assert "twin check: 1 differ" in page and '<div class="chart' in page
+    # the job summary: GitHub's file for the step, appended to without being asked
+    assert "| `goldens/carry.mcap` | differ | **FAIL** |" in check.summary, check.summary
     kept = {"twin-diff/carry.mcap", "twin-diff/carry.md", "twin-diff/carry.rrd"}
     assert _held(job, "twin-diff", work) >= {"twin-check.txt", *kept}
     assert _twin(work, docs_env, "info", "twin-diff/carry.mcap") == 0

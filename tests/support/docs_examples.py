@@ -274,6 +274,7 @@ class StepRun:
     runs: bool  # its `if:` held: GitHub runs it
     code: int | None = None  # the exit status of a run step this harness ran
     output: str = ""  # its stdout and stderr
+    summary: str = ""  # what it wrote to $GITHUB_STEP_SUMMARY (the job summary)
 
 
 @dataclass
@@ -317,15 +318,22 @@ def _condition(step: dict, name: str) -> str:
     return text
 
 
-def _shell_run(script: str, shell: str | None, workdir: Path, env: dict[str, str]) -> Done:
-    """A step's script as GitHub runs it: written to a file, run by the shell's command line."""
+def _shell_run(
+    script: str, shell: str | None, workdir: Path, env: dict[str, str]
+) -> tuple[Done, str]:
+    """A step's script as GitHub runs it: written to a file, run by the shell's command line, with
+    an empty $GITHUB_STEP_SUMMARY file of its own; its result and what it wrote there."""
     if shell not in SHELLS:
         raise ValueError(f"shell: {shell!r} is not one this harness runs ({list(SHELLS)[1:]})")
     with tempfile.TemporaryDirectory(prefix="step-") as tmp:  # GitHub's RUNNER_TEMP
         script_file = Path(tmp) / "step.sh"
         script_file.write_text(script, encoding="utf-8")
+        summary = Path(tmp) / "step_summary.md"
+        summary.touch()
         argv = [part.replace("{0}", str(script_file)) for part in SHELLS[shell]]
-        return captured(argv, workdir, {**env, "CI": "true", "GITHUB_ACTIONS": "true"})
+        step_env = {**env, "CI": "true", "GITHUB_ACTIONS": "true",
+                    "GITHUB_STEP_SUMMARY": str(summary)}
+        return captured(argv, workdir, step_env), summary.read_text(encoding="utf-8")
 
 
 def _uses(step: dict, name: str, when: str, runs: bool, job: JobRun) -> None:
@@ -372,7 +380,7 @@ def run_workflow(text: str, workdir: Path, env: dict[str, str]) -> JobRun:
         if not runs or step["run"].startswith("pip install"):
             job.steps.append(StepRun(name, when, runs))
             continue
-        done = _shell_run(step["run"], step.get("shell", default_shell), workdir, env)
-        job.steps.append(StepRun(name, when, True, done.code, done.output))
+        done, summary = _shell_run(step["run"], step.get("shell", default_shell), workdir, env)
+        job.steps.append(StepRun(name, when, True, done.code, done.output, summary))
         job.failed = job.failed or done.code != 0
     return job

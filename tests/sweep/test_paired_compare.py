@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 
 import pyarrow.parquet as pq
@@ -206,3 +207,20 @@ def test_a_bad_results_file_is_one_line_naming_file_column_and_row(
     err = capsys.readouterr().err
     assert err.startswith("twin: error: results ") and err.count("\n") == 1, err
     assert message in err and "bad" in err, err
+def test_compare_html_shows_the_flips_the_interval_and_the_map(runs, tmp_path, capsys):
+    a, b = _outcomes(runs / "a"), _outcomes(runs / "b")
+    worse = sorted(i for i in a if a[i] and not b[i])
+    page_path = tmp_path / "c.html"
+    assert main(["sweep", "compare", str(runs / "a"), str(runs / "b"), "--html",
+                 str(page_path)]) == 0
+    assert f"wrote {page_path}" in capsys.readouterr().out
+    page = page_path.read_text()
+    assert "<title>twin sweep compare</title>" in page
+    rows = re.findall(r"<tr><td>(\d+)</td><td>ok -&gt; failed</td>", page)
+    assert [int(s) for s in rows] == worse[: len(rows)] and rows  # the flips table
+    assert f"McNemar's exact p = {mcnemar_exact(len(worse), 0):.3g}" in page
+    assert "Newcombe's paired 95 % interval [" in page
+    assert "<img alt=\"success map\"" in page and "src=\"data:image/png;base64," in page
+    assert not re.search(r"(src|href)\s*=\s*[\"']?(https?:)?//", page)
+    assert main(["sweep", "compare", str(runs / "a"), str(runs / "b"), "--html", "c.htm"]) == 2
+    assert "--html 'c.htm' should end in .html" in capsys.readouterr().err

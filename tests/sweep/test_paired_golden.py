@@ -242,3 +242,15 @@ def test_the_paired_verdict_is_the_same_whatever_the_executor(golden, tmp_path):
             executor.close()
     assert {o.status for o in outcomes} == {"differ"}
     assert len({o.summary for o in outcomes}) == 1 and len({o.report for o in outcomes}) == 1
+
+
+def test_the_html_report_of_a_differing_sweep_golden_shows_its_flips_and_map(golden, tmp_path,
+                                                                            capsys):
+    definition, _, _ = _swap_two(golden, tmp_path, strict=True)
+    capsys.readouterr()
+    assert main(["check", str(definition), "--html", str(tmp_path / "p.html")]) == 1
+    page = (tmp_path / "p.html").read_text()
+    assert "twin check: 1 differ" in page and "<h3>flips</h3>" in page
+    assert page.count("<td>ok -&gt; failed</td>") + page.count("<td>failed -&gt; ok</td>") == 2
+    assert "McNemar's exact p = " in page and "Newcombe's paired 95 % interval" in page
+    assert 'src="data:image/png;base64,' in page  # the success map, inline

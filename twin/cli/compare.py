@@ -67,6 +67,17 @@ def _add_report_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--quiet", "-q", action="store_true", help="print only the verdict and first divergence"
     )
+    _add_html_option(p)
+
+
+def _add_html_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--html",
+        default=None,
+        metavar="FILE.html",
+        help="also write a self-contained HTML report: plots of each diverging field against its "
+        "allowance, the paths from above, the events, the pictures at the onset (works offline)",
+    )
 
 
 def _check_outputs(
@@ -83,6 +94,10 @@ def _check_outputs(
         report_format(path)
     if args.rrd:
         check_output(args.rrd, ".rrd", inputs=inputs, option="--rrd", force=force)
+    if getattr(args, "html", None):
+        check_output(args.html, ".html", inputs=inputs, option="--html")
+    if getattr(args, "summary", None):
+        check_output(args.summary, ".md", inputs=inputs, option="--summary")
     if getattr(args, "record", None):
         check_output(args.record, ".mcap", inputs=inputs, option="--record", force=force)
 
@@ -106,7 +121,22 @@ def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
         from twin.verify.diff_view import write_diff_rrd
 
         write_diff_rrd(golden, candidate, result, args.rrd)
+    if args.html:
+        from twin.report.output import write_diff_page
+
+        write_diff_page(args.html, golden, candidate, result, *_again(args))
     return result.exit_code
+
+
+def _again(args: argparse.Namespace) -> tuple[list[str], str]:
+    """The commands that show a diff or replay's difference again, and the report's title."""
+    rrd = args.rrd or "diff.rrd"
+    if args.command == "diff":
+        return [f"twin diff {args.golden} {args.candidate} --rrd {rrd}",
+                f"twin view --web {rrd}"], "twin diff"
+    record = args.record or "replayed.mcap"
+    return [f"twin replay {args.recording} --record {record} --rrd {rrd}",
+            f"twin view --web {rrd}"], "twin replay"
 
 
 def cmd_diff(args: argparse.Namespace) -> int:
@@ -162,6 +192,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if args.force and not args.keep:
         raise ConfigError("--force replaces files in the --keep folder; expected --keep DIR too")
     goldens = find_goldens(args.paths)
+    _check_outputs_of_check(args, goldens)
     keep = None
     if args.keep:
         from twin.verify.keep import plan_keep
@@ -180,6 +211,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         from twin.record.outputs import write_atomic
 
         write_atomic(args.junit, render_check_junit(outcomes))
+    from twin.report.output import write_check_reports
+
+    written = write_check_reports(outcomes, args.html, args.summary)
     for o in outcomes:
         if o.status in ("differ", "refused") and args.verbose:
             print(f"== {o.path}\n{o.report}")
@@ -190,7 +224,21 @@ def cmd_check(args: argparse.Namespace) -> int:
     kept = [os.path.join(args.keep, Path(f).name) for o in outcomes for f in o.kept]
     if kept:
         print("kept: " + ", ".join(kept))
+    if written:
+        print("report: " + ", ".join(written))
     return exit_code(outcomes)
+
+
+def _check_outputs_of_check(args: argparse.Namespace, goldens) -> None:
+    """--html and --summary checked before any work: the right suffix, an existing folder, none
+    of the goldens' files."""
+    from twin.record.outputs import check_output
+
+    inputs = goldens.recordings + goldens.sweeps + goldens.searches
+    if args.html:
+        check_output(args.html, ".html", inputs=inputs, option="--html")
+    if args.summary:
+        check_output(args.summary, ".md", inputs=inputs, option="--summary")
 
 
 def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, progress) -> list:
@@ -216,7 +264,8 @@ def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, pro
             allow_error=args.allow_error,
             keep=keep,
             progress=progress,
-            check_sweep=functools.partial(check_sweep, executor=executor),
+            check_sweep=functools.partial(check_sweep, executor=executor, html=bool(args.html)),
+            html=bool(args.html),
             check_search=check_search,
         )
     finally:
@@ -310,6 +359,14 @@ def _add_check_command(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="FILE.xml",
         help="also write a JUnit report, one case per golden",
+    )
+    _add_html_option(p)
+    p.add_argument(
+        "--summary",
+        default=None,
+        metavar="FILE.md",
+        help="also write the job summary in Markdown (the table and what changed, no pictures); "
+        "with $GITHUB_STEP_SUMMARY set, it is appended there without being asked",
     )
     _add_tolerance_options(p, DEFAULT)
     p.set_defaults(func=cmd_check, interrupt=True)  # Ctrl-C even as a background job

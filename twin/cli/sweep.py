@@ -241,6 +241,13 @@ def _add_subcommands(p: argparse.ArgumentParser) -> None:
         metavar="FILE.png",
         help="also write a picture with the flips ringed (needs matplotlib)",
     )
+    compare.add_argument(
+        "--html",
+        default=None,
+        metavar="FILE.html",
+        help="also write a self-contained HTML report: the flips, the paired interval and p, the "
+        "success map (with matplotlib)",
+    )
     compare.set_defaults(func=cmd_compare, interrupt=True)  # Ctrl-C even as a background job
     plot = kind(
         prog=f"{p.prog} plot",
@@ -280,6 +287,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         )
     if args.plot:
         _plot_target(args.plot)
+    if args.html:
+        from twin.record.outputs import check_output
+
+        check_output(args.html, ".html", inputs=[args.a, args.b], option="--html")
     a, b = load_run(args.a), load_run(args.b)
     result = compare(a, b)
     print(result.text(), end="")
@@ -292,6 +303,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
         paired = result.result if result.is_paired else None
         plot_sweep(b.side, args.plot, f"{b.label} against {a.label}", paired, a.side)
         print(f"wrote {args.plot}")
+    if args.html:
+        from twin.sweep.html import write_compare_page
+
+        write_compare_page(result, args.html)
+        print(f"wrote {args.html}")
     if args.fail_if_worse and result.problems:
         raise Worse(f"{b.label} is worse than {a.label}: " + "; ".join(result.problems))
     return 0

@@ -118,6 +118,18 @@ def error_series(
     return golden.frames.step[gi], golden.frames.t_ns[gi], out
 
 
+def element_series(golden: Recording, candidate: Recording):
+    """On the steps both runs have, per frame field: (name, golden (n, k, c), candidate (n, k, c),
+    error (n, k) in FIELDS units, element names), what frame_stats judges; and (steps, t_ns)
+    first. For drawing the runs against their allowance (twin.report)."""
+    gi, ci = align(golden.frames.step, candidate.frames.step)
+    fields = [
+        (name, a, b, metric(a, b), elements)
+        for name, a, b, metric, elements in _field_arrays(golden, candidate, gi, ci)
+    ]
+    return golden.frames.step[gi], golden.frames.t_ns[gi], fields
+
+
 def align(g_steps: np.ndarray, c_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Indices of the steps both runs have, in step order."""
     n = min(len(g_steps), len(c_steps))

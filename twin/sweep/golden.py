@@ -113,11 +113,13 @@ def judge(golden: dict, new: dict, tolerances: dict[str, float]) -> list[str]:
 
 
 def check_sweep(
-    definition: str, executor, *, update: bool = False, keep: str | None = None
+    definition: str, executor, *, update: bool = False, keep: str | None = None,
+    html: bool = False,
 ) -> Outcome:
     """Re-run one sweep golden on executor and judge it; an Outcome as verify.check gives for a
     recording. Paired when the golden keeps its results, else by its summary. keep (DIR/NAME): a
-    golden that differs leaves its report and the new run's summary (and results) there."""
+    golden that differs leaves its report and the new run's summary (and results) there. html: a
+    paired golden that differs carries its section of the HTML report (flips, interval, map)."""
     t0 = time.perf_counter()
     expected_path, scenarios_path = summary_path(definition), results_path(definition)
     try:
@@ -158,6 +160,12 @@ def check_sweep(
         outcome = Outcome(definition, "differ", 1, line, report, spec.scenarios, seconds)
         if keep is not None:
             outcome.kept = _keep(keep, outcome, new, new_table if reference is not None else None)
+        if html and reference is not None:
+            from twin.sweep.html import golden_section
+
+            now = paired.side_from_table(new_table, "now")
+            outcome.section = golden_section(definition, line, paired.pair(reference[0], now), now,
+                                             reference[0], report)
         return outcome
     except TwinError as err:
         return Outcome(

@@ -123,6 +123,9 @@ class Outcome:
     frames: int = 0
     seconds: float = 0.0
     kept: list[str] = field(default_factory=list)  # the files --keep wrote for it
+    onset: str = ""  # "step N (t = T s)" of the first divergence ("" when none)
+    section: str = ""  # its HTML report section (twin.report), when asked for and it differs
+    recorded_on: str = ""  # the machine the golden was recorded on, in one line
 
 
 def check_one(
@@ -131,11 +134,13 @@ def check_one(
     update: bool = False,
     allow_error: bool = False,
     keep: str | None = None,
+    html: bool = False,
 ) -> Outcome:
     """Load one golden, re-run it, diff; with update, rewrite it when it differs, but never with a
     run whose task failed unless allow_error (a crash is not a new golden). keep (DIR/NAME, from
     verify.keep.plan_keep): a golden that differs or is refused leaves its re-run, report and diff
-    view there; one that matches leaves nothing."""
+    view there; one that matches leaves nothing. html: a golden that differs or is refused gets
+    its HTML report section (twin.report.section), drawn here where both runs are."""
     from twin.record.mcap.reader import load
     from twin.verify.keep import KEPT, keep_recording, staging
 
@@ -151,12 +156,26 @@ def check_one(
                 publish(tmp, path)
             elif staged is not None and outcome.status in KEPT:
                 outcome.kept = keep_recording(staged, golden, new, result, record_to)
+            _describe(outcome, golden, new, result, html)
             outcome.seconds = time.perf_counter() - t0
             return outcome
         except TwinError as err:
             return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
         finally:
             tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
+
+
+def _describe(outcome: Outcome, golden: Recording, new: Recording, result, html: bool) -> None:
+    """The report's part of an outcome: the onset, the machine the golden was recorded on, and
+    with html the section of a golden that differs or is refused."""
+    from twin.record.machine import machine_text
+    from twin.report.section import commands_for, golden_section, onset_text
+
+    outcome.onset = onset_text(result)
+    outcome.recorded_on = machine_text(golden.machine) if golden.machine else ""
+    if html and outcome.status in ("differ", "refused"):
+        commands = commands_for(outcome.path, outcome.kept)
+        outcome.section = golden_section(golden, new, result, outcome.path, commands)
 
 
 def _rerun_and_judge(golden: Recording, tolerances: Tolerances, record_to: Path | None):
@@ -384,19 +403,35 @@ class Checks:
     update: bool = False
     allow_error: bool = False
     keep: tuple[str | None, ...] = ()
+    html: bool = False
 
     def warm(self) -> None:
         from twin.record.mcap.reader import load  # noqa: F401 - imported once, before the fork
 
     def run(self, item: int) -> Outcome:
         keep = self.keep[item] if self.keep else None
-        return check_one(self.paths[item], self.tolerances, self.update, self.allow_error, keep)
+        return check_one(
+            self.paths[item],
+            self.tolerances,
+            update=self.update,
+            allow_error=self.allow_error,
+            keep=keep,
+            html=self.html,
+        )
 
     def confirm(self, item: int) -> Outcome:
         return self.run(item)
 
     def failed(self, item: int, reason: str, wall_s: float) -> Outcome:
-        return Outcome(self.paths[item], "error", WORKER_DIED_EXIT, reason, "", 0, wall_s)
+        return Outcome(
+            path=self.paths[item],
+            status="error",
+            exit_code=WORKER_DIED_EXIT,
+            summary=reason,
+            report="",
+            frames=0,
+            seconds=wall_s,
+        )
 
 
 def check_all(
@@ -409,15 +444,24 @@ def check_all(
     allow_error: bool = False,
     executor=None,
     keep: dict[str, str] | None = None,
+    html: bool = False,
 ) -> list[Outcome]:
     """Check every golden: here, one after the other, with jobs == 1 and no executor; else spread
     over `executor` (a `twin.jobs` executor, the caller's to close) or `jobs` guarded local
     processes. Outcomes in the order of paths. keep: DIR/NAME by golden (verify.keep.plan_keep),
-    written by the process that checks it."""
+    written by the process that checks it. html: each golden that differs carries its HTML report
+    section (Outcome.section)."""
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs {jobs!r} is invalid; expected a whole number >= 1")
     keep = keep or {}
-    unit = Checks(tuple(paths), tolerances, update, allow_error, tuple(keep.get(p) for p in paths))
+    unit = Checks(
+        paths=tuple(paths),
+        tolerances=tolerances,
+        update=update,
+        allow_error=allow_error,
+        keep=tuple(keep.get(p) for p in paths),
+        html=html,
+    )
     results: dict[str, Outcome] = {}
     own = None
     if executor is None and jobs > 1 and len(paths) > 1:
@@ -452,6 +496,7 @@ def check_goldens(
     progress: Callable[[Outcome], None] | None = None,
     check_sweep: Callable[..., Outcome] | None = None,
     check_search: Callable[..., Outcome] | None = None,
+    html: bool = False,
 ) -> list[Outcome]:
     """Every golden of a `twin check`: the recordings (check_all: on the executor, or `jobs` local
     processes), then each statistical golden with check_sweep(definition, update=, keep=), then
@@ -468,6 +513,7 @@ def check_goldens(
             allow_error=allow_error,
             executor=executor,
             keep=keep,
+            html=html,
         )
         if goldens.recordings
         else []

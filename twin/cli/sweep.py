@@ -426,7 +426,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         progress.close()
         executor.close()
     summary = folder.finish(spec, the_plan, done)
-    _print_outcome(args, spec, summary, done, executor, out)
+    _print_outcome(args=args, spec=spec, summary=summary, done=done, executor=executor, out=out)
     if done.stopped_by is not None:
         print(
             f"stopped part-way: `twin sweep {out / 'sweep.toml'} --out {out} --resume` "
@@ -448,7 +448,14 @@ def _print_outcome(args, spec, summary: dict | None, done, executor, out: Path) 
     if summary is None:
         _print_only(done.rows, out, args.save)
         return
-    for line in summary_lines(spec, summary, done, executor, out, args.save):
+    for line in summary_lines(
+        spec=spec,
+        summary=summary,
+        done=done,
+        executor=executor,
+        out=out,
+        save=args.save,
+    ):
         print(line)
     print(f"wrote {out / 'results.parquet'}, {out / 'summary.json'}, {out / 'sweep.toml'}")
     if args.plot and done.rows:

@@ -167,14 +167,14 @@ def _stat(label: str, name: str, unit: str, limit: float, e: np.ndarray, t_a: np
     worst = int(np.argmax(e))
     over = np.nonzero(e > limit)[0]
     return JointStat(
-        label,
-        name,
-        unit,
-        limit,
-        float(np.sqrt(np.mean(e**2))),
-        float(e[worst]),
-        float(t_a[worst]),
-        float(t_a[over[0]]) if len(over) else None,
+        joint=label,
+        quantity=name,
+        unit=unit,
+        tolerance=limit,
+        rms=float(np.sqrt(np.mean(e**2))),
+        worst=float(e[worst]),
+        worst_t_s=float(t_a[worst]),
+        parts_t_s=float(t_a[over[0]]) if len(over) else None,
     )
 
 
@@ -195,7 +195,7 @@ def _joint_stats(pair: _Pair, a, b, tol, lag_s: float, keep, notes: list[str]) -
             continue
         err = pair.error(attr, lag_s, keep)
         stats += [
-            _stat(joint, name, unit, tol[name], err[:, k], t_a)
+            _stat(label=joint, name=name, unit=unit, limit=tol[name], e=err[:, k], t_a=t_a)
             for k, joint in enumerate(pair.common)
         ]
     return stats
@@ -222,7 +222,7 @@ def _frame_stats(a: JointLog, b: JointLog, tol: Tolerances, lag_s: float) -> lis
             dense = _interp(ub, at, pb[:, :3])
         if len(at):
             e = np.linalg.norm(sparse - dense, axis=1)
-            stats.append(_stat(frame, name, "m", tol[name], e, at))
+            stats.append(_stat(label=frame, name=name, unit="m", limit=tol[name], e=e, t_a=at))
     return stats
 
 
@@ -247,16 +247,24 @@ def compare_logs(
             f"their lengths ({pair.td[-1]:.3f} s and {pair.ts[-1]:.3f} s)"
         )
     result = LogComparison(
-        a.path,
-        b.path,
-        lag_s,
-        lag_from,
-        int(keep.sum()),
-        "B" if pair.b_is_sparse else "A",
-        a.rate_hz,
-        b.rate_hz,
+        a=a.path,
+        b=b.path,
+        lag_s=lag_s,
+        lag_from=lag_from,
+        samples=int(keep.sum()),
+        at="B" if pair.b_is_sparse else "A",
+        rate_a_hz=a.rate_hz,
+        rate_b_hz=b.rate_hz,
     )
-    result.stats += _joint_stats(pair, a, b, tol, lag_s, keep, result.notes)
+    result.stats += _joint_stats(
+        pair=pair,
+        a=a,
+        b=b,
+        tol=tol,
+        lag_s=lag_s,
+        keep=keep,
+        notes=result.notes,
+    )
     result.stats += _frame_stats(a, b, tol, lag_s)
     result.notes += [*a.notes, *b.notes]
     extra = [n for n in (*a.names, *b.names) if n not in pair.common]

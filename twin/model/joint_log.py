@@ -83,15 +83,15 @@ class JointLog:
             )
         names = tuple(joint_map.get(name, name) for name in self.names)
         return JointLog(
-            names,
-            self.t_ns,
-            self.position_rad,
-            self.velocity_rad_s,
-            self.effort_nm,
-            self.path,
-            self.topics,
-            self.tf,
-            self.notes,
+            names=names,
+            t_ns=self.t_ns,
+            position_rad=self.position_rad,
+            velocity_rad_s=self.velocity_rad_s,
+            effort_nm=self.effort_nm,
+            path=self.path,
+            topics=self.topics,
+            tf=self.tf,
+            notes=self.notes,
         )
 
 

@@ -112,19 +112,40 @@ def _values_chart(run: FieldRun, part: slice, traces, title: str) -> dict:
               "dash": True}, c),
         ]
         bands.append([base, base + 1, ALLOWED])
-    return _chart(title, run.t_s[part], columns, run, run.unit.replace("|", " | "), bands)
+    return _chart(
+        title=title,
+        t=run.t_s[part],
+        columns=columns,
+        run=run,
+        y_label=run.unit.replace("|", " | "),
+        bands=bands,
+    )
 
 
 def _error_chart(run: FieldRun, part: slice, chosen: list[int], title: str) -> dict:
     scale, unit = _milli(run.unit)
-    columns = [({"label": "allowance", "color": "#2ca02c"}, run.allowance[part] * scale),
-               ({"label": "zero", "color": "transparent", "legend": False},
-                np.zeros(len(run.t_s[part])))]
+    columns = [
+        ({"label": "allowance", "color": "#2ca02c"}, run.allowance[part] * scale),
+        ({"label": "zero", "color": "transparent", "legend": False}, np.zeros(len(run.t_s[part]))),
+    ]
     for i, k in enumerate(chosen):
-        columns.append(({"label": f"error {run.elements[k]}".strip(),
-                         "color": PALETTE[(k if len(chosen) > 1 else 3) % len(PALETTE)]},
-                        run.error[part, k] * scale))
-    return _chart(title, run.t_s[part], columns, run, unit.replace("|", " | "), [[1, 2, ALLOWED]])
+        columns.append(
+            (
+                {
+                    "label": f"error {run.elements[k]}".strip(),
+                    "color": PALETTE[(k if len(chosen) > 1 else 3) % len(PALETTE)],
+                },
+                run.error[part, k] * scale,
+            )
+        )
+    return _chart(
+        title=title,
+        t=run.t_s[part],
+        columns=columns,
+        run=run,
+        y_label=unit.replace("|", " | "),
+        bands=[[1, 2, ALLOWED]],
+    )
 
 
 def field_charts(run: FieldRun) -> list[dict]:
@@ -135,8 +156,12 @@ def field_charts(run: FieldRun) -> list[dict]:
     near = f"around the onset, step {run.onset_step} (t = {run.onset_t_s:.3f} s)"
     out = []
     if traces:
-        out += [_values_chart(run, whole, traces, f"{run.name}: whole run"),
-                _values_chart(run, zoom, traces, f"{run.name}: {near}")]
-    out += [_error_chart(run, whole, chosen, f"{run.name} error: whole run"),
-            _error_chart(run, zoom, chosen, f"{run.name} error: {near}")]
+        out += [
+            _values_chart(run, whole, traces, f"{run.name}: whole run"),
+            _values_chart(run, zoom, traces, f"{run.name}: {near}"),
+        ]
+    out += [
+        _error_chart(run, whole, chosen, f"{run.name} error: whole run"),
+        _error_chart(run, zoom, chosen, f"{run.name} error: {near}"),
+    ]
     return out

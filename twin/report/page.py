@@ -61,9 +61,15 @@ class Entry:
 
 def entry_of(outcome) -> Entry:
     """A check's Outcome (twin.verify.check) as an Entry."""
-    return Entry(outcome.path, outcome.status, outcome.summary, getattr(outcome, "onset", ""),
-                 getattr(outcome, "section", ""), outcome.report,
-                 getattr(outcome, "recorded_on", ""))
+    return Entry(
+        name=outcome.path,
+        status=outcome.status,
+        changed=outcome.summary,
+        onset=getattr(outcome, "onset", ""),
+        section=getattr(outcome, "section", ""),
+        text=outcome.report,
+        recorded_on=getattr(outcome, "recorded_on", ""),
+    )
 
 
 def _cell(text: str) -> str:
@@ -74,20 +80,31 @@ def _table(entries: list[Entry]) -> str:
     rows = "".join(
         f"<tr><td><a href='#g{i}'>{html.escape(e.name)}</a></td>"
         f"<td class='s-{e.status}'>{e.status}</td>"
-        + _cell("pass" if e.passed else "FAIL") + _cell(e.onset) + _cell(e.changed) + "</tr>"
+        + _cell("pass" if e.passed else "FAIL")
+        + _cell(e.onset)
+        + _cell(e.changed)
+        + "</tr>"
         for i, e in enumerate(entries)
     )
-    return ("<table><tr><th>golden</th><th>status</th><th>verdict</th><th>onset</th>"
-            f"<th>what changed</th></tr>{rows}</table>")
+    return (
+        "<table><tr><th>golden</th><th>status</th><th>verdict</th><th>onset</th>"
+        f"<th>what changed</th></tr>{rows}</table>"
+    )
 
 
 def counts_line(entries: list[Entry]) -> str:
-    """"12 match, 1 differ" (or "every golden matched")."""
+    """ "12 match, 1 differ" (or "every golden matched")."""
     statuses = ("match", "differ", "updated", "refused", "error")
     if entries and all(e.status == "match" for e in entries):
         return f"every golden matched ({len(entries)} of {len(entries)})"
-    return ", ".join(f"{sum(e.status == s for e in entries)} {s}" for s in statuses
-                     if any(e.status == s for e in entries)) or "nothing checked"
+    return (
+        ", ".join(
+            f"{sum(e.status == s for e in entries)} {s}"
+            for s in statuses
+            if any(e.status == s for e in entries)
+        )
+        or "nothing checked"
+    )
 
 
 def _machines(entries: list[Entry], checked_on: str) -> str:
@@ -103,12 +120,15 @@ def _body(entries: list[Entry]) -> str:
         if e.section:
             parts.append(f"<div id='g{i}'>{e.section}</div>")
         elif not e.passed:
-            parts.append(f"<div id='g{i}'><section class='differ'><h2>{html.escape(e.name)}</h2>"
-                         f"<p class='changed'>{html.escape(e.changed)}</p>"
-                         f"<pre>{html.escape(e.text)}</pre></section></div>")
+            parts.append(
+                f"<div id='g{i}'><section class='differ'><h2>{html.escape(e.name)}</h2>"
+                f"<p class='changed'>{html.escape(e.changed)}</p>"
+                f"<pre>{html.escape(e.text)}</pre></section></div>"
+            )
         else:
-            matched.append(f"<li id='g{i}'>{html.escape(e.name)}: {e.status}, "
-                           f"{html.escape(e.changed)}</li>")
+            matched.append(
+                f"<li id='g{i}'>{html.escape(e.name)}: {e.status}, {html.escape(e.changed)}</li>"
+            )
     if matched:
         parts.append(f"<h2>matching goldens</h2><ul class='matched'>{''.join(matched)}</ul>")
     return "".join(parts)
@@ -145,8 +165,10 @@ def render_summary(entries: list[Entry], title: str) -> str:
     lines = ["| golden | status | verdict | onset | what changed |", "|---|---|---|---|---|"]
     size = len(head.encode()) + sum(len(x.encode()) + 1 for x in lines) + 200
     for n, e in enumerate(entries):
-        row = (f"| `{_code(e.name)}` | {e.status} | {'pass' if e.passed else '**FAIL**'} | "
-               f"{_md(e.onset)} | {_md(e.changed)} |")
+        row = (
+            f"| `{_code(e.name)}` | {e.status} | {'pass' if e.passed else '**FAIL**'} | "
+            f"{_md(e.onset)} | {_md(e.changed)} |"
+        )
         size += len(row.encode()) + 1
         if size > SUMMARY_LIMIT_BYTES:
             lines.append(f"| ... and {len(entries) - n} more | | | | |")

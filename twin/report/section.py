@@ -59,14 +59,25 @@ def field_runs(golden, candidate, result) -> list[FieldRun]:
         allowance = np.full(len(steps), f.tolerance, dtype=np.float64)
         if floor is not None:
             allowance = np.maximum(allowance, floor.at(f.name, steps))
-        out.append(FieldRun(f.name, f.unit, t_ns * 1e-9, a.astype(np.float64),
-                            b.astype(np.float64), err, elements, allowance, f.first.step,
-                            f.first.t_s))
+        out.append(
+            FieldRun(
+                name=f.name,
+                unit=f.unit,
+                t_s=t_ns * 1e-9,
+                golden=a.astype(np.float64),
+                candidate=b.astype(np.float64),
+                error=err,
+                elements=elements,
+                allowance=allowance,
+                onset_step=f.first.step,
+                onset_t_s=f.first.t_s,
+            )
+        )
     return out
 
 
 def _more(shown: int, total: int) -> str:
-    """"and N more" under a list or table cut at `shown` rows ("" when it was not cut)."""
+    """ "and N more" under a list or table cut at `shown` rows ("" when it was not cut)."""
     return f"<p>and {total - shown} more</p>" if total > shown else ""
 
 
@@ -81,12 +92,15 @@ def differences_html(result) -> str:
     """The configuration and task differences, the notes, and what else changed."""
     ex = result.explanation
     items = list(ex.configuration) if ex is not None else []
-    items += [f"{k}: {a} -> {b}" for k, a, b in result.config_differences if
-              f"{k}" not in " ".join(items)]
+    items += [
+        f"{k}: {a} -> {b}" for k, a, b in result.config_differences if f"{k}" not in " ".join(items)
+    ]
     if ex is not None and ex.task_file_changed:
         items.append("the task file changed since the golden was recorded")
-    items += [f"the task's identity at step {d.step}: {d.golden} -> {d.candidate}"
-              for d in result.identity]
+    items += [
+        f"the task's identity at step {d.step}: {d.golden} -> {d.candidate}"
+        for d in result.identity
+    ]
     out = _list("configuration and task differences", items or ["none"])
     if ex is not None:
         out += _list("also changed", ([ex.shift.text()] if ex.shift else []) + ex.annotations)
@@ -97,33 +111,43 @@ def golden_section(golden, candidate, result, title: str, commands: list[str]) -
     """The section of one differing golden (title: its path), commands: how to see it again."""
     dt_s = result.golden["dt_ns"] * 1e-9
     onset = result.first.step if result.first is not None else None
-    parts = [f'<section class="differ"><h2>{html.escape(title)}</h2>',
-             f'<p class="changed">{html.escape(changed_text(result))}</p>']
+    parts = [
+        f'<section class="differ"><h2>{html.escape(title)}</h2>',
+        f'<p class="changed">{html.escape(changed_text(result))}</p>',
+    ]
     if result.first is not None:
-        parts.append(f"<p>first divergence: <b>{html.escape(first_line(result.first))}</b>: "
-                     f"{html.escape(first_detail(result.first))}</p>")
+        parts.append(
+            f"<p>first divergence: <b>{html.escape(first_line(result.first))}</b>: "
+            f"{html.escape(first_detail(result.first))}</p>"
+        )
     runs = field_runs(golden, candidate, result)
     if runs:
         parts.append("<h3>diverging fields</h3>")
     for r in runs:
         charts = "".join(chart_html(c) for c in field_charts(r))
-        parts.append(f'<h4>{html.escape(r.name)} ({html.escape(r.unit.replace("|", " | "))}), '
-                     f"diverges at step {r.onset_step}</h4><div class=grid2>{charts}</div>")
+        parts.append(
+            f"<h4>{html.escape(r.name)} ({html.escape(r.unit.replace('|', ' | '))}), "
+            f"diverges at step {r.onset_step}</h4><div class=grid2>{charts}</div>"
+        )
     parts.append("<h3>paths from above</h3><div class=grid3>")
     parts += [chart_html(c, "chart square") for c in paths_charts(golden, candidate, onset)]
     parts.append("</div><h3>events</h3>")
-    parts.append(chart_html(events_chart(golden, candidate, result.event_diffs, dt_s, onset),
-                            "chart wide"))
+    parts.append(
+        chart_html(events_chart(golden, candidate, result.event_diffs, dt_s, onset), "chart wide")
+    )
     parts.append(_event_table(result.event_diffs, dt_s))
     # what a camera sees changes where the frames first diverge (a command may differ earlier)
-    seen = min((f.first.step for f in result.fields if f.first is not None and f.unit),
-               default=onset)
+    seen = min(
+        (f.first.step for f in result.fields if f.first is not None and f.unit), default=onset
+    )
     parts.append(pictures_html(golden, candidate, seen))
     parts.append(differences_html(result))
     cmds = "\n".join(html.escape(c) for c in commands)
     parts.append(f"<h4>see it again</h4><pre>{cmds}</pre>")
-    parts.append(f"<details><summary>the full text report</summary><pre>"
-                 f"{html.escape(render_text(result))}</pre></details></section>")
+    parts.append(
+        f"<details><summary>the full text report</summary><pre>"
+        f"{html.escape(render_text(result))}</pre></details></section>"
+    )
     return "".join(parts)
 
 
@@ -135,8 +159,11 @@ def commands_for(golden_path: str, kept: list[str]) -> list[str]:
     if rrd and mcap:
         return [f"twin diff {golden_path} {mcap}", f"twin view --web {rrd}"]
     stem = golden_path.rsplit("/", 1)[-1].rsplit(".", 1)[0]
-    return [f"twin check {golden_path} --keep kept",
-            f"twin diff {golden_path} kept/{stem}.mcap", f"twin view --web kept/{stem}.rrd"]
+    return [
+        f"twin check {golden_path} --keep kept",
+        f"twin diff {golden_path} kept/{stem}.mcap",
+        f"twin view --web kept/{stem}.rrd",
+    ]
 
 
 def _at(step: int | None, dt_s: float) -> str:
@@ -147,14 +174,23 @@ def _event_table(diffs, dt_s: float) -> str:
     if not diffs:
         return "<p>no event moved, missing or extra</p>"
     rows = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in (
-            d.kind, f"{d.event_kind} {d.body}".strip(),
-            _at(d.expected_step, dt_s), _at(d.actual_step, dt_s),
-        )) + "</tr>"
+        "<tr>"
+        + "".join(
+            f"<td>{html.escape(str(x))}</td>"
+            for x in (
+                d.kind,
+                f"{d.event_kind} {d.body}".strip(),
+                _at(d.expected_step, dt_s),
+                _at(d.actual_step, dt_s),
+            )
+        )
+        + "</tr>"
         for d in diffs[:MAX_ROWS]
     )
-    return ("<table><tr><th>difference</th><th>event</th><th>golden step</th>"
-            f"<th>candidate step</th></tr>{rows}</table>{_more(MAX_ROWS, len(diffs))}")
+    return (
+        "<table><tr><th>difference</th><th>event</th><th>golden step</th>"
+        f"<th>candidate step</th></tr>{rows}</table>{_more(MAX_ROWS, len(diffs))}"
+    )
 
 
 def diff_entry(golden, candidate, result, name: str, commands: list[str]):
@@ -167,5 +203,12 @@ def diff_entry(golden, candidate, result, name: str, commands: list[str]):
     status = "match" if result.match else "differ"
     section = "" if result.match else golden_section(golden, candidate, result, name, commands)
     recorded = machine_text(golden.machine) if golden.machine else ""
-    return Entry(name, status, headline(result), onset_text(result), section,
-                 render_text(result), recorded)
+    return Entry(
+        name=name,
+        status=status,
+        changed=headline(result),
+        onset=onset_text(result),
+        section=section,
+        text=render_text(result),
+        recorded_on=recorded,
+    )

@@ -128,12 +128,12 @@ def _camera_messages(rec: Recording) -> list[tuple[int, str, object]]:
             t = int(track.t_ns[i])
             if spec is not None:
                 info = m.camera_info(
-                    t,
-                    frame_id,
-                    track.width_px,
-                    track.height_px,
-                    spec.intrinsics(),
-                    spec.projection(),
+                    t_ns=t,
+                    frame_id=frame_id,
+                    width_px=track.width_px,
+                    height_px=track.height_px,
+                    k=spec.intrinsics(),
+                    p=spec.projection(),
                 )
                 out.append((t, CAMERA_TOPICS["info"][0].format(name), info))
             image = m.compressed_image(t, frame_id, track.format, track.data[i])

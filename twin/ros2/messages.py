@@ -33,15 +33,15 @@ def offered_qos(latched: bool = False) -> list[Qos]:
     reports them (unknown, 0), no deadline, lifespan or lease."""
     return [
         Qos(
-            QosHistory.UNKNOWN,
-            0,
-            QosReliability.RELIABLE,
-            QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
-            _INFINITE,
-            _INFINITE,
-            QosLiveliness.AUTOMATIC,
-            _INFINITE,
-            False,
+            history=QosHistory.UNKNOWN,
+            depth=0,
+            reliability=QosReliability.RELIABLE,
+            durability=QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+            deadline=_INFINITE,
+            lifespan=_INFINITE,
+            liveliness=QosLiveliness.AUTOMATIC,
+            liveliness_lease_duration=_INFINITE,
+            avoid_ros_namespace_conventions=False,
         )
     ]
 

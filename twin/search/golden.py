@@ -143,22 +143,35 @@ def check_search(definition: str, *, update: bool = False, keep: str | None = No
                 + "\n",
             )
             return Outcome(
-                definition,
-                "updated",
-                0,
-                f"rewrote {expect_path(definition).name} and the recording; was: {line}",
-                report,
-                1,
-                time.perf_counter() - t0,
+                path=definition,
+                status="updated",
+                exit_code=0,
+                summary=f"rewrote {expect_path(definition).name} and the recording; was: {line}",
+                report=report,
+                frames=1,
+                seconds=time.perf_counter() - t0,
             )
-        outcome = Outcome(definition, status, 0 if status == "match" else 1, line, report, 1)
+        outcome = Outcome(
+            path=definition,
+            status=status,
+            exit_code=0 if status == "match" else 1,
+            summary=line,
+            report=report,
+            frames=1,
+        )
         if status == "differ" and keep is not None:
             outcome.kept = _keep(keep, spec, outcome)
         outcome.seconds = time.perf_counter() - t0
         return outcome
     except TwinError as err:
         return Outcome(
-            definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
+            path=definition,
+            status="error",
+            exit_code=err.exit_code,
+            summary=str(err),
+            report="",
+            frames=0,
+            seconds=time.perf_counter() - t0,
         )
 
 

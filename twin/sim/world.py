@@ -269,12 +269,12 @@ class World:
         inv_pos, inv_orn = pb.invertTransform(com_pos, com_orn)
         rel_pos, rel_orn = pb.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
         self._constraint = pb.createConstraint(
-            self.robot,
-            self.pad_link,
-            body,
-            -1,
-            pb.JOINT_FIXED,
-            (0, 0, 0),
+            parentBodyUniqueId=self.robot,
+            parentLinkIndex=self.pad_link,
+            childBodyUniqueId=body,
+            childLinkIndex=-1,
+            jointType=pb.JOINT_FIXED,
+            jointAxis=(0, 0, 0),
             parentFramePosition=rel_pos,
             childFramePosition=(0, 0, 0),
             parentFrameOrientation=rel_orn,

@@ -144,7 +144,14 @@ def compare(a: Run, b: Run) -> Comparison:
     else:
         result = paired.unpaired(a.side, b.side, why)
         problems, warnings = paired.unpaired_problems(result), []
-    return Comparison(a, b, diffs, result, problems, warnings)
+    return Comparison(
+        reference=a,
+        new=b,
+        differences=diffs,
+        result=result,
+        problems=problems,
+        warnings=warnings,
+    )
 
 
 def write_report(comparison: Comparison, path: str) -> None:

@@ -148,28 +148,71 @@ def check_sweep(
         else:
             problems, report, within = ["no golden summary yet"], _report(golden, new), ""
         seconds = time.perf_counter() - t0
-        wrote = _update(spec, golden, new, reference, new_table, definition) if update else []
+        wrote = _update(
+            spec=spec,
+            golden=golden,
+            new=new,
+            reference=reference,
+            new_table=new_table,
+            definition=definition,
+        ) if update else []
         if wrote:
             was = "; ".join(problems) or "within tolerance"
             line = f"rewrote {', '.join(wrote)}; was: {was}"
-            return Outcome(definition, "updated", 0, line, report, spec.scenarios, seconds)
+            return Outcome(
+                path=definition,
+                status="updated",
+                exit_code=0,
+                summary=line,
+                report=report,
+                frames=spec.scenarios,
+                seconds=seconds,
+            )
         if not problems:
             line = "; ".join([within or "matches", *notes])
-            return Outcome(definition, "match", 0, line, report, spec.scenarios, seconds)
+            return Outcome(
+                path=definition,
+                status="match",
+                exit_code=0,
+                summary=line,
+                report=report,
+                frames=spec.scenarios,
+                seconds=seconds,
+            )
         line = "; ".join(problems + notes)
-        outcome = Outcome(definition, "differ", 1, line, report, spec.scenarios, seconds)
+        outcome = Outcome(
+            path=definition,
+            status="differ",
+            exit_code=1,
+            summary=line,
+            report=report,
+            frames=spec.scenarios,
+            seconds=seconds,
+        )
         if keep is not None:
             outcome.kept = _keep(keep, outcome, new, new_table if reference is not None else None)
         if html and reference is not None:
             from twin.sweep.html import golden_section
 
             now = paired.side_from_table(new_table, "now")
-            outcome.section = golden_section(definition, line, paired.pair(reference[0], now), now,
-                                             reference[0], report)
+            outcome.section = golden_section(
+                definition=definition,
+                summary=line,
+                p=paired.pair(reference[0], now),
+                new=now,
+                reference=reference[0],
+                report=report,
+            )
         return outcome
     except TwinError as err:
         return Outcome(
-            definition, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0
+            path=definition,
+            status="error",
+            exit_code=err.exit_code,
+            summary=str(err),
+            report="",
+            frames=0,
+            seconds=time.perf_counter() - t0,
         )
 
 
@@ -246,8 +289,9 @@ def _judge_paired(
         if p.shift is not None:
             within += f"; paired placement shift median {p.shift[0]:+.3f} mm"
     notes = [power.detectable_text(p.n, p.detectable_drop_pct, rule)]
-    notes += [f"warning: {w}" for w in
-              paired.warnings(p, rule, spec.tolerance.get("success_drop_pct"))]
+    notes += [
+        f"warning: {w}" for w in paired.warnings(p, rule, spec.tolerance.get("success_drop_pct"))
+    ]
     report = paired.report_text(p, definition, rule)
     report += "".join(f"  {note}\n" for note in notes[1:])
     return problems, report, within, notes

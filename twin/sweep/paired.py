@@ -82,7 +82,9 @@ def side_from_table(table: pa.Table, label: str) -> Side:
     ok = pc.equal(table.column("outcome"), "ok").fill_null(False).to_numpy(zero_copy_only=False)
     placement = table.column("placement_error_mm").cast(pa.float64())
     placement_mm = placement.to_numpy(zero_copy_only=False).astype(float)  # null -> NaN
-    return Side(label, scenario, ok, placement_mm, table, keys)
+    return Side(
+        label=label, scenario=scenario, ok=ok, placement_mm=placement_mm, table=table, keys=keys
+    )
 
 
 OUTCOMES = ("ok", "error")  # what a sweep's worker writes
@@ -98,8 +100,9 @@ def check_columns(table: pa.Table, label: str) -> None:
         row = int(np.flatnonzero(np.asarray(mask))[0]) if mask is not None else 0
         value = table.column(column)[row].as_py()
         shown = repr(value) if not isinstance(value, str) else repr(value[:40])
-        return ConfigError(f"results {label!r} column {column!r} row {row + 1} holds {shown}; "
-                           f"expected {expected}")
+        return ConfigError(
+            f"results {label!r} column {column!r} row {row + 1} holds {shown}; expected {expected}"
+        )
 
     def nulls(column: str):
         return pc.is_null(table.column(column)).to_numpy(zero_copy_only=False)
@@ -111,7 +114,8 @@ def check_columns(table: pa.Table, label: str) -> None:
         raise bad("scenario", None, "whole numbers (an integer column)")
     scenario = table.column("scenario")
     wrong = nulls("scenario") | pc.fill_null(pc.less(scenario, 0), False).to_numpy(
-        zero_copy_only=False)
+        zero_copy_only=False
+    )
     if wrong.any():
         raise bad("scenario", wrong, "a whole number >= 0")
     if not (pa.types.is_string(kinds["outcome"]) or pa.types.is_large_string(kinds["outcome"])):
@@ -120,8 +124,11 @@ def check_columns(table: pa.Table, label: str) -> None:
     wrong = ~pc.fill_null(known, False).to_numpy(zero_copy_only=False)
     if wrong.any():
         raise bad("outcome", wrong, f"one of {', '.join(OUTCOMES)}")
-    if not (pa.types.is_string(kinds["error"]) or pa.types.is_large_string(kinds["error"])
-            or pa.types.is_null(kinds["error"])):
+    if not (
+        pa.types.is_string(kinds["error"])
+        or pa.types.is_large_string(kinds["error"])
+        or pa.types.is_null(kinds["error"])
+    ):
         raise bad("error", None, "text or null")
     kind = kinds["placement_error_mm"]
     if not (pa.types.is_floating(kind) or pa.types.is_integer(kind) or pa.types.is_null(kind)):
@@ -141,14 +148,18 @@ def read_side(path: str | os.PathLike, label: str | None = None) -> Side:
     try:
         st = os.stat(path)
         if not S_ISREG(st.st_mode):
-            raise ConfigError(f"results {str(path)!r} is not a regular file; expected a "
-                              ".parquet file")
+            raise ConfigError(
+                f"results {str(path)!r} is not a regular file; expected a .parquet file"
+            )
         if st.st_size > MAX_RESULTS_BYTES:
-            raise ConfigError(f"results {str(path)!r} hold {st.st_size} bytes; expected at most "
-                              f"{MAX_RESULTS_BYTES}")
+            raise ConfigError(
+                f"results {str(path)!r} hold {st.st_size} bytes; expected at most "
+                f"{MAX_RESULTS_BYTES}"
+            )
         schema = pq.read_schema(path)
-        table = pq.read_table(path, columns=[c for c in schema.names
-                                             if c in RESULT_COLUMNS or c not in NOT_VARIED])
+        table = pq.read_table(
+            path, columns=[c for c in schema.names if c in RESULT_COLUMNS or c not in NOT_VARIED]
+        )
     except FileNotFoundError:
         raise ConfigError(f"results {str(path)!r} do not exist") from None
     except (OSError, pa.ArrowException) as err:
@@ -169,10 +180,14 @@ class Flip:
     placement_now_mm: float | None
 
     def as_dict(self) -> dict:
-        return {"scenario": self.scenario, "values": self.values,
-                "reason_before": self.reason_before, "reason_now": self.reason_now,
-                "placement_before_mm": self.placement_before_mm,
-                "placement_now_mm": self.placement_now_mm}
+        return {
+            "scenario": self.scenario,
+            "values": self.values,
+            "reason_before": self.reason_before,
+            "reason_now": self.reason_now,
+            "placement_before_mm": self.placement_before_mm,
+            "placement_now_mm": self.placement_now_mm,
+        }
 
 
 @dataclass
@@ -213,30 +228,47 @@ class Paired:
         return (self.both_ok + self.better) / self.n if self.n else 0.0
 
     def as_dict(self) -> dict:
-        out = {"kind": "paired", "reference": self.reference, "new": self.new, "scenarios": self.n,
-               "only_in_reference": self.only_reference, "only_in_new": self.only_new,
-               "reference_ok": self.both_ok + self.worse, "new_ok": self.both_ok + self.better,
-               "reference_success_rate": self.reference_rate, "new_success_rate": self.new_rate,
-               "ok_to_failed": self.worse, "failed_to_ok": self.better,
-               "difference": self.difference, "newcombe_paired95": list(self.interval),
-               "mcnemar_exact_p": self.mcnemar_p,
-               "detectable_drop_pct": self.detectable_drop_pct,
-               "placement_shift_mm": None if self.shift is None else {
-                   "median": self.shift[0], "ci95": [self.shift[1], self.shift[2]],
-                   "method": "sign-test order statistics", "count": self.shift_count},
-               "placed_in_one_run_only": self.placed_changed,
-               "largest_placement_move": None if self.largest_move is None else {
-                   "scenario": self.largest_move[0], "mm": self.largest_move[1]},
-               "values_moved": self.values_moved,
-               "ok_to_failed_scenarios": [f.as_dict() for f in self.worse_flips],
-               "failed_to_ok_scenarios": [f.as_dict() for f in self.better_flips]}
+        out = {
+            "kind": "paired",
+            "reference": self.reference,
+            "new": self.new,
+            "scenarios": self.n,
+            "only_in_reference": self.only_reference,
+            "only_in_new": self.only_new,
+            "reference_ok": self.both_ok + self.worse,
+            "new_ok": self.both_ok + self.better,
+            "reference_success_rate": self.reference_rate,
+            "new_success_rate": self.new_rate,
+            "ok_to_failed": self.worse,
+            "failed_to_ok": self.better,
+            "difference": self.difference,
+            "newcombe_paired95": list(self.interval),
+            "mcnemar_exact_p": self.mcnemar_p,
+            "detectable_drop_pct": self.detectable_drop_pct,
+            "placement_shift_mm": None
+            if self.shift is None
+            else {
+                "median": self.shift[0],
+                "ci95": [self.shift[1], self.shift[2]],
+                "method": "sign-test order statistics",
+                "count": self.shift_count,
+            },
+            "placed_in_one_run_only": self.placed_changed,
+            "largest_placement_move": None
+            if self.largest_move is None
+            else {"scenario": self.largest_move[0], "mm": self.largest_move[1]},
+            "values_moved": self.values_moved,
+            "ok_to_failed_scenarios": [f.as_dict() for f in self.worse_flips],
+            "failed_to_ok_scenarios": [f.as_dict() for f in self.better_flips],
+        }
         return out
 
 
 def pair(reference: Side, new: Side) -> Paired:
     """Compare new with reference on the scenarios both hold."""
-    common, ir, inew = np.intersect1d(reference.scenario, new.scenario, assume_unique=True,
-                                      return_indices=True)
+    common, ir, inew = np.intersect1d(
+        reference.scenario, new.scenario, assume_unique=True, return_indices=True
+    )
     ok_r, ok_n = reference.ok[ir], new.ok[inew]
     worse_mask, better_mask = ok_r & ~ok_n, ~ok_r & ok_n
     both, worse, better = int((ok_r & ok_n).sum()), int(worse_mask.sum()), int(better_mask.sum())
@@ -260,21 +292,40 @@ def pair(reference: Side, new: Side) -> Paired:
     kind = np.zeros(n, dtype=np.int8)
     kind[worse_mask], kind[better_mask] = -1, 1
     return Paired(
-        reference.label, new.label, n, reference.n - n, new.n - n, both, worse, better, neither,
-        (better - worse) / n if n else 0.0, newcombe_paired(both, better, worse, neither),
-        mcnemar_exact(worse, better), median_ci(diffs), int(diffs.size),
-        int((np.isnan(reference.placement_mm[ir]) != np.isnan(new.placement_mm[inew])).sum()),
-        largest, values_moved,
-        _flips(reference, new, ir, inew, np.flatnonzero(worse_mask)[:LISTED]),
-        _flips(reference, new, ir, inew, np.flatnonzero(better_mask)[:LISTED]),
-        moved, common, kind, power.detectable_drop_pct(n, worse + better))
+        reference=reference.label,
+        new=new.label,
+        n=n,
+        only_reference=reference.n - n,
+        only_new=new.n - n,
+        both_ok=both,
+        worse=worse,
+        better=better,
+        neither_ok=neither,
+        difference=(better - worse) / n if n else 0.0,
+        interval=newcombe_paired(both, better, worse, neither),
+        mcnemar_p=mcnemar_exact(worse, better),
+        shift=median_ci(diffs),
+        shift_count=int(diffs.size),
+        placed_changed=int(
+            (np.isnan(reference.placement_mm[ir]) != np.isnan(new.placement_mm[inew])).sum()
+        ),
+        largest_move=largest,
+        values_moved=values_moved,
+        worse_flips=_flips(reference, new, ir, inew, np.flatnonzero(worse_mask)[:LISTED]),
+        better_flips=_flips(reference, new, ir, inew, np.flatnonzero(better_mask)[:LISTED]),
+        moved=moved,
+        common=common,
+        flip_kind=kind,
+        detectable_drop_pct=power.detectable_drop_pct(n, worse + better),
+    )
 
 
 def first_moved(reference: Side, new: Side) -> tuple[str, int] | None:
     """The first varied key (in reference's order) whose value differs in a scenario both hold, and
     the first such scenario; None when every shared scenario has the same values."""
-    common, ir, inew = np.intersect1d(reference.scenario, new.scenario, assume_unique=True,
-                                      return_indices=True)
+    common, ir, inew = np.intersect1d(
+        reference.scenario, new.scenario, assume_unique=True, return_indices=True
+    )
     for key in reference.keys:
         if key not in new.keys:
             continue
@@ -298,8 +349,9 @@ def _differs(a: pa.ChunkedArray, b: pa.ChunkedArray) -> int:
     return len(a) - int(pc.sum(pc.or_(same.fill_null(False), both_null)).as_py() or 0)
 
 
-def _flips(reference: Side, new: Side, ir: np.ndarray, inew: np.ndarray,
-           where: np.ndarray) -> list[Flip]:
+def _flips(
+    reference: Side, new: Side, ir: np.ndarray, inew: np.ndarray, where: np.ndarray
+) -> list[Flip]:
     """The flips at positions `where` (of the common scenarios) as rows: a few, never all."""
     if where.size == 0:
         return []
@@ -307,8 +359,16 @@ def _flips(reference: Side, new: Side, ir: np.ndarray, inew: np.ndarray,
     new_rows = new.table.take(pa.array(inew[where])).to_pylist()
     out = []
     for old, now in zip(old_rows, new_rows, strict=True):
-        out.append(Flip(now["scenario"], {k: now[k] for k in new.keys}, old["error"] or "",
-                        now["error"] or "", old["placement_error_mm"], now["placement_error_mm"]))
+        out.append(
+            Flip(
+                scenario=now["scenario"],
+                values={k: now[k] for k in new.keys},
+                reason_before=old["error"] or "",
+                reason_now=now["error"] or "",
+                placement_before_mm=old["placement_error_mm"],
+                placement_now_mm=now["placement_error_mm"],
+            )
+        )
     return out
 
 
@@ -317,20 +377,25 @@ def problems(p: Paired, rule: str, shift_mm: float) -> list[str]:
     out = []
     if rule == "strict":
         if p.worse or p.better:
-            out.append(f"{p.worse + p.better} scenarios flipped (strict: any flip fails): "
-                       f"{flip_text(p)}")
+            out.append(
+                f"{p.worse + p.better} scenarios flipped (strict: any flip fails): {flip_text(p)}"
+            )
         if p.placed_changed:
             out.append(f"{p.placed_changed} scenarios placed in one run only")
         if p.largest_move is not None and abs(p.largest_move[1]) > shift_mm:
             beyond = int((np.abs(np.nan_to_num(p.moved)) > shift_mm).sum())
-            out.append(f"placement error moved beyond {shift_mm:g} mm in {beyond} scenarios "
-                       f"(largest {p.largest_move[1]:+.3f} mm, scenario {p.largest_move[0]})")
+            out.append(
+                f"placement error moved beyond {shift_mm:g} mm in {beyond} scenarios "
+                f"(largest {p.largest_move[1]:+.3f} mm, scenario {p.largest_move[0]})"
+            )
         return out
     if p.worse > p.better and p.mcnemar_p < ALPHA:
         out.append(f"success rate dropped significantly: {rate_text(p)}; {flip_text(p)}")
     if p.shift is not None and p.shift[1] > 0 and p.shift[0] > shift_mm:
-        out.append(f"placement error grew significantly: paired median shift {p.shift[0]:+.3f} mm "
-                   f"(95 % {p.shift[1]:+.3f} to {p.shift[2]:+.3f}), beyond {shift_mm:g} mm")
+        out.append(
+            f"placement error grew significantly: paired median shift {p.shift[0]:+.3f} mm "
+            f"(95 % {p.shift[1]:+.3f} to {p.shift[2]:+.3f}), beyond {shift_mm:g} mm"
+        )
     return out
 
 
@@ -341,27 +406,33 @@ def warnings(p: Paired, rule: str, success_drop_pct: float | None) -> list[str]:
     if success_drop_pct is None or p.n == 0:
         return []
     out = []
-    warning = power.threshold_warning(success_drop_pct, p.n, p.worse + p.better,
-                                      p.detectable_drop_pct, rule)
+    warning = power.threshold_warning(
+        success_drop_pct, p.n, p.worse + p.better, p.detectable_drop_pct, rule
+    )
     if warning:
         out.append(warning)
     measured_pct = -100.0 * p.difference
     if rule != "strict" and measured_pct > success_drop_pct and p.mcnemar_p >= ALPHA:
-        out.append(f"the measured drop, {measured_pct:.2f} points, is beyond success_drop_pct "
-                   f"{success_drop_pct:g} but not significant (McNemar exact p = "
-                   f"{p.mcnemar_p:.3g}): it does not fail the significant rule")
+        out.append(
+            f"the measured drop, {measured_pct:.2f} points, is beyond success_drop_pct "
+            f"{success_drop_pct:g} but not significant (McNemar exact p = "
+            f"{p.mcnemar_p:.3g}): it does not fail the significant rule"
+        )
     return out
 
 
 def rate_text(p: Paired) -> str:
     lo, hi = p.interval
-    return (f"{100 * p.reference_rate:.2f} % -> {100 * p.new_rate:.2f} %, paired difference "
-            f"{100 * p.difference:+.2f} points (Newcombe 95 % {100 * lo:+.2f} to {100 * hi:+.2f}), "
-            f"McNemar exact p = {p.mcnemar_p:.3g}")
+    return (
+        f"{100 * p.reference_rate:.2f} % -> {100 * p.new_rate:.2f} %, paired difference "
+        f"{100 * p.difference:+.2f} points (Newcombe 95 % {100 * lo:+.2f} to {100 * hi:+.2f}), "
+        f"McNemar exact p = {p.mcnemar_p:.3g}"
+    )
 
 
 def flip_text(p: Paired, most: int = 5) -> str:
     """ok->failed and failed->ok counts with their first scenario numbers."""
+
     def some(flips: list[Flip], count: int) -> str:
         shown = ", ".join(str(f.scenario) for f in flips[:most])
         return shown + (", ..." if count > most else "")
@@ -397,25 +468,38 @@ def report_text(p: Paired, definition: str | None = None, rule: str = "significa
     """The paired comparison as text (twin check -v, twin sweep compare)."""
     lines = [f"paired on {p.n} scenarios: reference {p.reference}, new {p.new}"]
     if p.only_reference or p.only_new:
-        lines.append(f"  not paired: {p.only_reference} scenarios only in the reference, "
-                     f"{p.only_new} only in the new run")
-    lines.append(f"  ok->failed {p.worse}, failed->ok {p.better}, unchanged "
-                 f"{p.both_ok + p.neither_ok} ({p.both_ok} ok, {p.neither_ok} failed in both)")
+        lines.append(
+            f"  not paired: {p.only_reference} scenarios only in the reference, "
+            f"{p.only_new} only in the new run"
+        )
+    lines.append(
+        f"  ok->failed {p.worse}, failed->ok {p.better}, unchanged "
+        f"{p.both_ok + p.neither_ok} ({p.both_ok} ok, {p.neither_ok} failed in both)"
+    )
     lines.append(f"  success rate {rate_text(p)}")
     lines.append(f"  {power.detectable_text(p.n, p.detectable_drop_pct, rule)}")
     if p.shift is not None:
         med, lo, hi = p.shift
-        lines.append(f"  placement error, paired shift (new - reference) over {p.shift_count} "
-                     f"scenarios: median {med:+.3f} mm (95 % {lo:+.3f} to {hi:+.3f}, sign test)"
-                     + (f"; largest move {p.largest_move[1]:+.3f} mm (scenario "
-                        f"{p.largest_move[0]})" if p.largest_move and p.largest_move[1] else ""))
+        lines.append(
+            f"  placement error, paired shift (new - reference) over {p.shift_count} "
+            f"scenarios: median {med:+.3f} mm (95 % {lo:+.3f} to {hi:+.3f}, sign test)"
+            + (
+                f"; largest move {p.largest_move[1]:+.3f} mm (scenario {p.largest_move[0]})"
+                if p.largest_move and p.largest_move[1]
+                else ""
+            )
+        )
     if p.placed_changed:
         lines.append(f"  placed in one run only: {p.placed_changed} scenarios")
     if p.values_moved:
-        lines.append("  varied values that differ between the runs: " + ", ".join(
-            f"{k} ({c} of {p.n} scenarios)" for k, c in p.values_moved.items()))
-    for title, flips, count, before in (("ok->failed", p.worse_flips, p.worse, False),
-                                        ("failed->ok", p.better_flips, p.better, True)):
+        lines.append(
+            "  varied values that differ between the runs: "
+            + ", ".join(f"{k} ({c} of {p.n} scenarios)" for k, c in p.values_moved.items())
+        )
+    for title, flips, count, before in (
+        ("ok->failed", p.worse_flips, p.worse, False),
+        ("failed->ok", p.better_flips, p.better, True),
+    ):
         if not count:
             continue
         lines.append(f"  {title}:")
@@ -431,26 +515,45 @@ def report_text(p: Paired, definition: str | None = None, rule: str = "significa
 
 def report_markdown(p: Paired, definition: str | None = None, rule: str = "significant") -> str:
     lo, hi = p.interval
-    rows = [("scenarios paired", str(p.n)),
-            ("success rate", f"{100 * p.reference_rate:.2f} % -> {100 * p.new_rate:.2f} %"),
-            ("ok -> failed / failed -> ok", f"{p.worse} / {p.better}"),
-            ("paired difference (Newcombe 95 %)",
-             f"{100 * p.difference:+.2f} points ({100 * lo:+.2f} to {100 * hi:+.2f})"),
-            ("McNemar exact p", f"{p.mcnemar_p:.3g}")]
+    rows = [
+        ("scenarios paired", str(p.n)),
+        ("success rate", f"{100 * p.reference_rate:.2f} % -> {100 * p.new_rate:.2f} %"),
+        ("ok -> failed / failed -> ok", f"{p.worse} / {p.better}"),
+        (
+            "paired difference (Newcombe 95 %)",
+            f"{100 * p.difference:+.2f} points ({100 * lo:+.2f} to {100 * hi:+.2f})",
+        ),
+        ("McNemar exact p", f"{p.mcnemar_p:.3g}"),
+    ]
     if p.shift is not None:
-        rows.append(("placement shift, median (95 %, sign test)",
-                     f"{p.shift[0]:+.3f} mm ({p.shift[1]:+.3f} to {p.shift[2]:+.3f})"))
-    lines = [f"# Paired comparison: {p.new} vs {p.reference}", "", "| statistic | value |",
-             "|---|---|", *(f"| {a} | {b} |" for a, b in rows), "",
-             f"The verdict {power.detectable_text(p.n, p.detectable_drop_pct, rule)}.", ""]
-    for title, flips, count, before in (("ok -> failed", p.worse_flips, p.worse, False),
-                                        ("failed -> ok", p.better_flips, p.better, True)):
+        rows.append(
+            (
+                "placement shift, median (95 %, sign test)",
+                f"{p.shift[0]:+.3f} mm ({p.shift[1]:+.3f} to {p.shift[2]:+.3f})",
+            )
+        )
+    lines = [
+        f"# Paired comparison: {p.new} vs {p.reference}",
+        "",
+        "| statistic | value |",
+        "|---|---|",
+        *(f"| {a} | {b} |" for a, b in rows),
+        "",
+        f"The verdict {power.detectable_text(p.n, p.detectable_drop_pct, rule)}.",
+        "",
+    ]
+    for title, flips, count, before in (
+        ("ok -> failed", p.worse_flips, p.worse, False),
+        ("failed -> ok", p.better_flips, p.better, True),
+    ):
         if not count:
             continue
         lines += [f"## {title} ({count})", "", "| scenario | values | reason |", "|---|---|---|"]
-        lines += [f"| {f.scenario} | {_values_text(f.values)} | "
-                  f"{(f.reason_before if before else f.reason_now).replace('|', '/')} |"
-                  for f in flips]
+        lines += [
+            f"| {f.scenario} | {_values_text(f.values)} | "
+            f"{(f.reason_before if before else f.reason_now).replace('|', '/')} |"
+            for f in flips
+        ]
         if count > len(flips):
             lines.append(f"| ... | {count - len(flips)} more | |")
         lines.append("")
@@ -483,22 +586,37 @@ class Unpaired:
         def med(m):
             return None if m is None else {"median": m[0], "ci95": [m[1], m[2]]}
 
-        return {"kind": "unpaired", "why": self.why, "reference": self.reference, "new": self.new,
-                "reference_ok": self.reference_ok, "reference_scenarios": self.reference_n,
-                "new_ok": self.new_ok, "new_scenarios": self.new_n,
-                "reference_wilson95": list(wilson(self.reference_ok, self.reference_n)),
-                "new_wilson95": list(wilson(self.new_ok, self.new_n)),
-                "difference": self.difference, "newcombe_unpaired95": list(self.interval),
-                "reference_placement_median_mm": med(self.reference_median),
-                "new_placement_median_mm": med(self.new_median)}
+        return {
+            "kind": "unpaired",
+            "why": self.why,
+            "reference": self.reference,
+            "new": self.new,
+            "reference_ok": self.reference_ok,
+            "reference_scenarios": self.reference_n,
+            "new_ok": self.new_ok,
+            "new_scenarios": self.new_n,
+            "reference_wilson95": list(wilson(self.reference_ok, self.reference_n)),
+            "new_wilson95": list(wilson(self.new_ok, self.new_n)),
+            "difference": self.difference,
+            "newcombe_unpaired95": list(self.interval),
+            "reference_placement_median_mm": med(self.reference_median),
+            "new_placement_median_mm": med(self.new_median),
+        }
 
 
 def unpaired(reference: Side, new: Side, why: str) -> Unpaired:
-    return Unpaired(reference.label, new.label, int(reference.ok.sum()), reference.n,
-                    int(new.ok.sum()), new.n,
-                    newcombe_unpaired(int(new.ok.sum()), new.n, int(reference.ok.sum()),
-                                      reference.n),
-                    median_ci(_placed(reference)), median_ci(_placed(new)), why)
+    return Unpaired(
+        reference=reference.label,
+        new=new.label,
+        reference_ok=int(reference.ok.sum()),
+        reference_n=reference.n,
+        new_ok=int(new.ok.sum()),
+        new_n=new.n,
+        interval=newcombe_unpaired(int(new.ok.sum()), new.n, int(reference.ok.sum()), reference.n),
+        reference_median=median_ci(_placed(reference)),
+        new_median=median_ci(_placed(new)),
+        why=why,
+    )
 
 
 def _placed(side: Side) -> np.ndarray:
@@ -511,12 +629,16 @@ def unpaired_problems(u: Unpaired) -> list[str]:
     out = []
     lo, hi = u.interval
     if hi < 0:
-        out.append(f"success rate is lower: {u.difference * 100:+.2f} points (Newcombe 95 % "
-                   f"{100 * lo:+.2f} to {100 * hi:+.2f})")
+        out.append(
+            f"success rate is lower: {u.difference * 100:+.2f} points (Newcombe 95 % "
+            f"{100 * lo:+.2f} to {100 * hi:+.2f})"
+        )
     if u.reference_median and u.new_median and u.new_median[1] > u.reference_median[2]:
-        out.append(f"placement error is higher: median {u.new_median[0]:.3f} mm (95 % from "
-                   f"{u.new_median[1]:.3f}) against {u.reference_median[0]:.3f} mm (95 % up to "
-                   f"{u.reference_median[2]:.3f})")
+        out.append(
+            f"placement error is higher: median {u.new_median[0]:.3f} mm (95 % from "
+            f"{u.new_median[1]:.3f}) against {u.reference_median[0]:.3f} mm (95 % up to "
+            f"{u.reference_median[2]:.3f})"
+        )
     return out
 
 
@@ -524,21 +646,32 @@ def unpaired_text(u: Unpaired) -> str:
     lo, hi = u.interval
     rl, rh = wilson(u.reference_ok, u.reference_n)
     nl, nh = wilson(u.new_ok, u.new_n)
-    lines = [f"not paired ({u.why}): reference {u.reference}, new {u.new}",
-             (f"  reference {u.reference_ok}/{u.reference_n} ok: "
-              f"{100 * u.reference_ok / u.reference_n:.2f} % "
-             f"(Wilson 95 % {100 * rl:.2f}-{100 * rh:.2f} %)"),
-             (f"  new {u.new_ok}/{u.new_n} ok: {100 * u.new_ok / u.new_n:.2f} % "
-             f"(Wilson 95 % {100 * nl:.2f}-{100 * nh:.2f} %)"),
-             (f"  difference {100 * u.difference:+.2f} points (Newcombe unpaired 95 % "
-             f"{100 * lo:+.2f} to {100 * hi:+.2f})")]
+    lines = [
+        f"not paired ({u.why}): reference {u.reference}, new {u.new}",
+        (
+            f"  reference {u.reference_ok}/{u.reference_n} ok: "
+            f"{100 * u.reference_ok / u.reference_n:.2f} % "
+            f"(Wilson 95 % {100 * rl:.2f}-{100 * rh:.2f} %)"
+        ),
+        (
+            f"  new {u.new_ok}/{u.new_n} ok: {100 * u.new_ok / u.new_n:.2f} % "
+            f"(Wilson 95 % {100 * nl:.2f}-{100 * nh:.2f} %)"
+        ),
+        (
+            f"  difference {100 * u.difference:+.2f} points (Newcombe unpaired 95 % "
+            f"{100 * lo:+.2f} to {100 * hi:+.2f})"
+        ),
+    ]
     for name, m in (("reference", u.reference_median), ("new", u.new_median)):
         if m is not None:
-            lines.append(f"  {name} placement error median {m[0]:.3f} mm (95 % {m[1]:.3f} to "
-                         f"{m[2]:.3f})")
+            lines.append(
+                f"  {name} placement error median {m[0]:.3f} mm (95 % {m[1]:.3f} to {m[2]:.3f})"
+            )
     return "\n".join(lines) + "\n"
 
 
 def unpaired_markdown(u: Unpaired) -> str:
-    return (f"# Unpaired comparison: {u.new} vs {u.reference}\n\n{u.why}.\n\n```text\n"
-            f"{unpaired_text(u)}```\n")
+    return (
+        f"# Unpaired comparison: {u.new} vs {u.reference}\n\n{u.why}.\n\n```text\n"
+        f"{unpaired_text(u)}```\n"
+    )

@@ -14,6 +14,8 @@ import json
 import os
 from pathlib import Path
 
+from twin.record.outputs import write_atomic
+
 CACHE_DIR = ".twin-bisect"
 
 
@@ -55,6 +57,4 @@ class VerdictCache:
         ignore = self.dir / ".gitignore"
         if not ignore.exists():
             ignore.write_text("*\n", encoding="utf-8")
-        tmp = self.dir / f"{key}.json.tmp"
-        tmp.write_text(json.dumps(verdict, sort_keys=True) + "\n", encoding="utf-8")
-        os.replace(tmp, self.dir / f"{key}.json")
+        write_atomic(self.dir / f"{key}.json", json.dumps(verdict, sort_keys=True) + "\n")

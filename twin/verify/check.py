@@ -160,7 +160,15 @@ def check_one(
             outcome.seconds = time.perf_counter() - t0
             return outcome
         except TwinError as err:
-            return Outcome(path, "error", err.exit_code, str(err), "", 0, time.perf_counter() - t0)
+            return Outcome(
+                path=path,
+                status="error",
+                exit_code=err.exit_code,
+                summary=str(err),
+                report="",
+                frames=0,
+                seconds=time.perf_counter() - t0,
+            )
         finally:
             tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
 
@@ -218,22 +226,38 @@ def _verdict(
     report = render_text(result)
     frames = len(golden.frames)
     if result.match:
-        return Outcome(path, "match", 0, headline(result), report, frames)
+        return Outcome(
+            path=path,
+            status="match",
+            exit_code=0,
+            summary=headline(result),
+            report=report,
+            frames=frames,
+        )
     summary = headline(result)
     if update and new.outcome != "ok" and not allow_error:
         why = next((e.message for e in new.events if e.kind == "task_error"), new.outcome)
         return Outcome(
-            path,
-            "refused",
-            1,
-            f"not rewritten: the re-run's task failed ({why}); the golden is "
+            path=path,
+            status="refused",
+            exit_code=1,
+            summary=f"not rewritten: the re-run's task failed ({why}); the golden is "
             "left as it was (--allow-error writes it anyway)",
-            report,
-            frames,
+            report=report,
+            frames=frames,
         )
     if update:
-        return Outcome(path, "updated", 0, "rewritten; was: " + summary, report, frames)
-    return Outcome(path, "differ", 1, summary, report, frames)
+        return Outcome(
+            path=path,
+            status="updated",
+            exit_code=0,
+            summary="rewritten; was: " + summary,
+            report=report,
+            frames=frames,
+        )
+    return Outcome(
+        path=path, status="differ", exit_code=1, summary=summary, report=report, frames=frames
+    )
 
 
 def _task_sha256_now(golden: Recording) -> str | None:

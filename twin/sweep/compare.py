@@ -3,7 +3,7 @@
 with NAME.results.parquet beside them. Their scenarios are the same ones when both have the same
 seed and the same varied keys (scenario i's values depend only on the seed, i and the key), and
 then they are compared scenario by scenario (paired.pair); otherwise as two independent samples
-(paired.unpaired). What else differs between the two definitions (robot, task parameters, a
+(unpaired.py). What else differs between the two definitions (robot, task parameters, a
 distribution, the rate) is named: it is what the comparison measures."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from twin.model.errors import ConfigError
 from twin.record.outputs import write_atomic
-from twin.sweep import paired
+from twin.sweep import paired, unpaired
 from twin.sweep.spec import TOLERANCES, SweepSpec, load_spec
 
 RESULTS, DEFINITION = "results.parquet", "sweep.toml"
@@ -82,7 +82,7 @@ class Comparison:
     reference: Run
     new: Run
     differences: list[str]
-    result: paired.Paired | paired.Unpaired
+    result: paired.Paired | unpaired.Unpaired
     problems: list[str]  # what makes B worse than A (--fail-if-worse)
     warnings: list[str] = field(default_factory=list)  # said, failing nothing (paired.warnings)
 
@@ -98,7 +98,7 @@ class Comparison:
         head = ("definitions differ in: " + "; ".join(self.differences) + "\n"
                 if self.differences else "definitions are the same\n")
         body = (paired.report_text(self.result, self.new.definition) if self.is_paired
-                else paired.unpaired_text(self.result))
+                else unpaired.unpaired_text(self.result))
         verdict = ("worse: " + "; ".join(self.problems) if self.problems
                    else "not worse beyond sampling noise")
         warned = "".join(f"warning: {w}\n" for w in self.warnings)
@@ -106,7 +106,7 @@ class Comparison:
 
     def markdown(self) -> str:
         body = (paired.report_markdown(self.result, self.new.definition) if self.is_paired
-                else paired.unpaired_markdown(self.result))
+                else unpaired.unpaired_markdown(self.result))
         diffs = "\n".join(f"- {d}" for d in self.differences) or "- none"
         verdict = "\n".join(f"- {p}" for p in self.problems) or "- not worse beyond sampling noise"
         verdict += "".join(f"\n- warning: {w}" for w in self.warnings)
@@ -142,8 +142,8 @@ def compare(a: Run, b: Run) -> Comparison:
         problems = paired.problems(result, "significant", shift)
         warnings = paired.warnings(result, "significant", a.spec.tolerance.get("success_drop_pct"))
     else:
-        result = paired.unpaired(a.side, b.side, why)
-        problems, warnings = paired.unpaired_problems(result), []
+        result = unpaired.unpaired(a.side, b.side, why)
+        problems, warnings = unpaired.unpaired_problems(result), []
     return Comparison(
         reference=a,
         new=b,

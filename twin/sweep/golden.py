@@ -158,51 +158,24 @@ def check_sweep(
         ) if update else []
         if wrote:
             was = "; ".join(problems) or "within tolerance"
-            line = f"rewrote {', '.join(wrote)}; was: {was}"
-            return Outcome(
-                path=definition,
-                status="updated",
-                exit_code=0,
-                summary=line,
-                report=report,
-                frames=spec.scenarios,
-                seconds=seconds,
-            )
-        if not problems:
-            line = "; ".join([within or "matches", *notes])
-            return Outcome(
-                path=definition,
-                status="match",
-                exit_code=0,
-                summary=line,
-                report=report,
-                frames=spec.scenarios,
-                seconds=seconds,
-            )
-        line = "; ".join(problems + notes)
+            status, line = "updated", f"rewrote {', '.join(wrote)}; was: {was}"
+        elif not problems:
+            status, line = "match", "; ".join([within or "matches", *notes])
+        else:
+            status, line = "differ", "; ".join(problems + notes)
         outcome = Outcome(
             path=definition,
-            status="differ",
-            exit_code=1,
+            status=status,
+            exit_code=1 if status == "differ" else 0,
             summary=line,
             report=report,
             frames=spec.scenarios,
             seconds=seconds,
         )
-        if keep is not None:
+        if status == "differ" and keep is not None:
             outcome.kept = _keep(keep, outcome, new, new_table if reference is not None else None)
-        if html and reference is not None:
-            from twin.sweep.html import golden_section
-
-            now = paired.side_from_table(new_table, "now")
-            outcome.section = golden_section(
-                definition=definition,
-                summary=line,
-                p=paired.pair(reference[0], now),
-                new=now,
-                reference=reference[0],
-                report=report,
-            )
+        if status == "differ" and html and reference is not None:
+            outcome.section = _section(definition, outcome, reference, new_table)
         return outcome
     except TwinError as err:
         return Outcome(
@@ -214,6 +187,21 @@ def check_sweep(
             frames=0,
             seconds=time.perf_counter() - t0,
         )
+
+
+def _section(definition: str, outcome: Outcome, reference, new_table) -> str:
+    """A paired golden that differs, as its section of the HTML report (flips, interval, map)."""
+    from twin.sweep.html import golden_section
+
+    now = paired.side_from_table(new_table, "now")
+    return golden_section(
+        definition=definition,
+        summary=outcome.summary,
+        p=paired.pair(reference[0], now),
+        new=now,
+        reference=reference[0],
+        report=outcome.report,
+    )
 
 
 def _update(spec, golden, new, reference, new_table, definition) -> list[str]:

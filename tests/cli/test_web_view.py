@@ -26,6 +26,9 @@ pytestmark = [
     ),
 ]
 LOAD_TIMEOUT_S = 240
+# a screenshot of a software-rendered WebGL page waits for a frame: 30 s (Playwright's default)
+# ran out once on a machine loaded by other jobs
+SHOT_TIMEOUT_MS = 120_000
 URL = re.compile(
     r"serving the web viewer at (http://127\.0\.0\.1:\d+/)(\?url=\S+) \(Ctrl-C to stop\)$"
 )
@@ -94,11 +97,11 @@ def test_the_printed_url_opens_the_recording_in_chromium(web_view, tmp_path):
             while time.monotonic() < deadline:
                 pages["printed"].wait_for_timeout(5000)
                 for name, page in pages.items():
-                    page.screenshot(path=shots[name])
+                    page.screenshot(path=shots[name], timeout=SHOT_TIMEOUT_MS)
                     seen[name] = _colours(shots[name])
                 if _shows_recording(seen["printed"]):
                     pages["printed"].wait_for_timeout(5000)  # the bare page has had as long to load
-                    pages["bare"].screenshot(path=shots["bare"])
+                    pages["bare"].screenshot(path=shots["bare"], timeout=SHOT_TIMEOUT_MS)
                     seen["bare"] = _colours(shots["bare"])
                     break
         finally:

@@ -21,8 +21,11 @@ import collections
 import marshal
 import os
 import pickle
+import select
 import sys
+import time
 from pathlib import Path
+from typing import NamedTuple
 
 from twin.helpers import start_helper
 from twin.model.config import TwinConfig
@@ -38,17 +41,35 @@ PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames a
 MAX_AHEAD_S = 0.4
 # simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
 RING_S = 4096 / 240
-POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
-IDLE_POLL_S = 0.016
-# a recorder takes rows in once this much simulated time is published (or when woken, or at the
-# end): the writers take columns, whose cost is per batch as much as per frame
-MIN_TAKE_S = 32 / 240
+# The twin wakes a recorder (a byte down its pipe) once this much simulated time is published since
+# it last did: the writers take columns, whose cost is per batch as much as per frame, and a
+# recorder asleep in poll() costs nothing. The MCAP writer's is half its slack; the Rerun one's a
+# quarter of the ring.
+TAKE_S = 48 / 240
+RRD_TAKE_S = 1024 / 240
+IDLE_S = 0.1  # a recorder that nobody woke takes in what is published after this (a paused run)
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
 _OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
+_DONE = b"OK\0"  # a recorder's last reply: finished, and its RecorderStats
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
 # item kind -> the sinks' method
 _HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}
+
+
+class RecorderStats(NamedTuple):
+    """What a recorder process spent, from its first row to its file finalized (CPU seconds of all
+    its threads), and how much of it its writer spent (its calls, and the threads it runs)."""
+
+    cpu_s: float
+    writer_cpu_s: float
+    frames: int
+
+
+def _poller(conn) -> select.poll:
+    poller = select.poll()
+    poller.register(conn.fileno(), select.POLLIN)
+    return poller
 
 
 def _frames(config: TwinConfig, seconds: float) -> int:
@@ -76,9 +97,13 @@ class RecorderProcess(Sink):
         self._publish_every = _frames(config, PUBLISH_S)
         mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
         capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
+        # (writer, path, how far ahead the twin may go, how many rows between wake-ups)
         writers = [
-            (w, p, ahead)
-            for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
+            (w, p, ahead, min(_frames(config, take_s), ahead // 2))
+            for w, p, ahead, take_s in [
+                ("mcap", mcap_path, mcap_ahead, TAKE_S),
+                ("rrd", rrd_path, capacity, RRD_TAKE_S),
+            ]
             if p is not None
         ]
         self._ring = FrameRing(self._rows, capacity, len(writers))
@@ -102,12 +127,12 @@ class RecorderProcess(Sink):
         self._children: list[_Child] = []
         starting = None
         try:
-            for reader, (writer, path, ahead) in enumerate(writers):
+            for reader, (writer, path, ahead, take) in enumerate(writers):
                 self._children.append(
                     _Child(
                         writer,
                         reader,
-                        ahead,
+                        (ahead, take),
                         self._children,
                         (self._ring, config, run, urdf, meshes, path, rate, engine),
                     )
@@ -163,9 +188,9 @@ class RecorderProcess(Sink):
         for child, read in zip(self._children, reads, strict=True):
             if self._next_publish - read > child.ahead:
                 self.waits += 1
-                child.wait_until_read(self._ring, self._next_publish - child.ahead)
-            elif written - read > child.ahead // 2:
-                child.nudge(read)
+                child.wait_until_read(self._ring, self._next_publish - child.ahead, written)
+            elif written - child.woken_at >= child.take:
+                child.wake(written)
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Publish what is left, have the writers finalize, wait for them (the first failure is
@@ -186,6 +211,12 @@ class RecorderProcess(Sink):
         if failure is not None:
             raise failure
 
+    @property
+    def stats(self) -> dict[str, RecorderStats]:
+        """Each finished recorder's RecorderStats, by writer ("mcap", "rrd"): tools/bench_record.py
+        reports them."""
+        return {c.writer: c.stats for c in self._children if c.stats is not None}
+
     def _publish_rest(self) -> None:
         self._send_others()
         self._ring.publish(self._written)
@@ -204,20 +235,29 @@ class _Child:
     ring)."""
 
     def __init__(
-        self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple
+        self,
+        writer: str,
+        reader: int,
+        ahead_take: tuple[int, int],
+        siblings: list[_Child],
+        args: tuple,
     ) -> None:
         self.writer = writer
         self.reader = reader
-        self.ahead = ahead
-        self.wakes = 0  # wake-ups the twin sent it (it falls behind)
-        self._nudged_at = -1
+        self.ahead, self.take = ahead_take
+        self.wakes = 0  # wake-ups the twin sent it
+        self.woken_at = 0  # the rows published when the twin last woke it
+        # what the recorder said of its CPU at the end (RecorderStats), None before
+        self.stats: RecorderStats | None = None
         self.conn, self.process = start_helper(
             self,
             _serve,
-            (writer, reader, ahead, *args),
+            (writer, reader, *args),
             name=f"twin-recorder-{writer}",
             other_ends=[s.conn for s in siblings],
         )
+        # one poll object for the pipe: Connection.poll builds a selector on every call
+        self._poller = _poller(self.conn)
 
     def send(self, message: bytes) -> None:
         try:
@@ -225,23 +265,19 @@ class _Child:
         except OSError as err:
             raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
 
-    def nudge(self, read: int) -> None:
-        """Half its slack is used up: wake the recorder if it may be waiting for its timer (once for
-        each point it has read to, so a recorder busy writing is not woken again and again)."""
-        if read != self._nudged_at:
-            self._nudged_at = read
-            self._wake()
-
-    def wait_until_read(self, ring: FrameRing, read: int) -> None:
-        """Wake the recorder and wait until it has taken in rows [0, read)."""
-        self._wake()
-        while ring.read(self.reader) < read:
-            if self.conn.poll(WAIT_S):  # it says nothing before the close: this is the pipe's end
-                raise RecordingError(f"the recorder process stopped: {self._exit_text()}")
-
-    def _wake(self) -> None:
+    def wake(self, written: int) -> None:
+        """Rows [0, written) are published: have the recorder take them in."""
+        self.woken_at = written
         self.wakes += 1
         self.send(_WAKE)
+
+    def wait_until_read(self, ring: FrameRing, read: int, written: int) -> None:
+        """Wake the recorder and wait until it has taken in rows [0, read)."""
+        self.wake(written)
+        while ring.read(self.reader) < read:
+            if self._poller.poll(0):  # it says nothing before the close: this is the pipe's end
+                raise RecordingError(f"the recorder process stopped: {self._exit_text()}")
+            time.sleep(WAIT_S)
 
     def expect_ok(self, what: str) -> None:
         try:
@@ -250,9 +286,13 @@ class _Child:
             raise RecordingError(
                 f"{what}: the recorder process stopped ({self._exit_text()})"
             ) from err
-        if reply != b"OK":
-            self.process.join(timeout=5)
-            raise RecordingError(reply.decode(errors="replace"))
+        if reply == b"OK":
+            return
+        if reply.startswith(_DONE):
+            self.stats = RecorderStats(*marshal.loads(reply[len(_DONE) :]))
+            return
+        self.process.join(timeout=5)
+        raise RecordingError(reply.decode(errors="replace"))
 
     def finish(self, outcome: str, error: str) -> None:
         """Have the writer finalize with the run's outcome and wait for it."""
@@ -282,7 +322,6 @@ def _serve(
     conn,
     writer: str,
     reader: int,
-    ahead: int,
     ring: FrameRing,
     config: TwinConfig,
     run: dict,
@@ -320,44 +359,35 @@ def _serve(
         os._exit(0)
     conn.send_bytes(b"OK")
     feed = _Feed(ring, sinks)
-    # below half its slack: the twin wakes it at half (and waits at all of it)
-    min_take = max(1, min(_frames(config, MIN_TAKE_S), ahead // 2))
-    timeout = POLL_S
+    poller = _poller(conn)
     while True:
-        conn.poll(timeout)  # a message, or the timer
+        # asleep until the twin wakes it (rows to take in, the others, the close) or the pipe ends
+        woke = poller.poll(IDLE_S * 1000)
         written = ring.written()
         # all the twin sent before publishing `written`, and maybe more
-        end = _take_messages(conn, feed)
+        end = _take_messages(conn, poller, feed) if woke else None
         if end is not None:
             # the twin publishes its last rows before it closes (or has died)
             written = ring.written()
-        came = written > feed.read
-        if end is not None or feed.woken or written - feed.read >= min_take:
+        if end is not None or feed.woken or not woke:
             feed.take(written, final=end is not None)
             ring.release(reader, feed.read)
             feed.woken = False
-        # Enough rows while it wrote (a block, a burst): at once; some: the timer; none: slower.
-        waiting = ring.written() - feed.read
-        timeout = (
-            0.0
-            if waiting >= min_take
-            else POLL_S if waiting or came else min(2 * timeout, IDLE_POLL_S)
-        )
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
             if not feed.failure:
                 _abandon(sinks)
             os._exit(0)
         if end is not None:
-            failure = feed.failure or _close_all(sinks, *end)
-            conn.send_bytes(failure.encode() if failure else b"OK")
+            failure = feed.failure or feed.timed(_close_all, sinks, *end)
+            conn.send_bytes(failure.encode() if failure else _DONE + marshal.dumps(feed.stats()))
             os._exit(0)
 
 
-def _take_messages(conn, feed: _Feed):
+def _take_messages(conn, poller: select.poll, feed: _Feed):
     """Read every message waiting in the pipe: the others go to the feed's queue. Returns None, the
     close request's (outcome, error), or "died" when the pipe has closed (the twin's process
     died)."""
-    while conn.poll(0):
+    while poller.poll(0):
         try:
             message = conn.recv_bytes()
         except (EOFError, OSError):
@@ -365,7 +395,7 @@ def _take_messages(conn, feed: _Feed):
         tag, body = message[:1], message[1:]
         if tag == _OTHERS:
             feed.queue.extend(marshal.loads(body))
-        elif tag == _WAKE:  # the twin has used half its slack: take in what there is
+        elif tag == _WAKE:  # rows to take in
             feed.woken = True
         elif tag == _CLOSE:
             return marshal.loads(body)
@@ -383,6 +413,23 @@ class _Feed:
         self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
         self.failure = ""
         self.woken = False  # the twin asked for the rows to be taken in
+        # CPU seconds: the process's and this thread's at the start, this thread's in the writers
+        self._cpu0, self._thread0, self._in_writers_s = time.process_time(), time.thread_time(), 0.0
+
+    def timed(self, call, *args):
+        """call(*args), a writer's work: its CPU counts as the writer's (RecorderStats)."""
+        t0 = time.thread_time()
+        try:
+            return call(*args)
+        finally:
+            self._in_writers_s += time.thread_time() - t0
+
+    def stats(self) -> tuple:
+        """RecorderStats' fields: everything else this thread did is the recorder's own work; the
+        writers' threads (Rerun's) are the writer's."""
+        cpu_s = time.process_time() - self._cpu0
+        around_s = time.thread_time() - self._thread0 - self._in_writers_s
+        return (cpu_s, cpu_s - around_s, self.read)
 
     def take(self, written: int, *, final: bool) -> None:
         """Rows [read, written) and the others that come before row `written` (all of them when
@@ -394,7 +441,7 @@ class _Feed:
                 if not self.failure:
                     message = pickle.loads(data)
                     for sink in self.sinks:
-                        getattr(sink, _HANDLERS[kind])(message)
+                        self.timed(getattr(sink, _HANDLERS[kind]), message)
             self._rows(written)
         except Exception as err:  # noqa: BLE001 - e.g. a full disk
             self.failure = (
@@ -408,11 +455,9 @@ class _Feed:
         if upto <= self.read:
             return
         if not self.failure:
-            rows = self.ring.rows
-            for run in self.ring.runs(self.read, upto):
-                frames = rows.columns(run, copy=False)  # views into the ring: writers copy
+            for frames in self.ring.runs(self.read, upto):  # views into the ring: writers copy
                 for sink in self.sinks:
-                    sink.on_frames(frames)
+                    self.timed(sink.on_frames, frames)
         self.read = upto
 
 

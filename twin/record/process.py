@@ -203,9 +203,17 @@ class RecorderProcess(Sink):
             self._publish_rest()
         except RecordingError as err:
             failure = err
+        # every writer finalizes at once (each in its process), then the twin waits for them all
+        asked = []
         for child in self._children:
             try:
-                child.finish(outcome, error)
+                child.ask_to_finish(outcome, error)
+                asked.append(child)
+            except RecordingError as err:
+                failure = failure or err
+        for child in asked:
+            try:
+                child.wait_finished()
             except RecordingError as err:
                 failure = failure or err
         if failure is not None:
@@ -296,14 +304,23 @@ class _Child:
 
     def finish(self, outcome: str, error: str) -> None:
         """Have the writer finalize with the run's outcome and wait for it."""
+        self.ask_to_finish(outcome, error)
+        self.wait_finished()
+
+    def ask_to_finish(self, outcome: str, error: str) -> None:
+        """Have the writer finalize with the run's outcome (wait_finished waits for it)."""
         try:
-            try:
-                self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
-            except OSError as err:
-                raise RecordingError(
-                    f"recording could not be finished: the recorder process stopped "
-                    f"({self._exit_text()})"
-                ) from err
+            self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
+        except OSError as err:
+            text = self._exit_text()
+            self.stop()
+            raise RecordingError(
+                f"recording could not be finished: the recorder process stopped ({text})"
+            ) from err
+
+    def wait_finished(self) -> None:
+        """Wait until the writer has finalized (or failed: RecordingError), and for its process."""
+        try:
             self.expect_ok("recording could not be finished")
         finally:
             self.stop()

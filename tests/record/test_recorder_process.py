@@ -153,3 +153,22 @@ def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
             path, TwinConfig(), RUN, urdf="<robot/>", meshes=[tmp_path / "no_such_mesh.stl"]
         )
     assert path.read_bytes() == b"an earlier recording"
+
+
+def test_a_writer_that_fails_after_the_checks_stops_the_run_in_one_line(tmp_path):
+    """The recorders start beside the twin's scene: a writer that fails in its process (here its
+    NAME.partial is a folder, which the path checks before the fork do not see) stops the run at
+    the twin's first publish, in one line, and the other writer ends as error."""
+    (tmp_path / "x.mcap.partial").mkdir()
+    config = TwinConfig()
+    with (
+        pytest.raises(RecordingError) as err,
+        open_recorders(
+            config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+        ) as sinks,
+    ):
+        Twin(config, sinks=sinks).step(100)
+    assert "x.mcap" in str(err.value) and "\n" not in str(err.value)
+    assert "could not start" in str(err.value) or "cannot write" in str(err.value)
+    assert not (tmp_path / "x.mcap").exists()
+    assert (tmp_path / "x.rrd").exists()  # the view ended as error, finished

@@ -3,16 +3,16 @@ which run the same MCAP and Rerun writers (one process each).
 
 The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
 microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
-events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
-timer (every millisecond while rows come), takes in what was published once it is 2/15 s of
-simulated time or more (the writers take columns: the bigger the batch, the less each frame costs),
-and says how far it read. The twin wakes a recorder through the pipe when it has used half its
-slack, and waits for it only when it has used all of it (the MCAP writer's: 0.4 s of simulated
-time, which bounds what a kill -9 loses; the Rerun writer's: the ring). Files are byte-for-byte what
-the in-process writers make, since the same writer code sees the same stream. If the twin's process
-dies, the recorder sees the pipe close, takes in every row that was published and leaves the MCAP
-file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to
-handle (it then finalizes the files): the recorder ignores them.
+events and pictures (rare) go down a pipe with the frame they follow. A recorder sleeps in poll()
+until the twin wakes it (a byte down the pipe) once a take's worth of rows is published (TAKE_S for
+the MCAP writer, RRD_TAKE_S for the Rerun one: the writers take columns, the bigger the batch the
+less each frame costs), takes in every published row and says how far it read. The twin waits for
+a recorder only when it has used all its slack (the MCAP writer's: MAX_AHEAD_S of simulated time,
+which bounds what a kill -9 of the whole run loses; the Rerun writer's: the ring). Files are
+byte-for-byte what the in-process writers make, since the same writer code sees the same stream. If
+the twin's process dies, the recorder sees the pipe close, takes in every row that was published and
+leaves the MCAP file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are
+the twin's to handle (it then finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
+from twin.record.outputs import check_target
 from twin.record.ring import FrameRing
 from twin.record.rows import FrameRows
 
@@ -55,6 +56,18 @@ _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
 # item kind -> the sinks' method
 _HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}
+
+
+def check_writable(mcap_path, rrd_path, run: dict) -> None:
+    """What the writers would refuse when they start, refused at once: a path whose folder is
+    missing or that is a folder, and (MCAP) a run description that is not plain JSON."""
+    from twin.record.mcap.metadata import check_run
+
+    for path, expected in ((mcap_path, "an .mcap path"), (rrd_path, "a .rrd file path")):
+        if path is not None:
+            check_target(path, "recording", expected, error=RecordingError)
+    if mcap_path is not None:
+        check_run(run)
 
 
 class RecorderStats(NamedTuple):
@@ -124,8 +137,9 @@ class RecorderProcess(Sink):
 
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
+        # what a writer would refuse at its start, refused here, before the run: a bad path or run
+        check_writable(mcap_path, rrd_path, run)
         self._children: list[_Child] = []
-        starting = None
         try:
             for reader, (writer, path, ahead, take) in enumerate(writers):
                 self._children.append(
@@ -137,19 +151,39 @@ class RecorderProcess(Sink):
                         (self._ring, config, run, urdf, meshes, path, rate, engine),
                     )
                 )
-            for starting in self._children:  # they start side by side; each says when it is ready
-                starting.expect_ok("recording could not start")
         except BaseException:
-            # as one process with both writers did: the others end as error
-            for child in self._children:
-                if child is starting:
-                    child.stop()
-                    continue
-                try:
-                    child.finish("error", "recording could not start")
-                except RecordingError:
-                    pass
+            self._fail_start(None)
             raise
+        # They start side by side with the twin's scene: the twin hears the MCAP writer is ready at
+        # its first publish (it waits for it there) and the Rerun one when it has said so (at the
+        # latest at the close), so building the twin does not wait for the writers' start.
+        self._starting = list(self._children)
+
+    def _check_started(self, wait: tuple[str, ...]) -> None:
+        """Read the start reply of the recorders that have sent it, waiting for those of the
+        writers in `wait`; a writer that could not start ends the recording, the others as
+        error."""
+        for child in list(self._starting):
+            if child.writer in wait or child.has_reply():
+                self._starting.remove(child)
+                try:
+                    child.expect_ok("recording could not start")
+                except RecordingError:
+                    self._fail_start(child)
+                    raise
+
+    def _fail_start(self, failed: _Child | None) -> None:
+        """A writer could not start (or forking failed): the others end as error, nothing waits
+        for the failed one; the recording is closed."""
+        self._closed = True
+        for child in self._children:
+            if child is failed:
+                child.stop()
+                continue
+            try:
+                child.finish("error", "recording could not start")
+            except RecordingError:
+                pass
 
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
@@ -181,6 +215,8 @@ class RecorderProcess(Sink):
         """The others down the pipes, then the rows up to here published; then room for the next
         ones (the others first: a recorder that sees the rows must find every message that came
         before them)."""
+        if self._starting:
+            self._check_started(("mcap",))
         self._send_others()
         written = self._written
         reads = self._ring.publish(written)
@@ -197,6 +233,8 @@ class RecorderProcess(Sink):
         raised once all have finished). Idempotent."""
         if self._closed:
             return
+        if self._starting:  # a writer that could not start: the others end as error, and it says
+            self._check_started(("mcap", "rrd"))
         self._closed = True
         failure: RecordingError | None = None
         try:
@@ -272,6 +310,10 @@ class _Child:
             self.conn.send_bytes(message)
         except OSError as err:
             raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
+
+    def has_reply(self) -> bool:
+        """True when the recorder has said something (or its end of the pipe has closed)."""
+        return bool(self._poller.poll(0))
 
     def wake(self, written: int) -> None:
         """Rows [0, written) are published: have the recorder take them in."""

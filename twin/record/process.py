@@ -112,7 +112,7 @@ class RecorderProcess(Sink):
         capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
         # (writer, path, how far ahead the twin may go, how many rows between wake-ups)
         writers = [
-            (w, p, ahead, min(_frames(config, take_s), ahead // 2))
+            (w, p, ahead, max(1, min(_frames(config, take_s), ahead - 2 * self._publish_every)))
             for w, p, ahead, take_s in [
                 ("mcap", mcap_path, mcap_ahead, TAKE_S),
                 ("rrd", rrd_path, capacity, RRD_TAKE_S),

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from twin.helpers import start_helper
+from twin.helpers import forking_on, other_cpus, start_helper
 from twin.model.config import TwinConfig
 from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
@@ -141,16 +141,17 @@ class RecorderProcess(Sink):
         check_writable(mcap_path, rrd_path, run)
         self._children: list[_Child] = []
         try:
-            for reader, (writer, path, ahead, take) in enumerate(writers):
-                self._children.append(
-                    _Child(
-                        writer,
-                        reader,
-                        (ahead, take),
-                        self._children,
-                        (self._ring, config, run, urdf, meshes, path, rate, engine),
+            with forking_on(other_cpus()):  # the recorders keep off the twin's core
+                for reader, (writer, path, ahead, take) in enumerate(writers):
+                    self._children.append(
+                        _Child(
+                            writer,
+                            reader,
+                            (ahead, take),
+                            self._children,
+                            (self._ring, config, run, urdf, meshes, path, rate, engine),
+                        )
                     )
-                )
         except BaseException:
             self._fail_start(None)
             raise

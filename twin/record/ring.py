@@ -2,8 +2,8 @@
 
 The twin packs each Frame straight into the ring (record.rows) and, every few frames, publishes how
 many it has written; each recorder takes in the published rows when it wakes and says how far it has
-read. No system call and no wake-up of the other core per frame or per batch: the recorders wake on
-their own timer, and the twin wakes one only when it has to wait for it (see RecorderProcess).
+read. No system call and no wake-up of the other core per frame: the twin wakes a recorder once a
+take's worth of rows is published (see RecorderProcess).
 
 The counters sit in the shared page and change only under one lock, whose acquire and release order
 the row bytes before the counter that publishes them on every processor, not only on x86.

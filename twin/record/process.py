@@ -126,7 +126,9 @@ class RecorderProcess(Sink):
         self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
         self._written = 0
-        self._next_publish = self._publish_every
+        # the first publish is the first frame's (the twin's scene is built by then): it waits for
+        # the MCAP writer to be ready, so the run's stepping never does
+        self._next_publish = 1
         self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
         self._closed = False
         # how often the twin waited for a recorder (tools/bench_record.py reports it)
@@ -156,8 +158,8 @@ class RecorderProcess(Sink):
             self._fail_start(None)
             raise
         # They start side by side with the twin's scene: the twin hears the MCAP writer is ready at
-        # its first publish (it waits for it there) and the Rerun one when it has said so (at the
-        # latest at the close), so building the twin does not wait for the writers' start.
+        # its first publish, the first frame's (it waits for it there), and the Rerun one when it
+        # has said so (at the latest at the close), so building the twin does not wait for them.
         self._starting = list(self._children)
 
     def _check_started(self, wait: tuple[str, ...]) -> None:

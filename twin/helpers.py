@@ -55,11 +55,11 @@ def _helper_main(target: Callable, conn, twins_ends: list, args: tuple) -> None:
     target(conn, *args)
 
 
-def other_cpus() -> set[int] | None:
-    """The CPUs this process may use except the one its calling thread runs on now, or None (it may
-    use one CPU only, or the system does not say). A helper forked while the thread is pinned to
-    these keeps off the twin's core: the scheduler would otherwise wake a helper on the core of the
-    thread that woke it (the twin's), where the two take turns while the other core idles."""
+def split_cpus() -> tuple[set[int], set[int]] | None:
+    """({the CPU the calling thread runs on now}, every other CPU this process may use), or None
+    (it may use one CPU only, or the system does not say). Helpers forked onto the others while the
+    thread keeps to its own never share its core: Linux wakes a process on the core of the thread
+    that woke it (the twin's), where the two would take turns while the other core idled."""
     try:
         allowed = os.sched_getaffinity(0)
         with open("/proc/thread-self/stat", encoding="ascii") as stat:
@@ -68,19 +68,25 @@ def other_cpus() -> set[int] | None:
     except (AttributeError, OSError, ValueError, IndexError):
         return None
     others = allowed - {here}
-    return others if others and here in allowed else None
+    return ({here}, others) if others and here in allowed else None
 
 
 @contextmanager
 def forking_on(cpus: set[int] | None) -> Iterator[None]:
     """While it lasts, the calling thread may run on `cpus` only (None: unchanged), so that the
     processes it forks inherit them; afterwards it may run where it could before."""
-    if cpus is None:
-        yield
-        return
-    before = os.sched_getaffinity(0)
-    os.sched_setaffinity(0, cpus)
+    before = keep_to(cpus)
     try:
         yield
     finally:
-        os.sched_setaffinity(0, before)
+        keep_to(before)
+
+
+def keep_to(cpus: set[int] | None) -> set[int] | None:
+    """Let the calling thread run on `cpus` only (None: leave it); returns the CPUs it could use
+    before (None when unchanged), for a later keep_to() to give them back."""
+    if cpus is None:
+        return None
+    before = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, cpus)
+    return before

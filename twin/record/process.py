@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from twin.helpers import forking_on, other_cpus, start_helper
+from twin.helpers import forking_on, keep_to, split_cpus, start_helper
 from twin.model.config import TwinConfig
 from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
@@ -142,8 +142,11 @@ class RecorderProcess(Sink):
         # what a writer would refuse at its start, refused here, before the run: a bad path or run
         check_writable(mcap_path, rrd_path, run)
         self._children: list[_Child] = []
+        # the recorders on the other cores, the twin's thread on its own one until the close
+        cpus = split_cpus()
+        self._twins_cpus: set[int] | None = None  # the CPUs the twin's thread had before
         try:
-            with forking_on(other_cpus()):  # the recorders keep off the twin's core
+            with forking_on(cpus and cpus[1]):
                 for reader, (writer, path, ahead, take) in enumerate(writers):
                     self._children.append(
                         _Child(
@@ -157,6 +160,7 @@ class RecorderProcess(Sink):
         except BaseException:
             self._fail_start(None)
             raise
+        self._twins_cpus = keep_to(cpus and cpus[0])
         # They start side by side with the twin's scene: the twin hears the MCAP writer is ready at
         # its first publish, the first frame's (it waits for it there), and the Rerun one when it
         # has said so (at the latest at the close), so building the twin does not wait for them.
@@ -179,6 +183,7 @@ class RecorderProcess(Sink):
         """A writer could not start (or forking failed): the others end as error, nothing waits
         for the failed one; the recording is closed."""
         self._closed = True
+        self._free_twins_thread()
         for child in self._children:
             if child is failed:
                 child.stop()
@@ -239,6 +244,7 @@ class RecorderProcess(Sink):
         if self._starting:  # a writer that could not start: the others end as error, and it says
             self._check_started(("mcap", "rrd"))
         self._closed = True
+        self._free_twins_thread()
         failure: RecordingError | None = None
         try:
             self._publish_rest()
@@ -259,6 +265,11 @@ class RecorderProcess(Sink):
                 failure = failure or err
         if failure is not None:
             raise failure
+
+    def _free_twins_thread(self) -> None:
+        """The twin's thread may run on every CPU it could before the recording again."""
+        keep_to(self._twins_cpus)
+        self._twins_cpus = None
 
     @property
     def stats(self) -> dict[str, RecorderStats]:

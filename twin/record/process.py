@@ -2,15 +2,15 @@
 which run the same MCAP and Rerun writers (one process each).
 
 The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
-microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
-events and pictures (rare) go down a pipe with the frame they follow. A recorder sleeps in poll()
-until the twin wakes it (a byte down the pipe) once a take's worth of rows is published (TAKE_S for
-the MCAP writer, RRD_TAKE_S for the Rerun one: the writers take columns, the bigger the batch the
-less each frame costs), takes in every published row and says how far it read. The twin waits for
+microsecond, no system call) and every 1/15 s of simulated time publishes how far it got. A recorder
+sleeps in poll() until the twin wakes it (a message down the pipe) once a take's worth of rows is
+published (TAKE_S for the MCAP writer, RRD_TAKE_S for the Rerun one: the writers take columns, the
+bigger the batch the less each frame costs); the wake-up carries the commands, events and pictures
+(rare) that come before those rows. The recorder takes the rows in and says how far it read. The twin waits for
 a recorder only when it has used all its slack (the MCAP writer's: MAX_AHEAD_S of simulated time,
 which bounds what a kill -9 of the whole run loses; the Rerun writer's: the ring). Files are
 byte-for-byte what the in-process writers make, since the same writer code sees the same stream. If
-the twin's process dies, the recorder sees the pipe close, takes in every row that was published and
+the twin's process dies, the recorder sees the pipe close, takes in every row it was woken for and
 leaves the MCAP file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are
 the twin's to handle (it then finalizes the files): the recorder ignores them.
 """
@@ -48,9 +48,8 @@ RING_S = 4096 / 240
 # quarter of the ring.
 TAKE_S = 48 / 240
 RRD_TAKE_S = 1024 / 240
-IDLE_S = 0.1  # a recorder that nobody woke takes in what is published after this (a paused run)
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
-_OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
+_WAKE, _CLOSE = b"W", b"C"
 _DONE = b"OK\0"  # a recorder's last reply: finished, and its RecorderStats
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
@@ -129,7 +128,10 @@ class RecorderProcess(Sink):
         # the first publish is the first frame's (the twin's scene is built by then): it waits for
         # the MCAP writer to be ready, so the run's stepping never does
         self._next_publish = 1
-        self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
+        # (frames before it, kind, pickle), from the run's `_others_base`th on: the ones some
+        # recorder has not been sent yet
+        self._others: list[tuple[int, int, bytes]] = []
+        self._others_base = 0
         self._closed = False
         # how often the twin waited for a recorder (tools/bench_record.py reports it)
         self.waits = 0
@@ -220,21 +222,34 @@ class RecorderProcess(Sink):
         )
 
     def _publish(self) -> None:
-        """The others down the pipes, then the rows up to here published; then room for the next
-        ones (the others first: a recorder that sees the rows must find every message that came
-        before them)."""
+        """The rows up to here published, and a recorder woken when a take's worth is waiting for
+        it (or waited for, when the twin would pass its slack)."""
         if self._starting:
             self._check_started(("mcap",))
-        self._send_others()
         written = self._written
         reads = self._ring.publish(written)
         self._next_publish = written + self._publish_every
         for child, read in zip(self._children, reads, strict=True):
             if self._next_publish - read > child.ahead:
                 self.waits += 1
-                child.wait_until_read(self._ring, self._next_publish - child.ahead, written)
+                self._wake(child, written)
+                child.wait_until_read(self._ring, self._next_publish - child.ahead)
             elif written - child.woken_at >= child.take:
-                child.wake(written)
+                self._wake(child, written)
+        if self._others:
+            self._drop_sent_others()
+
+    def _wake(self, child: _Child, written: int) -> None:
+        """Have a recorder take in rows [0, written): the wake-up carries the others it has not had
+        yet (all of them come before row `written`), so it wakes once for both."""
+        child.wake(written, self._others[child.others_sent - self._others_base :])
+        child.others_sent = self._others_base + len(self._others)
+
+    def _drop_sent_others(self) -> None:
+        sent = min(child.others_sent for child in self._children) - self._others_base
+        if sent:
+            del self._others[:sent]
+            self._others_base += sent
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Publish what is left, have the writers finalize, wait for them (the first failure is
@@ -278,15 +293,9 @@ class RecorderProcess(Sink):
         return {c.writer: c.stats for c in self._children if c.stats is not None}
 
     def _publish_rest(self) -> None:
-        self._send_others()
         self._ring.publish(self._written)
-
-    def _send_others(self) -> None:
-        if self._others:
-            message = _OTHERS + marshal.dumps(self._others)
-            self._others.clear()
-            for child in self._children:
-                child.send(message)
+        for child in self._children:
+            self._wake(child, self._written)
 
 
 class _Child:
@@ -307,6 +316,7 @@ class _Child:
         self.ahead, self.take = ahead_take
         self.wakes = 0  # wake-ups the twin sent it
         self.woken_at = 0  # the rows published when the twin last woke it
+        self.others_sent = 0  # the run's others it has been sent
         # what the recorder said of its CPU at the end (RecorderStats), None before
         self.stats: RecorderStats | None = None
         self.conn, self.process = start_helper(
@@ -329,15 +339,15 @@ class _Child:
         """True when the recorder has said something (or its end of the pipe has closed)."""
         return bool(self._poller.poll(0))
 
-    def wake(self, written: int) -> None:
-        """Rows [0, written) are published: have the recorder take them in."""
+    def wake(self, written: int, others: list) -> None:
+        """Rows [0, written) are published: have the recorder take them in, with `others` (the
+        commands, events and pictures that come before them it has not had)."""
         self.woken_at = written
         self.wakes += 1
-        self.send(_WAKE)
+        self.send(_WAKE + marshal.dumps((written, others)))
 
-    def wait_until_read(self, ring: FrameRing, read: int, written: int) -> None:
-        """Wake the recorder and wait until it has taken in rows [0, read)."""
-        self.wake(written)
+    def wait_until_read(self, ring: FrameRing, read: int) -> None:
+        """Wait until the recorder (woken) has taken in rows [0, read)."""
         while ring.read(self.reader) < read:
             if self._poller.poll(0):  # it says nothing before the close: this is the pipe's end
                 raise RecordingError(f"the recorder process stopped: {self._exit_text()}")
@@ -434,16 +444,14 @@ def _serve(
     feed = _Feed(ring, sinks)
     poller = _poller(conn)
     while True:
-        # asleep until the twin wakes it (rows to take in, the others, the close) or the pipe ends
-        woke = poller.poll(IDLE_S * 1000)
-        written = ring.written()
-        # all the twin sent before publishing `written`, and maybe more
-        end = _take_messages(conn, poller, feed) if woke else None
-        if end is not None:
-            # the twin publishes its last rows before it closes (or has died)
-            written = ring.written()
-        if end is not None or feed.woken or not woke:
-            feed.take(written, final=end is not None)
+        # asleep until the twin wakes it (rows to take in, with the others before them; the close)
+        # or the pipe ends
+        poller.poll()
+        end = _take_messages(conn, poller, feed)
+        if end is not None or feed.woken:
+            # the rows the twin woke it for: those whose others it has (all, at the close; at the
+            # twin's death the rows published after its last wake-up are left out)
+            feed.take(feed.synced, final=end is not None)
             ring.release(reader, feed.read)
             feed.woken = False
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
@@ -466,9 +474,10 @@ def _take_messages(conn, poller: select.poll, feed: _Feed):
         except (EOFError, OSError):
             return "died"
         tag, body = message[:1], message[1:]
-        if tag == _OTHERS:
-            feed.queue.extend(marshal.loads(body))
-        elif tag == _WAKE:  # rows to take in
+        if tag == _WAKE:  # rows to take in, and the others that come before them
+            synced, others = marshal.loads(body)
+            feed.queue.extend(others)
+            feed.synced = max(feed.synced, synced)
             feed.woken = True
         elif tag == _CLOSE:
             return marshal.loads(body)
@@ -486,6 +495,7 @@ class _Feed:
         self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
         self.failure = ""
         self.woken = False  # the twin asked for the rows to be taken in
+        self.synced = 0  # the rows whose others have come: what it may take in
         # CPU seconds: the process's and this thread's at the start, this thread's in the writers
         self._cpu0, self._thread0, self._in_writers_s = time.process_time(), time.thread_time(), 0.0
 

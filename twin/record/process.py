@@ -6,13 +6,13 @@ microsecond, no system call) and every 1/15 s of simulated time publishes how fa
 sleeps in poll() until the twin wakes it (a message down the pipe) once a take's worth of rows is
 published (TAKE_S for the MCAP writer, RRD_TAKE_S for the Rerun one: the writers take columns, the
 bigger the batch the less each frame costs); the wake-up carries the commands, events and pictures
-(rare) that come before those rows. The recorder takes the rows in and says how far it read. The twin waits for
-a recorder only when it has used all its slack (the MCAP writer's: MAX_AHEAD_S of simulated time,
-which bounds what a kill -9 of the whole run loses; the Rerun writer's: the ring). Files are
-byte-for-byte what the in-process writers make, since the same writer code sees the same stream. If
-the twin's process dies, the recorder sees the pipe close, takes in every row it was woken for and
-leaves the MCAP file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are
-the twin's to handle (it then finalizes the files): the recorder ignores them.
+(rare) that come before those rows. The recorder takes the rows in and says how far it read. The
+twin waits for a recorder only when it has used all its slack (the MCAP writer's: MAX_AHEAD_S of
+simulated time, which bounds what a kill -9 of the whole run loses; the Rerun writer's: the ring).
+Files are byte-for-byte what the in-process writers make, since the same writer code sees the same
+stream. If the twin's process dies, the recorder sees the pipe close, takes in every row it was
+woken for and leaves the MCAP file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM
+and SIGHUP are the twin's to handle (it then finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations

@@ -228,7 +228,10 @@ class RecorderProcess(Sink):
             self._check_started(("mcap",))
         written = self._written
         reads = self._ring.publish(written)
-        self._next_publish = written + self._publish_every
+        # then every publish_every frames from the run's start (16, 32, ...), as before the first
+        # publish moved to frame 0: a task whose commands come at steps in step with the publishes
+        # would see a killed run keep a frame without the commands of its step
+        self._next_publish = (written // self._publish_every + 1) * self._publish_every
         for child, read in zip(self._children, reads, strict=True):
             if self._next_publish - read > child.ahead:
                 self.waits += 1

@@ -41,6 +41,8 @@ from bench import motion_actions, pick_place_physics_steps_per_s, replay_motion
 
 CYCLES = 16
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": CYCLES}}
+# the long run: 109,876 steps, where a recorder's cost per frame shows as a short run hides it
+LONG_CYCLES = 100
 
 
 def _cpu_s() -> float:
@@ -70,21 +72,27 @@ class Timed(NamedTuple):
     cpu_s: float  # this process's threads and the recorder process it waited for
     mcap_bytes: int
     waits: int  # how often the twin waited for a recorder to catch up
+    stepping_cpu_s: float = 0.0  # this process alone (the stepping one), the whole run
+    recorders: dict | None = None  # writer -> its process's RecorderStats (record.process)
 
 
-def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
+def timed_run(folder: Path, *, mcap: bool, rrd: bool, cycles: int = CYCLES) -> Timed:
     """One pick_place run, timed (see the module docstring)."""
     config = TwinConfig()
     mcap_path = folder / "bench.mcap" if mcap else None
     rrd_path = folder / "bench.rrd" if rrd else None
     clock = _Clock()
-    t0, cpu0 = time.perf_counter(), _cpu_s()
-    with open_recorders(config, RUN, mcap_path=mcap_path, rrd_path=rrd_path) as sinks:
+    run = {**RUN, "params": {"cycles": cycles}}
+    t0, cpu0, own0 = time.perf_counter(), _cpu_s(), time.process_time()
+    with open_recorders(config, run, mcap_path=mcap_path, rrd_path=rrd_path) as sinks:
         twin = Twin(config, sinks=[*sinks, clock])
-        run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
+        run_task(twin, TASKS["pick_place"], {"cycles": cycles})
         twin.close()
         waits = sum(getattr(sink, "waits", 0) for sink in sinks)
-    t1, cpu_s = time.perf_counter(), _cpu_s() - cpu0
+    t1, cpu_s, own_s = time.perf_counter(), _cpu_s() - cpu0, time.process_time() - own0
+    recorders = {}
+    for sink in sinks:
+        recorders.update(getattr(sink, "stats", {}))
     return Timed(
         twin.step_index,
         clock.last_s - clock.first_s,
@@ -94,6 +102,8 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool) -> Timed:
         cpu_s,
         mcap_path.stat().st_size if mcap_path else 0,
         waits,
+        own_s,
+        recorders,
     )
 
 
@@ -350,6 +360,8 @@ def bench(ctx) -> list[tuple[str, str]]:
                     f"{cpu:.2f} us",
                 )
             )
+        if "twin + MCAP + Rerun" in rates:
+            rows.extend(long_runs(ctx, folder, repeats))
         sim_min = steps * TwinConfig().dt_ns * 1e-9 / 60.0
         rows.append(("MCAP bytes per simulated minute", f"{mcap_bytes / sim_min / 1e6:.2f} MB"))
         ctx.figures["mcap_mb_per_sim_min"] = mcap_bytes / sim_min / 1e6
@@ -362,6 +374,73 @@ def bench(ctx) -> list[tuple[str, str]]:
                 f"{load_s / sim_min * 1000:.1f} ms ({len(recording.frames)} frames)",
             )
         )
+    return rows
+
+
+def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
+    """pick_place's LONG_CYCLES-cycle run without recording and with both files, taking turns: the
+    stepping speed with both over without (record_both_long_vs_none, paired by repeat), the CPU
+    per step of the stepping process in each (record_cpu_us_per_step_none, _both), and each
+    recorder process's CPU per frame and its writer's share of it, against the isolated writers
+    (record_recorders_cpu_us_per_frame, record_writers_cpu_us_per_frame)."""
+    none, both = [], []
+    folder = folder / "long"  # beside the short runs' files, which the section loads afterwards
+    folder.mkdir(exist_ok=True)
+    for _ in range(repeats):
+        none.append(timed_run(folder, mcap=False, rrd=False, cycles=LONG_CYCLES))
+        both.append(timed_run(folder, mcap=True, rrd=True, cycles=LONG_CYCLES))
+    steps = none[0].steps
+    f = ctx.figures
+    f["record_both_long_vs_none"] = statistics.median(
+        n.stepping_s / b.stepping_s for n, b in zip(none, both, strict=True)
+    )
+    f["record_cpu_us_per_step_none"] = (
+        statistics.median(t.stepping_cpu_s for t in none) / steps * 1e6
+    )
+    f["record_cpu_us_per_step_both"] = (
+        statistics.median(t.stepping_cpu_s for t in both) / steps * 1e6
+    )
+    per_frame = {
+        writer: (
+            statistics.median(t.recorders[writer].cpu_s for t in both) / steps * 1e6,
+            statistics.median(t.recorders[writer].writer_cpu_s for t in both) / steps * 1e6,
+        )
+        for writer in both[0].recorders
+    }
+    f["record_recorders_cpu_us_per_frame"] = sum(cpu for cpu, _ in per_frame.values())
+    f["record_recorders_writer_cpu_us_per_frame"] = sum(w for _, w in per_frame.values())
+    f["record_writers_cpu_us_per_frame"] = (
+        f["record_mcap_writer_cpu_us_per_frame"] + f["record_rrd_writer_cpu_us_per_frame"]
+    )
+    rows = [
+        (
+            f"long run ({steps:,} steps): stepping with MCAP + Rerun over without (paired)",
+            f"{f['record_both_long_vs_none']:.2f}x",
+        ),
+        (
+            "long run: stepping process CPU per step, no recording; MCAP + Rerun",
+            (
+                f"{f['record_cpu_us_per_step_none']:.1f} us; "
+                f"{f['record_cpu_us_per_step_both']:.1f} us"
+            ),
+        ),
+    ]
+    for writer, (cpu, in_writer) in per_frame.items():
+        rows.append(
+            (
+                f"long run: {writer} recorder process CPU per frame (its writer; around it)",
+                f"{cpu:.2f} us ({in_writer:.2f}; {cpu - in_writer:.2f})",
+            )
+        )
+    rows.append(
+        (
+            "long run: recorders CPU per frame, summed; the isolated writers, summed",
+            (
+                f"{f['record_recorders_cpu_us_per_frame']:.2f} us; "
+                f"{f['record_writers_cpu_us_per_frame']:.2f} us"
+            ),
+        )
+    )
     return rows
 
 

@@ -41,6 +41,21 @@ def _timed_pick_place() -> float:
         twin.close()
 
 
+def twin_cost_us_per_step(repeats: int, samples: int = 3) -> float:
+    """The twin's own cost per step over the reads floor (bench_record.reads_floor_steps_per_s: the
+    same motion on the bare World with a Frame's engine reads): its commands, suction rule, Frame
+    and settle checks. Each repeat takes the best of `samples` runs of each, side by side (a short
+    run is easily slowed by a busy moment); the median over repeats of 1/twin - 1/reads."""
+    from bench_record import reads_floor_steps_per_s
+
+    costs = []
+    for _ in range(repeats):
+        reads = max(reads_floor_steps_per_s(CYCLES) for _ in range(samples))
+        twin = max(_timed_pick_place() for _ in range(samples))
+        costs.append((1 / twin - 1 / reads) * 1e6)
+    return statistics.median(costs)
+
+
 def _idle_rate() -> float:
     """steps/s of twin.step() with nothing commanded: Frame building and the suction rule."""
     twin = Twin(TwinConfig())
@@ -69,6 +84,7 @@ def bench(ctx) -> list[tuple[str, str]]:
     build_ms = statistics.median(_build_ms() for _ in range(repeats))
     sim_s = steps * TwinConfig().dt_ns * 1e-9
     ctx.rate_figures("twin", run_rate)
+    cost_us = ctx.figures["twin_cost_us_per_step"] = twin_cost_us_per_step(repeats)
     return [
         (
             f"pick_place {CYCLES} cycles, no recording: steps/s (ratio to physics-only)",
@@ -81,6 +97,10 @@ def bench(ctx) -> list[tuple[str, str]]:
         (
             "twin cost per step over the same motion's stepSimulation (pick_place)",
             f"{(1 / run_rate - 1 / (ctx.motion_physics_steps_per_s or physics)) * 1e6:.1f} us",
+        ),
+        (
+            "twin cost per step over the reads floor (the same motion and a Frame's engine reads)",
+            f"{cost_us:.2f} us (best of 3 each, median of {repeats} pairs)",
         ),
         (
             "twin.step() idle: steps/s (ratio to physics-only)",

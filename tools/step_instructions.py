@@ -1,13 +1,14 @@
 """Instructions a step, counted by valgrind's callgrind: the same count every run, where wall time
 on a shared machine moves by a third from one minute to the next.
 
-    python tools/step_instructions.py           # physics-only, twin alone, + MCAP, + MCAP and Rerun
-    python tools/step_instructions.py --modes physics alone
+    python tools/step_instructions.py   # physics-only, the reads floor, twin alone, + MCAP, + both
+    python tools/step_instructions.py --modes physics reads alone
 
 Each mode runs pick_place at 2 and at 4 cycles under callgrind; a step's cost is the difference of
 the twin process's totals over the difference of their steps, so the start (imports, the scene, the
 recorders) cancels out. `physics` replays the same motion on the bare World as tools/bench.py's
-same-motion baseline does (its actions are taken from a twin run outside valgrind). Only the twin's
+same-motion baseline does (its actions are taken from a twin run outside valgrind); `reads` adds a
+Frame's engine reads every step (bench_record's reads floor). Only the twin's
 own process is counted: the recorder processes (forked, traced too) work on the other core. Needs
 valgrind (`apt-get install valgrind`); takes about ten minutes.
 """
@@ -28,7 +29,7 @@ from bench import (  # tools/bench.py, beside this file: the same baseline
     replay_motion,
 )
 
-MODES = ("physics", "alone", "mcap", "both")
+MODES = ("physics", "reads", "alone", "mcap", "both")
 CYCLES = (2, 4)
 ENV = {"OPENBLAS_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}  # no BLAS threads, no random hash order
 
@@ -38,12 +39,15 @@ def run_mode(mode: str, cycles: int, folder: Path) -> int:
     from twin.model.config import TwinConfig
 
     config = TwinConfig()
-    if mode == "physics":
+    if mode in ("physics", "reads"):
         from twin.sim.world import World
 
         n_steps, actions = pickle.loads((folder / f"actions{cycles}.pkl").read_bytes())
         world = World(config)
-        replay_motion(world, n_steps, actions)
+        # reads: the reads floor, a Frame's engine reads every step and nothing else
+        replay_motion(
+            world, n_steps, actions, (lambda _: world.state()) if mode == "reads" else None
+        )
         world.close()
         return n_steps
     from twin.record import open_recorders
@@ -130,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, float] = {}
     with tempfile.TemporaryDirectory(prefix="twin_instructions_") as tmp:
         folder = Path(tmp)
-        if "physics" in args.modes:
+        if "physics" in args.modes or "reads" in args.modes:
             for cycles in CYCLES:
                 (folder / f"actions{cycles}.pkl").write_bytes(pickle.dumps(motion_actions(cycles)))
         for mode in args.modes:

@@ -4,9 +4,11 @@ joined to it by a pipe, and deaf to the signals that are the twin's to handle.""
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 import weakref
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 
 # the twin handles them, then closes its helpers
 TWINS_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -51,3 +53,40 @@ def _helper_main(target: Callable, conn, twins_ends: list, args: tuple) -> None:
         signal.signal(signum, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, TWINS_SIGNALS)
     target(conn, *args)
+
+
+def split_cpus() -> tuple[set[int], set[int]] | None:
+    """({the CPU the calling thread runs on now}, every other CPU this process may use), or None
+    (it may use one CPU only, or the system does not say). Helpers forked onto the others while the
+    thread keeps to its own never share its core: Linux wakes a process on the core of the thread
+    that woke it (the twin's), where the two would take turns while the other core idled."""
+    try:
+        allowed = os.sched_getaffinity(0)
+        with open("/proc/thread-self/stat", encoding="ascii") as stat:
+            # field 39, "processor", counting from 1; the name (field 2) may hold spaces
+            here = int(stat.read().rsplit(")", 1)[1].split()[36])
+    except (AttributeError, OSError, ValueError, IndexError):
+        return None
+    others = allowed - {here}
+    return ({here}, others) if others and here in allowed else None
+
+
+@contextmanager
+def forking_on(cpus: set[int] | None) -> Iterator[None]:
+    """While it lasts, the calling thread may run on `cpus` only (None: unchanged), so that the
+    processes it forks inherit them; afterwards it may run where it could before."""
+    before = keep_to(cpus)
+    try:
+        yield
+    finally:
+        keep_to(before)
+
+
+def keep_to(cpus: set[int] | None) -> set[int] | None:
+    """Let the calling thread run on `cpus` only (None: leave it); returns the CPUs it could use
+    before (None when unchanged), for a later keep_to() to give them back."""
+    if cpus is None:
+        return None
+    before = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, cpus)
+    return before

@@ -3,6 +3,7 @@ run whose process dies leaves a recoverable, unfinalized file."""
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -153,3 +154,38 @@ def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
             path, TwinConfig(), RUN, urdf="<robot/>", meshes=[tmp_path / "no_such_mesh.stl"]
         )
     assert path.read_bytes() == b"an earlier recording"
+
+
+def test_a_writer_that_fails_after_the_checks_stops_the_run_in_one_line(tmp_path):
+    """The recorders start beside the twin's scene: a writer that fails in its process (here its
+    NAME.partial is a folder, which the path checks before the fork do not see) stops the run at
+    the twin's first publish, in one line, and the other writer ends as error."""
+    (tmp_path / "x.mcap.partial").mkdir()
+    config = TwinConfig()
+    with (
+        pytest.raises(RecordingError) as err,
+        open_recorders(
+            config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+        ) as sinks,
+    ):
+        Twin(config, sinks=sinks).step(100)
+    assert "x.mcap" in str(err.value) and "\n" not in str(err.value)
+    assert "could not start" in str(err.value) or "cannot write" in str(err.value)
+    assert not (tmp_path / "x.mcap").exists()
+    assert (tmp_path / "x.rrd").exists()  # the view ended as error, finished
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the recorders share it")
+def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
+    """While it records, the twin's thread keeps to the CPU it was on and the recorders to every
+    other one; afterwards the thread may run where it could before."""
+    config = TwinConfig()
+    before = os.sched_getaffinity(0)
+    with open_recorders(
+        config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+    ) as sinks:
+        twins = os.sched_getaffinity(0)
+        cpus = [os.sched_getaffinity(child.process.pid) for child in sinks[0]._children]
+        Twin(config, sinks=sinks).step(20)
+    assert os.sched_getaffinity(0) == before
+    assert len(twins) == 1 and len(cpus) == 2 and cpus[0] == cpus[1] == before - twins

@@ -82,3 +82,30 @@ def test_each_frame_keeps_the_targets_of_its_step():
         assert type(after.joint_target) is tuple
     finally:
         twin.close()
+
+
+@pytest.mark.parametrize("timeout_s", [0.0, 1 / 240, 0.05])
+def test_a_settle_that_times_out_takes_its_steps_and_says_so(timeout_s):
+    """settle() looks at the Frame before each of its steps: it takes round(timeout * 240) steps,
+    no more, before its settle_timeout event."""
+    from twin.verify.collectors import FrameCollector
+
+    collector = FrameCollector()
+    twin = Twin(sinks=[collector])
+    try:
+        twin.set_joint_target(0, 1.0)  # far: the arm cannot get there in 0.05 s
+        assert twin.settle(timeout_s) is False
+        assert twin.step_index == round(timeout_s * 240)
+        assert [e.kind for e in collector.events][-1] == "settle_timeout"
+        assert collector.events[-1].step == twin.step_index
+    finally:
+        twin.close()
+
+
+def test_a_settled_arm_takes_no_step():
+    twin = Twin()
+    try:
+        assert twin.settle() is True  # at rest at its targets from the start
+        assert twin.step_index == 0
+    finally:
+        twin.close()

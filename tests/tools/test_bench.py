@@ -20,7 +20,7 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
         [sys.executable, str(BENCH), *args],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=600,  # the record section's long runs: 110k steps each
         check=False,
     )
 
@@ -98,8 +98,24 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
         "record_both_vs_reads",
         "record_both_vs_naive",
         "record_reads_vs_motion",
+        "record_both_long_vs_none",
+        "record_cpu_us_per_step_none",
+        "record_cpu_us_per_step_both",
+        "record_recorders_cpu_us_per_frame",
+        "record_recorders_writer_cpu_us_per_frame",
+        "twin_cost_us_per_step",
     ):
         assert isinstance(data[key], float) and data[key] > 0, key
+    # the isolated writers, summed; a recorder's writer share is part of its process's CPU
+    assert data["record_writers_cpu_us_per_frame"] == pytest.approx(
+        data["record_mcap_writer_cpu_us_per_frame"] + data["record_rrd_writer_cpu_us_per_frame"],
+        abs=2e-6,
+    )
+    assert (
+        0
+        < data["record_recorders_writer_cpu_us_per_frame"]
+        < data["record_recorders_cpu_us_per_frame"]
+    )
     # the record section pairs each repeat with its own sample of the same motion's baseline (one
     # repeat: that one)
     assert (

@@ -2,17 +2,17 @@
 which run the same MCAP and Rerun writers (one process each).
 
 The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
-microsecond, no system call) and every 1/15 s of simulated time publishes how far it got; commands,
-events and pictures (rare) go down a pipe with the frame they follow. Each recorder wakes on its own
-timer (every millisecond while rows come), takes in what was published once it is 2/15 s of
-simulated time or more (the writers take columns: the bigger the batch, the less each frame costs),
-and says how far it read. The twin wakes a recorder through the pipe when it has used half its
-slack, and waits for it only when it has used all of it (the MCAP writer's: 0.4 s of simulated
-time, which bounds what a kill -9 loses; the Rerun writer's: the ring). Files are byte-for-byte what
-the in-process writers make, since the same writer code sees the same stream. If the twin's process
-dies, the recorder sees the pipe close, takes in every row that was published and leaves the MCAP
-file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to
-handle (it then finalizes the files): the recorder ignores them.
+microsecond, no system call) and every 1/15 s of simulated time publishes how far it got. A recorder
+sleeps in poll() until the twin wakes it (a message down the pipe) once a take's worth of rows is
+published (TAKE_S for the MCAP writer, RRD_TAKE_S for the Rerun one: the writers take columns, the
+bigger the batch the less each frame costs); the wake-up carries the commands, events and pictures
+(rare) that come before those rows. The recorder takes the rows in and says how far it read. The
+twin waits for a recorder only when it has used all its slack (the MCAP writer's: MAX_AHEAD_S of
+simulated time, which bounds what a kill -9 of the whole run loses; the Rerun writer's: the ring).
+Files are byte-for-byte what the in-process writers make, since the same writer code sees the same
+stream. If the twin's process dies, the recorder sees the pipe close, takes in every row it was
+woken for and leaves the MCAP file unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM
+and SIGHUP are the twin's to handle (it then finalizes the files): the recorder ignores them.
 """
 
 from __future__ import annotations
@@ -21,15 +21,19 @@ import collections
 import marshal
 import os
 import pickle
+import select
 import sys
+import time
 from pathlib import Path
+from typing import NamedTuple
 
-from twin.helpers import start_helper
+from twin.helpers import forking_on, keep_to, split_cpus, start_helper
 from twin.model.config import TwinConfig
 from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
 from twin.model.sink import Sink, close_all
 from twin.model.types import Command, Event, Frame
+from twin.record.outputs import check_target
 from twin.record.ring import FrameRing
 from twin.record.rows import FrameRows
 
@@ -38,17 +42,46 @@ PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames a
 MAX_AHEAD_S = 0.4
 # simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
 RING_S = 4096 / 240
-POLL_S = 0.001  # a recorder's timer while rows come; it doubles up to IDLE_POLL_S while none do
-IDLE_POLL_S = 0.016
-# a recorder takes rows in once this much simulated time is published (or when woken, or at the
-# end): the writers take columns, whose cost is per batch as much as per frame
-MIN_TAKE_S = 32 / 240
+# The twin wakes a recorder (a byte down its pipe) once this much simulated time is published since
+# it last did: the writers take columns, whose cost is per batch as much as per frame, and a
+# recorder asleep in poll() costs nothing. The MCAP writer's is half its slack; the Rerun one's a
+# quarter of the ring.
+TAKE_S = 48 / 240
+RRD_TAKE_S = 1024 / 240
 WAIT_S = 0.0002  # the twin's sleep while it waits for a recorder to take rows in
-_OTHERS, _WAKE, _CLOSE = b"O", b"W", b"C"
+_WAKE, _CLOSE = b"W", b"C"
+_DONE = b"OK\0"  # a recorder's last reply: finished, and its RecorderStats
 _COMMAND, _EVENT = 0, 1
 _IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
 # item kind -> the sinks' method
 _HANDLERS = {_COMMAND: "on_command", _EVENT: "on_event", _IMAGE: "on_image"}
+
+
+def check_writable(mcap_path, rrd_path, run: dict) -> None:
+    """What the writers would refuse when they start, refused at once: a path whose folder is
+    missing or that is a folder, and (MCAP) a run description that is not plain JSON."""
+    from twin.record.mcap.metadata import check_run
+
+    for path, expected in ((mcap_path, "an .mcap path"), (rrd_path, "a .rrd file path")):
+        if path is not None:
+            check_target(path, "recording", expected, error=RecordingError)
+    if mcap_path is not None:
+        check_run(run)
+
+
+class RecorderStats(NamedTuple):
+    """What a recorder process spent, from its first row to its file finalized (CPU seconds of all
+    its threads), and how much of it its writer spent (its calls, and the threads it runs)."""
+
+    cpu_s: float
+    writer_cpu_s: float
+    frames: int
+
+
+def _poller(conn) -> select.poll:
+    poller = select.poll()
+    poller.register(conn.fileno(), select.POLLIN)
+    return poller
 
 
 def _frames(config: TwinConfig, seconds: float) -> int:
@@ -76,9 +109,13 @@ class RecorderProcess(Sink):
         self._publish_every = _frames(config, PUBLISH_S)
         mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
         capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
+        # (writer, path, how far ahead the twin may go, how many rows between wake-ups)
         writers = [
-            (w, p, ahead)
-            for w, p, ahead in [("mcap", mcap_path, mcap_ahead), ("rrd", rrd_path, capacity)]
+            (w, p, ahead, max(1, min(_frames(config, take_s), ahead - 2 * self._publish_every)))
+            for w, p, ahead, take_s in [
+                ("mcap", mcap_path, mcap_ahead, TAKE_S),
+                ("rrd", rrd_path, capacity, RRD_TAKE_S),
+            ]
             if p is not None
         ]
         self._ring = FrameRing(self._rows, capacity, len(writers))
@@ -88,8 +125,13 @@ class RecorderProcess(Sink):
         self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
         self._written = 0
-        self._next_publish = self._publish_every
-        self._others: list[tuple[int, int, bytes]] = []  # (frames before it, kind, pickle)
+        # the first publish is the first frame's (the twin's scene is built by then): it waits for
+        # the MCAP writer to be ready, so the run's stepping never does
+        self._next_publish = 1
+        # (frames before it, kind, pickle), from the run's `_others_base`th on: the ones some
+        # recorder has not been sent yet
+        self._others: list[tuple[int, int, bytes]] = []
+        self._others_base = 0
         self._closed = False
         # how often the twin waited for a recorder (tools/bench_record.py reports it)
         self.waits = 0
@@ -99,32 +141,59 @@ class RecorderProcess(Sink):
 
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
+        # what a writer would refuse at its start, refused here, before the run: a bad path or run
+        check_writable(mcap_path, rrd_path, run)
         self._children: list[_Child] = []
-        starting = None
+        # the recorders on the other cores, the twin's thread on its own one until the close
+        cpus = split_cpus()
+        self._twins_cpus: set[int] | None = None  # the CPUs the twin's thread had before
         try:
-            for reader, (writer, path, ahead) in enumerate(writers):
-                self._children.append(
-                    _Child(
-                        writer,
-                        reader,
-                        ahead,
-                        self._children,
-                        (self._ring, config, run, urdf, meshes, path, rate, engine),
+            with forking_on(cpus and cpus[1]):
+                for reader, (writer, path, ahead, take) in enumerate(writers):
+                    self._children.append(
+                        _Child(
+                            writer,
+                            reader,
+                            (ahead, take),
+                            self._children,
+                            (self._ring, config, run, urdf, meshes, path, rate, engine),
+                        )
                     )
-                )
-            for starting in self._children:  # they start side by side; each says when it is ready
-                starting.expect_ok("recording could not start")
         except BaseException:
-            # as one process with both writers did: the others end as error
-            for child in self._children:
-                if child is starting:
-                    child.stop()
-                    continue
-                try:
-                    child.finish("error", "recording could not start")
-                except RecordingError:
-                    pass
+            self._fail_start(None)
             raise
+        self._twins_cpus = keep_to(cpus and cpus[0])
+        # They start side by side with the twin's scene: the twin hears the MCAP writer is ready at
+        # its first publish, the first frame's (it waits for it there), and the Rerun one when it
+        # has said so (at the latest at the close), so building the twin does not wait for them.
+        self._starting = list(self._children)
+
+    def _check_started(self, wait: tuple[str, ...]) -> None:
+        """Read the start reply of the recorders that have sent it, waiting for those of the
+        writers in `wait`; a writer that could not start ends the recording, the others as
+        error."""
+        for child in list(self._starting):
+            if child.writer in wait or child.has_reply():
+                self._starting.remove(child)
+                try:
+                    child.expect_ok("recording could not start")
+                except RecordingError:
+                    self._fail_start(child)
+                    raise
+
+    def _fail_start(self, failed: _Child | None) -> None:
+        """A writer could not start (or forking failed): the others end as error, nothing waits
+        for the failed one; the recording is closed."""
+        self._closed = True
+        self._free_twins_thread()
+        for child in self._children:
+            if child is failed:
+                child.stop()
+                continue
+            try:
+                child.finish("error", "recording could not start")
+            except RecordingError:
+                pass
 
     # -- sink -------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
@@ -153,49 +222,83 @@ class RecorderProcess(Sink):
         )
 
     def _publish(self) -> None:
-        """The others down the pipes, then the rows up to here published; then room for the next
-        ones (the others first: a recorder that sees the rows must find every message that came
-        before them)."""
-        self._send_others()
+        """The rows up to here published, and a recorder woken when a take's worth is waiting for
+        it (or waited for, when the twin would pass its slack)."""
+        if self._starting:
+            self._check_started(("mcap",))
         written = self._written
         reads = self._ring.publish(written)
-        self._next_publish = written + self._publish_every
+        # then every publish_every frames from the run's start (16, 32, ...), as before the first
+        # publish moved to frame 0: a task whose commands come at steps in step with the publishes
+        # would see a killed run keep a frame without the commands of its step
+        self._next_publish = (written // self._publish_every + 1) * self._publish_every
         for child, read in zip(self._children, reads, strict=True):
             if self._next_publish - read > child.ahead:
                 self.waits += 1
+                self._wake(child, written)
                 child.wait_until_read(self._ring, self._next_publish - child.ahead)
-            elif written - read > child.ahead // 2:
-                child.nudge(read)
+            elif written - child.woken_at >= child.take:
+                self._wake(child, written)
+        if self._others:
+            self._drop_sent_others()
+
+    def _wake(self, child: _Child, written: int) -> None:
+        """Have a recorder take in rows [0, written): the wake-up carries the others it has not had
+        yet (all of them come before row `written`), so it wakes once for both."""
+        child.wake(written, self._others[child.others_sent - self._others_base :])
+        child.others_sent = self._others_base + len(self._others)
+
+    def _drop_sent_others(self) -> None:
+        sent = min(child.others_sent for child in self._children) - self._others_base
+        if sent:
+            del self._others[:sent]
+            self._others_base += sent
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Publish what is left, have the writers finalize, wait for them (the first failure is
         raised once all have finished). Idempotent."""
         if self._closed:
             return
+        if self._starting:  # a writer that could not start: the others end as error, and it says
+            self._check_started(("mcap", "rrd"))
         self._closed = True
+        self._free_twins_thread()
         failure: RecordingError | None = None
         try:
             self._publish_rest()
         except RecordingError as err:
             failure = err
+        # every writer finalizes at once (each in its process), then the twin waits for them all
+        asked = []
         for child in self._children:
             try:
-                child.finish(outcome, error)
+                child.ask_to_finish(outcome, error)
+                asked.append(child)
+            except RecordingError as err:
+                failure = failure or err
+        for child in asked:
+            try:
+                child.wait_finished()
             except RecordingError as err:
                 failure = failure or err
         if failure is not None:
             raise failure
 
-    def _publish_rest(self) -> None:
-        self._send_others()
-        self._ring.publish(self._written)
+    def _free_twins_thread(self) -> None:
+        """The twin's thread may run on every CPU it could before the recording again."""
+        keep_to(self._twins_cpus)
+        self._twins_cpus = None
 
-    def _send_others(self) -> None:
-        if self._others:
-            message = _OTHERS + marshal.dumps(self._others)
-            self._others.clear()
-            for child in self._children:
-                child.send(message)
+    @property
+    def stats(self) -> dict[str, RecorderStats]:
+        """Each finished recorder's RecorderStats, by writer ("mcap", "rrd"): tools/bench_record.py
+        reports them."""
+        return {c.writer: c.stats for c in self._children if c.stats is not None}
+
+    def _publish_rest(self) -> None:
+        self._ring.publish(self._written)
+        for child in self._children:
+            self._wake(child, self._written)
 
 
 class _Child:
@@ -204,20 +307,30 @@ class _Child:
     ring)."""
 
     def __init__(
-        self, writer: str, reader: int, ahead: int, siblings: list[_Child], args: tuple
+        self,
+        writer: str,
+        reader: int,
+        ahead_take: tuple[int, int],
+        siblings: list[_Child],
+        args: tuple,
     ) -> None:
         self.writer = writer
         self.reader = reader
-        self.ahead = ahead
-        self.wakes = 0  # wake-ups the twin sent it (it falls behind)
-        self._nudged_at = -1
+        self.ahead, self.take = ahead_take
+        self.wakes = 0  # wake-ups the twin sent it
+        self.woken_at = 0  # the rows published when the twin last woke it
+        self.others_sent = 0  # the run's others it has been sent
+        # what the recorder said of its CPU at the end (RecorderStats), None before
+        self.stats: RecorderStats | None = None
         self.conn, self.process = start_helper(
             self,
             _serve,
-            (writer, reader, ahead, *args),
+            (writer, reader, *args),
             name=f"twin-recorder-{writer}",
             other_ends=[s.conn for s in siblings],
         )
+        # one poll object for the pipe: Connection.poll builds a selector on every call
+        self._poller = _poller(self.conn)
 
     def send(self, message: bytes) -> None:
         try:
@@ -225,23 +338,23 @@ class _Child:
         except OSError as err:
             raise RecordingError(f"the recorder process stopped: {self._exit_text()}") from err
 
-    def nudge(self, read: int) -> None:
-        """Half its slack is used up: wake the recorder if it may be waiting for its timer (once for
-        each point it has read to, so a recorder busy writing is not woken again and again)."""
-        if read != self._nudged_at:
-            self._nudged_at = read
-            self._wake()
+    def has_reply(self) -> bool:
+        """True when the recorder has said something (or its end of the pipe has closed)."""
+        return bool(self._poller.poll(0))
+
+    def wake(self, written: int, others: list) -> None:
+        """Rows [0, written) are published: have the recorder take them in, with `others` (the
+        commands, events and pictures that come before them it has not had)."""
+        self.woken_at = written
+        self.wakes += 1
+        self.send(_WAKE + marshal.dumps((written, others)))
 
     def wait_until_read(self, ring: FrameRing, read: int) -> None:
-        """Wake the recorder and wait until it has taken in rows [0, read)."""
-        self._wake()
+        """Wait until the recorder (woken) has taken in rows [0, read)."""
         while ring.read(self.reader) < read:
-            if self.conn.poll(WAIT_S):  # it says nothing before the close: this is the pipe's end
+            if self._poller.poll(0):  # it says nothing before the close: this is the pipe's end
                 raise RecordingError(f"the recorder process stopped: {self._exit_text()}")
-
-    def _wake(self) -> None:
-        self.wakes += 1
-        self.send(_WAKE)
+            time.sleep(WAIT_S)
 
     def expect_ok(self, what: str) -> None:
         try:
@@ -250,20 +363,33 @@ class _Child:
             raise RecordingError(
                 f"{what}: the recorder process stopped ({self._exit_text()})"
             ) from err
-        if reply != b"OK":
-            self.process.join(timeout=5)
-            raise RecordingError(reply.decode(errors="replace"))
+        if reply == b"OK":
+            return
+        if reply.startswith(_DONE):
+            self.stats = RecorderStats(*marshal.loads(reply[len(_DONE) :]))
+            return
+        self.process.join(timeout=5)
+        raise RecordingError(reply.decode(errors="replace"))
 
     def finish(self, outcome: str, error: str) -> None:
         """Have the writer finalize with the run's outcome and wait for it."""
+        self.ask_to_finish(outcome, error)
+        self.wait_finished()
+
+    def ask_to_finish(self, outcome: str, error: str) -> None:
+        """Have the writer finalize with the run's outcome (wait_finished waits for it)."""
         try:
-            try:
-                self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
-            except OSError as err:
-                raise RecordingError(
-                    f"recording could not be finished: the recorder process stopped "
-                    f"({self._exit_text()})"
-                ) from err
+            self.conn.send_bytes(_CLOSE + marshal.dumps((outcome, error)))
+        except OSError as err:
+            text = self._exit_text()
+            self.stop()
+            raise RecordingError(
+                f"recording could not be finished: the recorder process stopped ({text})"
+            ) from err
+
+    def wait_finished(self) -> None:
+        """Wait until the writer has finalized (or failed: RecordingError), and for its process."""
+        try:
             self.expect_ok("recording could not be finished")
         finally:
             self.stop()
@@ -282,7 +408,6 @@ def _serve(
     conn,
     writer: str,
     reader: int,
-    ahead: int,
     ring: FrameRing,
     config: TwinConfig,
     run: dict,
@@ -320,52 +445,42 @@ def _serve(
         os._exit(0)
     conn.send_bytes(b"OK")
     feed = _Feed(ring, sinks)
-    # below half its slack: the twin wakes it at half (and waits at all of it)
-    min_take = max(1, min(_frames(config, MIN_TAKE_S), ahead // 2))
-    timeout = POLL_S
+    poller = _poller(conn)
     while True:
-        conn.poll(timeout)  # a message, or the timer
-        written = ring.written()
-        # all the twin sent before publishing `written`, and maybe more
-        end = _take_messages(conn, feed)
-        if end is not None:
-            # the twin publishes its last rows before it closes (or has died)
-            written = ring.written()
-        came = written > feed.read
-        if end is not None or feed.woken or written - feed.read >= min_take:
-            feed.take(written, final=end is not None)
+        # asleep until the twin wakes it (rows to take in, with the others before them; the close)
+        # or the pipe ends
+        poller.poll()
+        end = _take_messages(conn, poller, feed)
+        if end is not None or feed.woken:
+            # the rows the twin woke it for: those whose others it has (all, at the close; at the
+            # twin's death the rows published after its last wake-up are left out)
+            feed.take(feed.synced, final=end is not None)
             ring.release(reader, feed.read)
             feed.woken = False
-        # Enough rows while it wrote (a block, a burst): at once; some: the timer; none: slower.
-        waiting = ring.written() - feed.read
-        timeout = (
-            0.0
-            if waiting >= min_take
-            else POLL_S if waiting or came else min(2 * timeout, IDLE_POLL_S)
-        )
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
             if not feed.failure:
                 _abandon(sinks)
             os._exit(0)
         if end is not None:
-            failure = feed.failure or _close_all(sinks, *end)
-            conn.send_bytes(failure.encode() if failure else b"OK")
+            failure = feed.failure or feed.timed(_close_all, sinks, *end)
+            conn.send_bytes(failure.encode() if failure else _DONE + marshal.dumps(feed.stats()))
             os._exit(0)
 
 
-def _take_messages(conn, feed: _Feed):
+def _take_messages(conn, poller: select.poll, feed: _Feed):
     """Read every message waiting in the pipe: the others go to the feed's queue. Returns None, the
     close request's (outcome, error), or "died" when the pipe has closed (the twin's process
     died)."""
-    while conn.poll(0):
+    while poller.poll(0):
         try:
             message = conn.recv_bytes()
         except (EOFError, OSError):
             return "died"
         tag, body = message[:1], message[1:]
-        if tag == _OTHERS:
-            feed.queue.extend(marshal.loads(body))
-        elif tag == _WAKE:  # the twin has used half its slack: take in what there is
+        if tag == _WAKE:  # rows to take in, and the others that come before them
+            synced, others = marshal.loads(body)
+            feed.queue.extend(others)
+            feed.synced = max(feed.synced, synced)
             feed.woken = True
         elif tag == _CLOSE:
             return marshal.loads(body)
@@ -383,6 +498,24 @@ class _Feed:
         self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
         self.failure = ""
         self.woken = False  # the twin asked for the rows to be taken in
+        self.synced = 0  # the rows whose others have come: what it may take in
+        # CPU seconds: the process's and this thread's at the start, this thread's in the writers
+        self._cpu0, self._thread0, self._in_writers_s = time.process_time(), time.thread_time(), 0.0
+
+    def timed(self, call, *args):
+        """call(*args), a writer's work: its CPU counts as the writer's (RecorderStats)."""
+        t0 = time.thread_time()
+        try:
+            return call(*args)
+        finally:
+            self._in_writers_s += time.thread_time() - t0
+
+    def stats(self) -> tuple:
+        """RecorderStats' fields: everything else this thread did is the recorder's own work; the
+        writers' threads (Rerun's) are the writer's."""
+        cpu_s = time.process_time() - self._cpu0
+        around_s = time.thread_time() - self._thread0 - self._in_writers_s
+        return (cpu_s, cpu_s - around_s, self.read)
 
     def take(self, written: int, *, final: bool) -> None:
         """Rows [read, written) and the others that come before row `written` (all of them when
@@ -394,7 +527,7 @@ class _Feed:
                 if not self.failure:
                     message = pickle.loads(data)
                     for sink in self.sinks:
-                        getattr(sink, _HANDLERS[kind])(message)
+                        self.timed(getattr(sink, _HANDLERS[kind]), message)
             self._rows(written)
         except Exception as err:  # noqa: BLE001 - e.g. a full disk
             self.failure = (
@@ -408,11 +541,9 @@ class _Feed:
         if upto <= self.read:
             return
         if not self.failure:
-            rows = self.ring.rows
-            for run in self.ring.runs(self.read, upto):
-                frames = rows.columns(run, copy=False)  # views into the ring: writers copy
+            for frames in self.ring.runs(self.read, upto):  # views into the ring: writers copy
                 for sink in self.sinks:
-                    sink.on_frames(frames)
+                    self.timed(sink.on_frames, frames)
         self.read = upto
 
 

@@ -6,7 +6,7 @@ produces a Frame; every discrete happening an Event. All three go to the sinks, 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from types import MappingProxyType
 from typing import Any
 
@@ -126,6 +126,13 @@ class Twin(Motions):
         Returns:
             The Frame after the last step (also `twin.frame`).
         """
+        for _ in self._stepping(n):
+            pass
+        return self.frame
+
+    def _stepping(self, n: int) -> Iterator[Frame]:
+        """Advance n physics steps, yielding each Frame once every sink has it: for a caller that
+        looks at every Frame (settle), a generator's resume costs a fraction of a step() call."""
         sinks, pad_model, world_step, read_frame = (
             self.sinks,
             self.suction_pad,
@@ -146,7 +153,7 @@ class Twin(Motions):
             # after every sink: a picture reaches them after the frame it shows
             if renderer is not None:
                 renderer.on_frame(f)
-        return self.frame
+            yield f
 
     def wait(self, seconds: float) -> Frame:
         """Let simulated time pass (the seeds' `sim.wait`), rounded to whole steps.

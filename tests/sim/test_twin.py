@@ -184,3 +184,10 @@ def test_separate_processes_give_bit_identical_frames():
         for _ in range(2)
     ]
     assert digests == [here, here]
+
+
+def test_every_command_kind_has_a_handler_and_every_handler_a_kind():
+    """Twin.apply looks a Command's handler up by kind (formerly an import-time check)."""
+    from twin.model.types import COMMAND_ARGS
+
+    assert set(Twin._COMMANDS) == set(COMMAND_ARGS)

@@ -593,9 +593,3 @@ class _KeyHands:
 
     def signal(self, name: str, value) -> None:
         self._twin._do_signal({"name": name, "value": value})
-
-
-if set(Twin._COMMANDS) != set(COMMAND_ARGS):
-    raise ImportError(
-        "twin.sim.twin: a Command kind without a handler, or a handler without a kind"
-    )

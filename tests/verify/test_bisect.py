@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -193,3 +194,20 @@ def test_a_stopped_bisect_removes_its_worktree(tmp_path):
         proc.kill()
     assert proc.returncode == 143 and "stopped by SIGTERM" in err, err
     assert state(repo) == before  # the worktree removed, the repository as it was
+
+
+def test_a_worktree_whose_add_was_cut_short_is_removed_too(tmp_path):
+    """A SIGTERM during `git worktree add` kills git mid-way: the worktree stays registered and
+    locked ("initializing"), which `git worktree prune` skips. remove_worktree unlocks it."""
+    from twin.verify.bisect import git, remove_worktree
+
+    repo = make_repo(tmp_path / "repo")
+    before = state(repo)
+    tmp = tmp_path / "twin-bisect-x"
+    tree = tmp / "tree"
+    assert git(repo, "worktree", "add", "--detach", "--quiet", str(tree), "HEAD~1").returncode == 0
+    git(repo, "worktree", "lock", "--reason", "initializing", str(tree))
+    shutil.rmtree(tree)  # what a killed add leaves: the entry, locked, without its files
+    assert "locked" in git(repo, "worktree", "list", "--porcelain").stdout
+    remove_worktree(repo, tree, tmp)
+    assert state(repo) == before and not tmp.exists()

@@ -104,6 +104,16 @@ def git(repo: str | os.PathLike, *args: str) -> subprocess.CompletedProcess:
     )
 
 
+def remove_worktree(root: Path, tree: Path, tmp: Path) -> None:
+    """Remove a tried commit's worktree and its temporary folder, also one whose `git worktree add`
+    a signal cut short: git leaves that one registered and locked ("initializing"), which
+    `worktree prune` skips, so it is unlocked first."""
+    git(root, "worktree", "remove", "--force", "--force", str(tree))
+    shutil.rmtree(tmp, ignore_errors=True)
+    git(root, "worktree", "unlock", str(tree))
+    git(root, "worktree", "prune")
+
+
 def repo_root(cwd: str | os.PathLike = ".") -> Path:
     done = git(cwd, "rev-parse", "--show-toplevel")
     if done.returncode != 0 or not done.stdout.strip():
@@ -251,10 +261,7 @@ class Bisector:
                     shutil.copyfile(f, folder / f.name)
             return self._run_check(tree, tmp / "check.xml", goldens)
         finally:
-            if tree.exists():
-                git(self.root, "worktree", "remove", "--force", str(tree))
-            shutil.rmtree(tmp, ignore_errors=True)
-            git(self.root, "worktree", "prune")
+            remove_worktree(self.root, tree, tmp)
 
     def _run_check(self, tree: Path, junit: Path, goldens: list[Golden]) -> tuple[dict | None, str]:
         env = dict(os.environ)

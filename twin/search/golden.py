@@ -164,15 +164,7 @@ def check_search(definition: str, *, update: bool = False, keep: str | None = No
         outcome.seconds = time.perf_counter() - t0
         return outcome
     except TwinError as err:
-        return Outcome(
-            path=definition,
-            status="error",
-            exit_code=err.exit_code,
-            summary=str(err),
-            report="",
-            frames=0,
-            seconds=time.perf_counter() - t0,
-        )
+        return Outcome.of_error(definition, err, time.perf_counter() - t0)
 
 
 def _keep(base: str, spec: SweepSpec, outcome: Outcome) -> list[str]:

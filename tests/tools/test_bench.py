@@ -3,6 +3,7 @@ table."""
 
 from __future__ import annotations
 
+import math
 import re
 import subprocess
 import sys
@@ -23,37 +24,6 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
         timeout=600,  # the record section's long runs: 110k steps each
         check=False,
     )
-
-
-def test_only_twin_prints_the_baseline_and_the_twins_ratio():
-    # medians of 3: one 2000-step sample each of the idle and the moving scene could be spoiled by a
-    # busy moment of the shared machine (the idle one measured slower than the moving one in 1 of 6
-    # runs)
-    done = _bench("--only", "twin", "--repeats", "3", "--physics-steps", "2000")
-    assert done.returncode == 0, done.stderr
-    rows = {
-        tuple(c.strip() for c in line.split("|")[:2]): line.split("|")[2].strip()
-        for line in done.stdout.splitlines()
-        if line.count("|") == 2
-    }
-    physics = float(
-        rows[("physics", "physics-only steps/s (median of 3)")].split()[0].replace(",", "")
-    )
-    assert physics > 0
-    rate, ratio = re.match(
-        r"([\d,]+) \(([\d.]+)x idle",
-        rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")],
-    ).groups()
-    # measured against that baseline
-    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006
-    motion = float(
-        rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")]
-        .split()[0]
-        .replace(",", "")
-    )
-    assert physics > motion > 0  # a moving arm with contacts costs more than an idle one
-    # --only selected
-    assert not any(section in ("record", "diff", "remote") for section, _ in rows)
 
 
 def test_list_names_every_section_and_unknown_sections_are_refused():
@@ -80,10 +50,13 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
         "1",
         "--physics-steps",
         "2000",
+        "--long-cycles",
+        "3",
         "--json",
         str(out),
     )
     assert done.returncode == 0, done.stderr
+    _assert_the_table_holds_the_baseline_and_the_twins_ratio(done.stdout)
     data = json.loads(out.read_text())
     for key in (
         "record_both_vs_motion",
@@ -103,9 +76,11 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
         "record_cpu_us_per_step_both",
         "record_recorders_cpu_us_per_frame",
         "record_recorders_writer_cpu_us_per_frame",
-        "twin_cost_us_per_step",
     ):
         assert isinstance(data[key], float) and data[key] > 0, key
+    # a difference of two timings: on a busy machine it can come out below zero (seen: -13.7)
+    assert isinstance(data["twin_cost_us_per_step"], float)
+    assert math.isfinite(data["twin_cost_us_per_step"])
     # the isolated writers, summed; a recorder's writer share is part of its process's CPU
     assert data["record_writers_cpu_us_per_frame"] == pytest.approx(
         data["record_mcap_writer_cpu_us_per_frame"] + data["record_rrd_writer_cpu_us_per_frame"],
@@ -150,3 +125,31 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
     )
     bad = _bench("--only", "twin", "--json", str(tmp_path / "no" / "b.json"))
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "does not exist" in bad.stderr
+
+
+def _assert_the_table_holds_the_baseline_and_the_twins_ratio(stdout: str) -> None:
+    rows = {
+        tuple(c.strip() for c in line.split("|")[:2]): line.split("|")[2].strip()
+        for line in stdout.splitlines()
+        if line.count("|") == 2
+    }
+    physics = float(
+        rows[("physics", "physics-only steps/s (median of 1)")].split()[0].replace(",", "")
+    )
+    assert physics > 0
+    rate, ratio = re.match(
+        r"([\d,]+) \(([\d.]+)x idle",
+        rows[("twin", "pick_place 2 cycles, no recording: steps/s (ratio to physics-only)")],
+    ).groups()
+    # measured against that baseline
+    assert abs(float(ratio) - float(rate.replace(",", "")) / physics) <= 0.006
+    motion = float(
+        rows[("physics", "physics-only steps/s, pick_place's motion and holds (median)")]
+        .split()[0]
+        .replace(",", "")
+    )
+    # the moving scene's rate is printed; which of the two is faster is a timing, not a contract
+    # (the shared machine once measured the moving one faster)
+    assert motion > 0
+    # --only selected
+    assert not any(section in ("diff", "remote", "sweep") for section, _ in rows)

@@ -41,6 +41,8 @@ class BenchContext:
     repeats: int
     # median over repeats, pick_place's motion (0: not measured)
     motion_physics_steps_per_s: float = 0.0
+    # pick_place cycles of the record section's long run (its figures need about 100)
+    long_cycles: int = 100
     physics_step_us: float = field(init=False)
     # named numbers for --json (sections add theirs)
     figures: dict[str, float] = field(default_factory=dict)
@@ -192,7 +194,11 @@ def _table(rows: list[tuple[str, str, str]]) -> list[str]:
 
 
 def run(
-    only: list[str], repeats: int, physics_steps: int = PHYSICS_STEPS, json_path: str | None = None
+    only: list[str],
+    repeats: int,
+    physics_steps: int = PHYSICS_STEPS,
+    json_path: str | None = None,
+    long_cycles: int = 100,
 ) -> int:
     sections = discover()
     unknown = sorted(set(only) - set(sections))
@@ -209,7 +215,13 @@ def run(
     t_start = time.perf_counter()
     samples = tuple(physics_only_steps_per_s(physics_steps) for _ in range(repeats))
     motion = tuple(pick_place_physics_steps_per_s() for _ in range(repeats))
-    ctx = BenchContext(statistics.median(samples), samples, repeats, statistics.median(motion))
+    ctx = BenchContext(
+        physics_steps_per_s=statistics.median(samples),
+        physics_samples=samples,
+        repeats=repeats,
+        motion_physics_steps_per_s=statistics.median(motion),
+        long_cycles=long_cycles,
+    )
     ctx.figures.update(
         physics_steps_per_s=ctx.physics_steps_per_s,
         motion_physics_steps_per_s=ctx.motion_physics_steps_per_s,
@@ -322,6 +334,13 @@ def main(argv: list[str] | None = None) -> int:
         default=PHYSICS_STEPS,
         help=f"steps per physics-only sample (default {PHYSICS_STEPS})",
     )
+    parser.add_argument(
+        "--long-cycles",
+        type=int,
+        default=100,
+        help="pick_place cycles of the record section's long run (default 100: 109,876 steps; "
+        "fewer only to try the bench quickly, its long-run figures then mean little)",
+    )
     parser.add_argument("--list", action="store_true", help="list the sections and exit")
     parser.add_argument(
         "--json", metavar="FILE", help="also write every figure of the table to FILE as JSON"
@@ -330,10 +349,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.list:
         print("\n".join(discover()))
         return 0
-    if args.repeats < 1 or args.physics_steps < 1:
+    if min(args.repeats, args.physics_steps, args.long_cycles) < 1:
         print(
-            f"bench: error: --repeats {args.repeats} and --physics-steps "
-            f"{args.physics_steps} must be >= 1",
+            f"bench: error: --repeats {args.repeats}, --physics-steps {args.physics_steps} and "
+            f"--long-cycles {args.long_cycles} must be >= 1",
             file=sys.stderr,
         )
         return 2
@@ -344,7 +363,13 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    return run(args.only, args.repeats, args.physics_steps, args.json)
+    return run(
+        args.only,
+        args.repeats,
+        physics_steps=args.physics_steps,
+        json_path=args.json,
+        long_cycles=args.long_cycles,
+    )
 
 
 if __name__ == "__main__":

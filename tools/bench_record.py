@@ -41,8 +41,6 @@ from bench import motion_actions, pick_place_physics_steps_per_s, replay_motion
 
 CYCLES = 16
 RUN = {"source": "task", "task": "pick_place", "params": {"cycles": CYCLES}}
-# the long run: 109,876 steps, where a recorder's cost per frame shows as a short run hides it
-LONG_CYCLES = 100
 
 
 def _cpu_s() -> float:
@@ -378,17 +376,18 @@ def bench(ctx) -> list[tuple[str, str]]:
 
 
 def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
-    """pick_place's LONG_CYCLES-cycle run without recording and with both files, taking turns: the
-    stepping speed with both over without (record_both_long_vs_none, paired by repeat), the CPU
-    per step of the stepping process in each (record_cpu_us_per_step_none, _both), and each
-    recorder process's CPU per frame and its writer's share of it, against the isolated writers
-    (record_recorders_cpu_us_per_frame, record_writers_cpu_us_per_frame)."""
+    """pick_place's long run (ctx.long_cycles cycles, 100 by default: 109,876 steps, where a
+    recorder's cost per frame shows as a short run hides it) without recording and with both files,
+    taking turns: the stepping speed with both over without (record_both_long_vs_none, paired by
+    repeat), the CPU per step of the stepping process in each (record_cpu_us_per_step_none, _both),
+    and each recorder process's CPU per frame and its writer's share of it, against the isolated
+    writers (record_recorders_cpu_us_per_frame, record_writers_cpu_us_per_frame)."""
     none, both = [], []
     folder = folder / "long"  # beside the short runs' files, which the section loads afterwards
     folder.mkdir(exist_ok=True)
     for _ in range(repeats):
-        none.append(timed_run(folder, mcap=False, rrd=False, cycles=LONG_CYCLES))
-        both.append(timed_run(folder, mcap=True, rrd=True, cycles=LONG_CYCLES))
+        none.append(timed_run(folder, mcap=False, rrd=False, cycles=ctx.long_cycles))
+        both.append(timed_run(folder, mcap=True, rrd=True, cycles=ctx.long_cycles))
     steps = none[0].steps
     f = ctx.figures
     f["record_both_long_vs_none"] = statistics.median(

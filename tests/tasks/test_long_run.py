@@ -90,13 +90,6 @@ def test_fifty_cycles_drift_under_a_micrometre_per_cycle(robot):
     assert abs(placed[-1].data["yaw_rad"]) < 50 * YAW_LIMIT_RAD_PER_CYCLE
 
 
-@pytest.mark.slow
-def test_five_hundred_cycles_stay_within_2_mm():
-    placed = _placed("mtb", 500)
-    worst_m = max(e.data["error_m"] for e in placed)
-    assert worst_m < MAX_ERROR_M / 20, worst_m  # measured 0.045 mm
-
-
 def test_twin_run_200_cycles_keeps_every_placement_within_2_mm(tmp_path):
     done = subprocess.run(
         [sys.executable, "-m", "twin.cli", "run", "pick_place", "--cycles", "200", "--no-record"],
@@ -108,7 +101,9 @@ def test_twin_run_200_cycles_keeps_every_placement_within_2_mm(tmp_path):
     )
     assert done.returncode == 0, done.stderr
     worst = re.search(r"placement error: worst ([\d.]+) mm over 200 cycle\(s\)", done.stdout)
-    assert worst and float(worst.group(1)) < 2.0, done.stdout[-2000:]
+    # the CLI's figure holds the task's 2 mm limit with room: measured 0.045 mm over 500 cycles
+    # (a 500-cycle run, in-process, took 64 s of the suite; 200 cycles show the same worst)
+    assert worst and float(worst.group(1)) < MAX_ERROR_M / 20 * 1e3, done.stdout[-2000:]
     assert "suction_empty" not in done.stdout
 
 

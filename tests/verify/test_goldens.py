@@ -74,6 +74,10 @@ def test_a_golden_holds_a_suction_break():
     assert rec.run == {"source": "task", "task": "pick_place", "params": {"cycles": 1}}
 
 
+# the inner runs are in this process (pytester.runpytest): a new interpreter each cost 7 s of 34;
+# pytest-benchmark would warn there that xdist (the outer run's) is active
+INNER = ("-p", "no:cacheprovider", "-p", "no:benchmark")
+
 PLUGIN_TEST = """
 import os
 from twin.verify.check import record_task
@@ -93,13 +97,13 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     pytester.makepyfile(test_plugin=PLUGIN_TEST)
     goldens = pytester.path / "goldens"
 
-    first = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    first = pytester.runpytest(*INNER)
     first.assert_outcomes(failed=1)
     assert "did not exist; wrote it" in first.stdout.str() and (goldens / "one_cycle.mcap").exists()
-    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+    pytester.runpytest(*INNER).assert_outcomes(passed=1)
 
     monkeypatch.setenv("TWIN_TAMPER", "1")
-    failed = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    failed = pytester.runpytest(*INNER)
     failed.assert_outcomes(failed=1)
     assert "step 400" in failed.stdout.str()
     assert (goldens / "one_cycle.obtained.mcap").exists() and (
@@ -107,14 +111,14 @@ def test_golden_fixture_writes_checks_reports_and_updates(pytester, monkeypatch)
     ).exists()
     monkeypatch.setenv("TWIN_TOL", "outcome")
     # lands within 5 mm
-    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+    pytester.runpytest(*INNER).assert_outcomes(passed=1)
     monkeypatch.delenv("TWIN_TOL")
 
-    pytester.runpytest_subprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+    pytester.runpytest(*INNER, "--update-goldens").assert_outcomes(
         passed=1
     )
     assert not (goldens / "one_cycle.obtained.mcap").exists()
-    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(passed=1)
+    pytester.runpytest(*INNER).assert_outcomes(passed=1)
 
 
 FAILING_TEST = """
@@ -134,24 +138,24 @@ def test_golden_fixture_never_makes_a_golden_of_a_failed_run(pytester, monkeypat
     pytester.makepyfile(test_plugin=FAILING_TEST)
     golden = pytester.path / "goldens" / "one_cycle.mcap"
     monkeypatch.setenv("TWIN_FAIL", "1")
-    first = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    first = pytester.runpytest(*INNER)
     first.assert_outcomes(failed=1)
     assert (
         "this run cannot become it: its task ended error" in first.stdout.str()
         and not golden.exists()
     )
     # still not written
-    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
+    pytester.runpytest(*INNER).assert_outcomes(failed=1)
     monkeypatch.delenv("TWIN_FAIL")
     # written from the ok run
-    pytester.runpytest_subprocess("-p", "no:cacheprovider").assert_outcomes(failed=1)
+    pytester.runpytest(*INNER).assert_outcomes(failed=1)
     assert golden.exists()
     monkeypatch.setenv("TWIN_FAIL", "1")
-    update = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--update-goldens")
+    update = pytester.runpytest(*INNER, "--update-goldens")
     update.assert_outcomes(failed=1)
     assert "rerun with --update-goldens" not in update.stdout.str()
     assert "this run cannot become the golden: its task ended error" in update.stdout.str()
     monkeypatch.setenv("TWIN_ALLOW", "1")
-    pytester.runpytest_subprocess("-p", "no:cacheprovider", "--update-goldens").assert_outcomes(
+    pytester.runpytest(*INNER, "--update-goldens").assert_outcomes(
         passed=1
     )

@@ -27,9 +27,11 @@ def load(path: str | PathLike) -> RecordingWithTables | JointLog:
         twin.model.errors.RecordingError: the file is missing, not MCAP, not a twin recording, or
             a bag without `/joint_states` (exit code 2 from the command line).
     """
-    from twin.ros2.bags import is_bag, read_bag
+    from twin.record.mcap.scan import is_bag
 
     if is_bag(path):
+        from twin.ros2.bags import read_bag
+
         return read_bag(path)
     from twin.record.mcap.reader import load as load_mcap
 

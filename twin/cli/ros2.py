@@ -40,7 +40,8 @@ def _log(path: str, joint_map: dict[str, str]):
     """A side as a JointLog and which of its joints are revolute (a twin run knows; a bag not)."""
     from twin.compare.metrics import REVOLUTE
     from twin.record.mcap.reader import load
-    from twin.ros2.bags import is_bag, read_bag, run_log
+    from twin.record.mcap.scan import is_bag
+    from twin.ros2.bags import read_bag, run_log
 
     if is_bag(path):
         return read_bag(path).renamed(joint_map), {}
@@ -54,7 +55,7 @@ def diff_with_bag(args: argparse.Namespace, tolerances) -> int | None:
     (then --joint-map and --time-offset are refused, and the preset left unsaid is DEFAULT)."""
     from twin.compare.samples import compare_logs, render_log_comparison
     from twin.model.joint_log import parse_joint_map
-    from twin.ros2.bags import is_bag
+    from twin.record.mcap.scan import is_bag
 
     bags = [p for p in (args.golden, args.candidate) if is_bag(p)]
     if not bags:

@@ -17,19 +17,13 @@ from rosbags.rosbag2.errors import ReaderError
 from twin.model.errors import RecordingError, TwinError
 from twin.model.joint_log import JointLog
 from twin.model.recording import Recording
-from twin.record.mcap.scan import ROS2_PROFILE, is_bag_folder, profile
+from twin.record.mcap.scan import is_bag  # noqa: F401 - read here before it moved to scan
 from twin.record.mcap.scene_tf import SceneTransforms
 from twin.ros2.messages import TYPESTORE
 
 JOINT_STATES = "/joint_states"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 TF = ("/tf", "/tf_static")
-
-
-def is_bag(path: str | os.PathLike) -> bool:
-    """A ROS 2 bag: a folder holding metadata.yaml, or an MCAP file whose profile is `ros2`."""
-    p = Path(path)
-    return is_bag_folder(p) or (p.is_file() and profile(p) == ROS2_PROFILE)
 
 
 def run_log(rec: Recording) -> JointLog:

@@ -237,7 +237,7 @@ def export_bags(
     """Each recording as a bag (bag_targets); (bag, messages, topics) of each. All recordings are
     loaded before any bag is written, so a bad one leaves nothing half done."""
     from twin.record.mcap.reader import load
-    from twin.ros2.bags import is_bag
+    from twin.record.mcap.scan import is_bag
 
     for path in paths:
         if is_bag(path):

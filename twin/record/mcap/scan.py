@@ -347,6 +347,12 @@ def is_bag_folder(path: str | os.PathLike) -> bool:
     return os.path.isdir(path) and os.path.isfile(os.path.join(path, BAG_METADATA))
 
 
+def is_bag(path: str | os.PathLike) -> bool:
+    """A ROS 2 bag: a folder holding metadata.yaml, or an MCAP file whose profile is `ros2` (told
+    without importing rosbags, which costs a command about 0.2 s to start)."""
+    return is_bag_folder(path) or (os.path.isfile(path) and profile(path) == ROS2_PROFILE)
+
+
 def profile(path: str | os.PathLike) -> str | None:
     """The profile of an MCAP file's header ("ros2" for a ROS 2 bag's file, "" for a twin
     recording), or None for anything that is no readable MCAP file with a header."""

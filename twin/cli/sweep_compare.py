@@ -116,13 +116,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise ConfigError(
                 f"--report {args.report!r} is invalid; expected a file ending in .md or .json"
             )
-        check_output(args.report, Path(args.report).suffix, inputs=inputs, option="--report",
-                     force=force)
+        check_output(
+            args.report, Path(args.report).suffix, inputs=inputs, option="--report", force=force
+        )
     if args.plot:
-        plot_target(args.plot)
         check_output(args.plot, ".png", inputs=inputs, option="--plot", force=force)
     if args.html:
         check_output(args.html, ".html", inputs=inputs, option="--html", force=force)
+    if args.plot:
+        plot_target(args.plot)  # matplotlib there (its import takes a while: after the paths)
     a, b = load_run(args.a), load_run(args.b)
     result = compare(a, b)
     print(result.text(), end="")
@@ -152,8 +154,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
     if out is None:
         path = Path(args.dir)
         out = str(path / "sweep.png") if path.is_dir() else path.stem + ".png"
-    plot_target(out)
     check_output(out, ".png", inputs=[args.dir], option="--out", force=args.force)
+    plot_target(out)
     run = load_run(args.dir)
     plot_run(run.side, out, run.spec, run.label)
     return 0

@@ -304,7 +304,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--record", default=None, metavar="NEW.mcap", help="also record the replayed run"
     )
-    add_force_option(p, "the --record, --rrd, --report and --html files")
+    add_force_option(p, "the --record, --rrd, --report or --html file")
     _add_tolerance_options(p, DEFAULT)
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)

@@ -156,5 +156,5 @@ def add_record_commands(sub) -> None:
         "the NAME.mcap "
         "it was meant to become, if that does not exist)",
     )
-    add_force_option(p, "an existing -o file")
+    add_force_option(p, "the -o file")
     p.set_defaults(func=cmd_recover)

@@ -80,7 +80,7 @@ def _compare_parser(kind, prog: str) -> argparse.ArgumentParser:
         help="also write a self-contained HTML report: the flips, the paired interval and p, the "
         "success map (with matplotlib)",
     )
-    add_force_option(compare, "the --report, --plot and --html files")
+    add_force_option(compare, "the --report, --plot or --html file")
     compare.set_defaults(func=cmd_compare, interrupt=True)  # Ctrl-C even as a background job
     return compare
 

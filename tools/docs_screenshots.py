@@ -44,7 +44,10 @@ def viewer_pictures(work: Path) -> None:
         "runs/pick_place.rrd",
         cwd=work,
     )
-    _twin("view", "runs/pick_place.rrd", "--screenshot", str(IMG / "pick_place.png"), cwd=work)
+    _twin(  # over the committed picture
+        "view", "runs/pick_place.rrd", "--screenshot", str(IMG / "pick_place.png"), "--force",
+        cwd=work,
+    )
     _twin(
         "run",
         "pick_place",
@@ -60,7 +63,10 @@ def viewer_pictures(work: Path) -> None:
         "runs/cameras.rrd",
         cwd=work,
     )
-    _twin("view", "runs/cameras.rrd", "--screenshot", str(IMG / "pick_place_cameras.png"), cwd=work)
+    _twin(  # over the committed picture
+        "view", "runs/cameras.rrd", "--screenshot", str(IMG / "pick_place_cameras.png"), "--force",
+        cwd=work,
+    )
 
 
 def plot_picture(work: Path) -> None:

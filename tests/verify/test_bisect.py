@@ -144,6 +144,25 @@ def test_a_second_bisect_over_the_range_takes_every_verdict_from_the_cache(repo,
 
 
 @pytest.mark.slow
+def test_an_existing_json_is_replaced_only_with_force(repo, first_bisect, tmp_path):
+    report = tmp_path / "verdicts.json"
+    report.write_text("my notes\n")
+    args = ("bisect", "--good", "HEAD~15", "golden.mcap", "--json", report)
+    done = twin_child(*args, cwd=repo)
+    assert (done.returncode, done.stdout) == (2, "")
+    assert done.stderr == (
+        f"twin: error: --json {str(report)!r} exists already; expected a new path, or --force "
+        "to replace it\n"
+    )
+    assert report.read_text() == "my notes\n"
+    done = twin_child(*args, "--force", cwd=repo)  # every verdict from the cache: quick
+    assert done.returncode == 0, done.stderr
+    found = json.loads(report.read_text())["first_bad"]
+    assert found["commit"] == first_bisect[2]["first_bad"]["commit"] and found["cached"]
+    assert [p.name for p in tmp_path.iterdir()] == ["verdicts.json"]  # no temporary left
+
+
+@pytest.mark.slow
 def test_a_commit_whose_task_does_not_load_is_skipped_and_the_search_goes_on(tmp_path):
     repo = make_repo(tmp_path / "repo", broken=BROKEN)
     before = state(repo)

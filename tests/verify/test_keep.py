@@ -133,7 +133,7 @@ def test_keep_refuses_to_replace_a_file_unless_forced(recorded, tmp_path, capsys
         ("w/carry.py", [], "--keep '{t}/w/carry.py' is a file; expected a folder"),
         ("w/goldens/K", [], "--keep '{t}/w/goldens/K' lies in '{t}/w/goldens', which is checked"),
         ("w/goldens", ["--force"], "--keep '{t}/w/goldens' lies in '{t}/w/goldens', which is"),
-        (None, ["--force"], "--force replaces files in the --keep folder; expected --keep DIR"),
+        (None, ["--force"], "--force replaces files in the --keep folder and existing --html,"),
     ],
 )
 def test_a_bad_keep_folder_is_one_line_exit_2(recorded, tmp_path, capsys, keep, extra, expected):

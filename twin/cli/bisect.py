@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from twin.cli.compare import _add_tolerance_options, _tolerances
+from twin.cli.record import add_force_option
 from twin.compare.tolerances import DEFAULT
-from twin.model.errors import ConfigError, OutputError
+from twin.record.outputs import check_output, write_atomic
 
 
 def _short(tried) -> str:
@@ -31,8 +31,8 @@ def cmd_bisect(args: argparse.Namespace) -> int:
     from twin.verify.bisect import bisect, check_options
 
     _tolerances(args)  # a bad preset or --tol is exit 2 before any work
-    if args.json and not args.json.endswith(".json"):
-        raise ConfigError(f"--json {args.json!r} must end in .json")
+    if args.json:
+        check_output(args.json, ".json", option="--json", force=args.force)
     options = check_options(args.tolerance, args.tol, args.event_window)
 
     result = bisect(args.good, args.bad, args.paths, options, progress=_print_tried, announce=print)
@@ -52,10 +52,7 @@ def cmd_bisect(args: argparse.Namespace) -> int:
         for c in result.candidates:
             print(f"  {c}")
     if args.json:
-        try:
-            Path(args.json).write_text(json.dumps(result.as_dict(), indent=2) + "\n")
-        except OSError as err:
-            raise OutputError(f"cannot write {args.json!r}: {err.strerror}") from err
+        write_atomic(args.json, json.dumps(result.as_dict(), indent=2) + "\n")
     return result.exit_code
 
 
@@ -86,5 +83,6 @@ def add_bisect_command(sub: argparse._SubParsersAction) -> None:
         metavar="FILE.json",
         help="also write the result, every tried commit's verdict included",
     )
+    add_force_option(p, "the --json file")
     _add_tolerance_options(p, DEFAULT)
     p.set_defaults(func=cmd_bisect)

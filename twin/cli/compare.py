@@ -17,6 +17,9 @@ from twin.compare.tolerances import DEFAULT, FIELDS, PRESETS, Tolerances
 from twin.model.errors import ConfigError
 from twin.signals import Terminated
 
+# what twin check --force replaces
+CHECK_FORCE = "files in the --keep folder and existing --html, --summary, --junit files"
+
 # what a local Dask cluster's workers import as they start: the goldens' and sweeps' code
 PRELOAD = ("twin.verify.check", "twin.sweep.worker")
 
@@ -80,12 +83,10 @@ def _add_html_option(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _check_outputs(
-    args: argparse.Namespace, inputs: list[str], *, force: bool | None = None
-) -> None:
-    """Every output path (--report, --rrd, replay's --record) checked before any work: the right
-    suffix, an existing folder, never one of the inputs (also through a link); with force=False
-    (replay without --force) none exists yet."""
+def _check_outputs(args: argparse.Namespace, inputs: list[str], *, force: bool) -> None:
+    """Every output path (--report, --rrd, --html, replay's --record) checked before any work: the
+    right suffix, an existing folder, never one of the inputs (also through a link); with
+    force=False (diff or replay without --force) none exists yet."""
     from twin.compare.report import report_format
     from twin.record.outputs import check_output
 
@@ -95,15 +96,14 @@ def _check_outputs(
     if args.rrd:
         check_output(args.rrd, ".rrd", inputs=inputs, option="--rrd", force=force)
     if getattr(args, "html", None):
-        check_output(args.html, ".html", inputs=inputs, option="--html")
-    if getattr(args, "summary", None):
-        check_output(args.summary, ".md", inputs=inputs, option="--summary")
+        check_output(args.html, ".html", inputs=inputs, option="--html", force=force)
     if getattr(args, "record", None):
         check_output(args.record, ".mcap", inputs=inputs, option="--record", force=force)
 
 
 def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
-    from twin.compare.report import render_text, write_report
+    from twin.compare.report import render_report, render_text
+    from twin.record.outputs import write_atomic
 
     lines = render_text(result).splitlines()
     if args.quiet:
@@ -116,7 +116,7 @@ def _emit(result, golden, candidate, args: argparse.Namespace) -> int:
         ]
     print("\n".join(lines))
     for path in args.report:
-        write_report(result, path)
+        write_atomic(path, render_report(result, path))
     if args.rrd:
         from twin.verify.diff_view import write_diff_rrd
 
@@ -148,7 +148,7 @@ def cmd_diff(args: argparse.Namespace) -> int:
     if bag_code is not None:
         return bag_code
     tol = _tolerances(args)
-    _check_outputs(args, [args.golden, args.candidate])
+    _check_outputs(args, [args.golden, args.candidate], force=args.force)
     golden, candidate = load(args.golden), load(args.candidate)
     result = judge(golden, candidate, tol, remade, force=args.force)
     return _emit(result, golden, candidate, args)
@@ -187,10 +187,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     from twin.verify.check import Progress, exit_code, find_goldens, summary_table
 
     tol = _tolerances(args)
-    if args.junit and not args.junit.endswith(".xml"):
-        raise ConfigError(f"JUnit report {args.junit!r} must end in .xml")
-    if args.force and not args.keep:
-        raise ConfigError("--force replaces files in the --keep folder; expected --keep DIR too")
+    if args.force and not (args.keep or args.html or args.summary or args.junit):
+        raise ConfigError(
+            f"--force replaces {CHECK_FORCE}; expected --keep DIR, --html, --summary or --junit too"
+        )
     goldens = find_goldens(args.paths)
     _check_outputs_of_check(args, goldens)
     keep = None
@@ -230,15 +230,18 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def _check_outputs_of_check(args: argparse.Namespace, goldens) -> None:
-    """--html and --summary checked before any work: the right suffix, an existing folder, none
-    of the goldens' files."""
+    """--html, --summary and --junit checked before any work: the right suffix, an existing
+    folder, none of the goldens' files, and without --force none exists yet."""
     from twin.record.outputs import check_output
 
     inputs = goldens.recordings + goldens.sweeps + goldens.searches
-    if args.html:
-        check_output(args.html, ".html", inputs=inputs, option="--html")
-    if args.summary:
-        check_output(args.summary, ".md", inputs=inputs, option="--summary")
+    for option, path, suffix in (
+        ("--html", args.html, ".html"),
+        ("--summary", args.summary, ".md"),
+        ("--junit", args.junit, ".xml"),
+    ):
+        if path:
+            check_output(path, suffix, inputs=inputs, option=option, force=args.force)
 
 
 def _check_goldens(args: argparse.Namespace, goldens, tol: Tolerances, keep, progress) -> list:
@@ -287,7 +290,9 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="compare even when robot profile, time step or scene objects differ",
+        help="compare even when robot profile, time step or scene objects differ; also replace "
+        "existing --report, --rrd and --html files (without it an existing one is refused before "
+        "any work; the old one stays until the new one is complete)",
     )
     _add_report_options(p)
     p.set_defaults(func=cmd_diff)
@@ -299,7 +304,7 @@ def add_compare_commands(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--record", default=None, metavar="NEW.mcap", help="also record the replayed run"
     )
-    add_force_option(p, "the --record, --rrd and --report files")
+    add_force_option(p, "the --record, --rrd, --report or --html file")
     _add_tolerance_options(p, DEFAULT)
     _add_report_options(p)
     p.set_defaults(func=cmd_replay)
@@ -344,8 +349,9 @@ def _add_check_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="replace files in the --keep folder (without it, a file --keep would write that "
-        "exists already is refused before any work)",
+        help=f"replace {CHECK_FORCE} (without it, a file --keep would write or an existing "
+        "report file is refused before any work; the old one stays until the new one is "
+        "complete)",
     )
     add_executor_options(p)
     p.add_argument(

@@ -118,7 +118,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 def cmd_recover(args: argparse.Namespace) -> int:
     from twin.record.mcap.recover import recover
 
-    report = recover(args.file, args.output)
+    report = recover(args.file, args.output, force=args.force)
     for line in report.lines():
         print(line)
     return 0
@@ -156,4 +156,5 @@ def add_record_commands(sub) -> None:
         "the NAME.mcap "
         "it was meant to become, if that does not exist)",
     )
+    add_force_option(p, "the -o file")
     p.set_defaults(func=cmd_recover)

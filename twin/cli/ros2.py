@@ -65,7 +65,7 @@ def diff_with_bag(args: argparse.Namespace, tolerances) -> int | None:
         args.tolerance = args.tolerance or DEFAULT
         return None
     args.tolerance = args.tolerance or BAG_PRESET
-    for option in ("report", "rrd"):
+    for option in ("report", "rrd", "html"):
         if getattr(args, option, None):
             raise ConfigError(
                 f"--{option} is for two twin recordings; a ROS 2 bag is compared "

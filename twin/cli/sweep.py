@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from twin.cli.args import add_executor_options, add_param_option, params_dict, whole_number
+from twin.cli.sweep_compare import add_subcommands, plot_run, plot_target
 from twin.model.errors import ConfigError, TwinError
 
 # a scenario that gave no result (twin.jobs.guard)
@@ -96,7 +97,7 @@ def add_sweep_command(sub) -> None:
         "the same scenarios); twin sweep plot DIR: a sweep's picture. See "
         "`twin sweep compare --help`."
     )
-    _add_subcommands(p)
+    add_subcommands(p)
 
 
 def _add_what_options(p: argparse.ArgumentParser) -> None:
@@ -199,157 +200,6 @@ def _add_output_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar; only the summary")
 
 
-def _add_subcommands(p: argparse.ArgumentParser) -> None:
-    """`twin sweep compare` and `twin sweep plot`: parsers of their own, chosen by the first word
-    after `sweep` (`twin sweep TASK` takes any other first word as the task)."""
-    kind = type(p)  # twin's parser class: one-line usage errors, exit 2
-    compare = kind(
-        prog=f"{p.prog} compare",
-        description="Compare two sweeps: B (new) against A (reference). The same "
-        "scenarios (same seed and varied keys): paired, scenario by "
-        "scenario (flips, Newcombe's paired interval, McNemar's exact "
-        "test, the paired shift of the placement error, the smallest drop "
-        "in success rate it detects at 80 % power); else Newcombe's "
-        "unpaired interval. Exit 0, 1 under --fail-if-worse when B is "
-        "worse, 2 bad input.",
-    )
-    compare.add_argument(
-        "a",
-        metavar="A",
-        help="the reference: a result folder (twin sweep "
-        "--out) or a golden NAME.toml with NAME.results.parquet",
-    )
-    compare.add_argument(
-        "b", metavar="B", help="the new run: a result folder or a golden NAME.toml"
-    )
-    compare.add_argument(
-        "--report",
-        default=None,
-        metavar="FILE",
-        help="also write the report: Markdown (.md) or JSON (.json)",
-    )
-    compare.add_argument(
-        "--fail-if-worse",
-        action="store_true",
-        help="exit 1 when B is worse beyond sampling noise: a significant "
-        "drop in success rate (paired: McNemar p < 0.05; unpaired: "
-        "Newcombe's interval below 0) or in placement error",
-    )
-    compare.add_argument(
-        "--plot",
-        default=None,
-        metavar="FILE.png",
-        help="also write a picture with the flips ringed (needs matplotlib)",
-    )
-    compare.add_argument(
-        "--html",
-        default=None,
-        metavar="FILE.html",
-        help="also write a self-contained HTML report: the flips, the paired interval and p, the "
-        "success map (with matplotlib)",
-    )
-    compare.set_defaults(func=cmd_compare, interrupt=True)  # Ctrl-C even as a background job
-    plot = kind(
-        prog=f"{p.prog} plot",
-        description="Draw a sweep: each scenario over the two "
-        "varied keys that matter most, and the placement error.",
-    )
-    plot.add_argument(
-        "dir",
-        metavar="DIR",
-        help="a result folder, or a golden NAME.toml with NAME.results.parquet",
-    )
-    plot.add_argument(
-        "--out",
-        default=None,
-        metavar="FILE.png",
-        help="the picture (default DIR/sweep.png; NAME.png for a golden)",
-    )
-    plot.set_defaults(func=cmd_plot, interrupt=True)  # Ctrl-C even as a background job
-    extra = {"compare": compare, "plot": plot}
-    parse_run = p.parse_known_args
-
-    def parse_known_args(args=None, namespace=None):
-        if args and args[0] in extra:
-            return extra[args[0]].parse_known_args(args[1:], namespace)
-        return parse_run(args, namespace)
-
-    p.parse_known_args = parse_known_args
-    p.extra_commands = extra  # for the generated CLI reference (tools/docs_reference.py)
-
-
-def cmd_compare(args: argparse.Namespace) -> int:
-    from twin.sweep.compare import compare, load_run, write_report
-
-    if args.report and not args.report.endswith((".md", ".json")):
-        raise ConfigError(
-            f"--report {args.report!r} is invalid; expected a file ending in .md or .json"
-        )
-    if args.plot:
-        _plot_target(args.plot)
-    if args.html:
-        from twin.record.outputs import check_output
-
-        check_output(args.html, ".html", inputs=[args.a, args.b], option="--html")
-    a, b = load_run(args.a), load_run(args.b)
-    result = compare(a, b)
-    print(result.text(), end="")
-    if args.report:
-        write_report(result, args.report)
-        print(f"wrote {args.report}")
-    if args.plot:
-        from twin.sweep.plot import plot_sweep
-
-        paired = result.result if result.is_paired else None
-        plot_sweep(b.side, args.plot, f"{b.label} against {a.label}", paired, a.side)
-        print(f"wrote {args.plot}")
-    if args.html:
-        from twin.sweep.html import write_compare_page
-
-        write_compare_page(result, args.html)
-        print(f"wrote {args.html}")
-    if args.fail_if_worse and result.problems:
-        raise Worse(f"{b.label} is worse than {a.label}: " + "; ".join(result.problems))
-    return 0
-
-
-def cmd_plot(args: argparse.Namespace) -> int:
-    from twin.sweep.compare import load_run
-
-    out = args.out
-    if out is None:
-        path = Path(args.dir)
-        out = str(path / "sweep.png") if path.is_dir() else path.stem + ".png"
-    _plot_target(out)
-    run = load_run(args.dir)
-    _plot_run(run.side, out, run.spec, run.label)
-    return 0
-
-
-def _plot_target(path: str) -> None:
-    """matplotlib importable and the picture a .png, checked before any work."""
-    from twin.sweep.plot import pyplot
-
-    if not path.endswith(".png"):
-        raise ConfigError(f"plot {path!r} is invalid; expected a file ending in .png")
-    pyplot()
-
-
-def _plot_run(side, out: str, spec, label: str) -> None:
-    from twin.sweep.plot import plot_sweep
-
-    n, ok = side.n, int(side.ok.sum())
-    title = f"{label}: {spec.task} on {spec.robot}, seed {spec.seed}: {ok}/{n} ok"
-    keys = plot_sweep(side, out, title)
-    print(f"wrote {out} (axes: {', '.join(keys) or 'scenario'})")
-
-
-class Worse(TwinError):
-    """--fail-if-worse: B is worse than A beyond sampling noise."""
-
-    exit_code = 1
-
-
 def sweep_spec(args: argparse.Namespace):
     """The definition the arguments ask for: TASK.toml's (with --scenarios/--seed overriding it), or
     one built from --robot, --scenarios, --seed, --vary and --param."""
@@ -391,7 +241,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.plot:
         if args.only is not None:
             raise ConfigError("--plot draws a whole sweep; expected it without --only")
-        _plot_target("sweep.png")  # matplotlib is there, before anything runs
+        plot_target("sweep.png")  # matplotlib is there, before anything runs
     the_plan = folder.plan(
         spec, args.out, only=args.only, resume=args.resume, force=args.force
     )
@@ -461,7 +311,7 @@ def _print_outcome(args, spec, summary: dict | None, done, executor, out: Path) 
     if args.plot and done.rows:
         from twin.sweep.paired import read_side
 
-        _plot_run(
+        plot_run(
             read_side(out / "results.parquet", str(out)), str(out / "sweep.png"), spec, str(out)
         )
 

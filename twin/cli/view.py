@@ -50,7 +50,7 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
         metavar="SECONDS",
         help="with --screenshot: the simulated time to show (default: the end of the first hold)",
     )
-    add_force_option(p, "the --rrd file")
+    add_force_option(p, "the --rrd or --screenshot file")
     p.set_defaults(func=cmd_view, interrupt=True)  # Ctrl-C even as a background job
 
 
@@ -63,6 +63,10 @@ def cmd_view(args: argparse.Namespace) -> int:
         frames = viewer.mcap_to_rrd(args.file, args.rrd)
         print(f"wrote {args.rrd}: {frames} frames")
         return 0
+    if args.screenshot:  # before any work
+        check_output(
+            args.screenshot, ".png", inputs=[args.file], option="--screenshot", force=args.force
+        )
     # Ctrl-C, SIGTERM and SIGHUP unwind through here (twin.signals): the viewer is stopped, the
     # folder removed.
     with tempfile.TemporaryDirectory(prefix="twin-view-") as tmp:

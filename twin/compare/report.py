@@ -455,9 +455,14 @@ def report_format(path: str | os.PathLike) -> str:
     return FORMATS[suffix]
 
 
+def render_report(result: DiffResult, path: str | os.PathLike) -> str:
+    """The report in the format the extension of `path` names (.md, .json, .xml JUnit, .txt)."""
+    return RENDERERS[report_format(path)](result)
+
+
 def write_report(result: DiffResult, path: str | os.PathLike) -> None:
     """Write the report in the format the extension names (.md, .json, .xml JUnit, .txt)."""
-    text = RENDERERS[report_format(path)](result)
+    text = render_report(result, path)
     try:
         Path(path).write_text(text)
     except OSError as err:

@@ -148,7 +148,8 @@ def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
     from PIL import Image
 
     png = recorded["tmp"] / "pick_place.png"
-    assert main(["view", str(recorded["mcap"]), "--screenshot", str(png)]) == 0
+    png.write_bytes(b"the user's own picture")  # --force replaces it, once the new one is whole
+    assert main(["view", str(recorded["mcap"]), "--screenshot", str(png), "--force"]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"wrote {png}: the viewer at t = ") and "view reported" not in out
     image = np.asarray(Image.open(png).convert("RGB")).astype(int)
@@ -165,11 +166,19 @@ def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
     assert orange[:, right].sum() > 300  # the elbow and z lines
     assert blue[:, right].sum() > 300  # the shoulder line
     assert green[:, right].sum() > 100
+    shown = png.read_bytes()
     _one_line_error(
         capsys,
         ["view", str(recorded["rrd"]), "--screenshot", str(png), "--at", "99"],
+        f"--screenshot {str(png)!r} exists already",
+        "--force to replace it",
+    )
+    _one_line_error(
+        capsys,
+        ["view", str(recorded["rrd"]), "--screenshot", str(png), "--at", "99", "--force"],
         "time 99.000 s is after the end of the recording",
     )
+    assert png.read_bytes() == shown  # a failed screenshot leaves the old picture whole
 
 
 URL = re.compile(

@@ -165,10 +165,13 @@ def default_output(source: Path) -> Path:
     return target
 
 
-def recover(source: str | Path, output: str | Path | None = None) -> RecoverReport:
+def recover(
+    source: str | Path, output: str | Path | None = None, *, force: bool = False
+) -> RecoverReport:
     """Write the readable, consistent part of `source` (or the .partial file beside it, see
     find_source) to `output` (default: see default_output), a complete MCAP file put in place
-    whole."""
+    whole; an existing `output` is replaced only with force (else a ConfigError, before any
+    work)."""
     asked, source = str(source), find_source(source)
     if not source.exists() and not source.is_symlink():
         raise RecordingError(
@@ -176,7 +179,7 @@ def recover(source: str | Path, output: str | Path | None = None) -> RecoverRepo
             "expected a recording or the .partial file a killed run left"
         )
     output = default_output(source) if output is None else output
-    out_path = check_output(output, ".mcap", inputs=[source], option="output")
+    out_path = check_output(output, ".mcap", inputs=[source], option="output", force=force)
     ends = _Ends()
     s = scan(source, strict=False, topics=ends.TOPICS, consume=ends.take)
     if S.META_CONFIG not in s.metadata:

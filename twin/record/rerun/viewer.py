@@ -21,7 +21,7 @@ import numpy as np
 
 from twin.model.errors import RecordingError
 from twin.model.recording import Recording
-from twin.record.outputs import check_target
+from twin.record.outputs import check_target, write_atomic
 from twin.record.rerun import scene
 from twin.record.rerun.process import (
     LOOPBACK,
@@ -210,7 +210,7 @@ def screenshot(
     check_target(out_png, "screenshot", "a .png file path", error=ViewerError)
     if missing := missing_driver():
         raise ViewerError(missing)
-    out = Path(out_png).resolve()
+    out = (Path(work_dir) / "shot.png").resolve()  # put in place whole once settled
     at_ns = round(at_s * 1e9) if at_s is not None else holding_time_ns(rrd)
     (port,) = loopback_ports(("--grpc-port", grpc_port))
     # no notification toasts in the picture
@@ -266,7 +266,8 @@ def screenshot(
         finally:
             stop(proc)
     if not out.is_file():
-        raise ViewerError(f"the headless viewer did not write {str(out)!r}")
+        raise ViewerError(f"the headless viewer did not write {str(out_png)!r}")
+    write_atomic(out_png, out.read_bytes())
     return (None if at_ns is None else at_ns * 1e-9), problems
 
 

@@ -94,16 +94,17 @@ def test_the_printed_url_opens_the_recording_in_chromium(web_view, tmp_path):
                 pages[name] = browser.new_page(viewport={"width": 1280, "height": 800})
                 pages[name].goto(url)
             deadline = time.monotonic() + LOAD_TIMEOUT_S
+            # only the printed page is looked at while both load: a screenshot makes the software
+            # renderer draw a frame, so each costs CPU the loading pages need
             while time.monotonic() < deadline:
                 pages["printed"].wait_for_timeout(5000)
-                for name, page in pages.items():
-                    page.screenshot(path=shots[name], timeout=SHOT_TIMEOUT_MS)
-                    seen[name] = _colours(shots[name])
+                pages["printed"].screenshot(path=shots["printed"], timeout=SHOT_TIMEOUT_MS)
+                seen["printed"] = _colours(shots["printed"])
                 if _shows_recording(seen["printed"]):
-                    pages["printed"].wait_for_timeout(5000)  # the bare page has had as long to load
-                    pages["bare"].screenshot(path=shots["bare"], timeout=SHOT_TIMEOUT_MS)
-                    seen["bare"] = _colours(shots["bare"])
                     break
+            pages["printed"].wait_for_timeout(5000)  # the bare page has had as long to load
+            pages["bare"].screenshot(path=shots["bare"], timeout=SHOT_TIMEOUT_MS)
+            seen["bare"] = _colours(shots["bare"])
         finally:
             browser.close()
     assert _shows_recording(seen["printed"]), (

@@ -25,6 +25,7 @@ from __future__ import annotations
 import marshal
 import os
 import pickle
+import threading
 import time
 from pathlib import Path
 
@@ -351,8 +352,13 @@ class _Child:
             ) from err
         try:
             self.expect_ok("recording could not be finished")
-        finally:
+        except RecordingError:
             self.stop()
+            raise
+        # the files are finalized: the process's exit (2-6 ms to unmap what it shares with this
+        # one) is waited for by a thread of its own, not by the twin
+        self.conn.close()
+        threading.Thread(target=self.process.join, name="twin-recorder-exit", daemon=True).start()
 
     def stop(self) -> None:
         self.conn.close()

@@ -84,7 +84,9 @@ def serve(
     failed = False
     for writer in writers:
         try:
-            sink = _make(writer, config, run, urdf, meshes, rate, engine)
+            sink = _make(
+                writer, config=config, run=run, urdf=urdf, meshes=meshes, rate=rate, engine=engine
+            )
         except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
             if not failed:
                 conn.send_bytes(str(err).encode())
@@ -99,7 +101,7 @@ def serve(
     _loop(conn, ring, feeds, _Clock())  # from here: the writers' starts are not per frame
 
 
-def _make(writer: Writer, config, run, urdf, meshes, rate, engine):
+def _make(writer: Writer, *, config, run, urdf, meshes, rate, engine):
     if writer.kind == "mcap":
         from twin.record.mcap.writer import McapRecorder  # loaded by the parent
 

@@ -11,6 +11,8 @@ import ctypes
 import os
 import sys
 import tempfile
+from collections.abc import Callable
+from functools import partial
 
 from twin.model.config import TwinConfig
 from twin.model.errors import ConfigError
@@ -225,6 +227,12 @@ class World:
         _step_simulation(self.client)
         if self._overlapping:
             self._collide_once_apart()
+
+    def stepper(self) -> Callable[[], object]:
+        """What step() does, as a call to make every step until the next attach or detach: with no
+        released object still overlapping the robot, PyBullet's step itself, without a Python call
+        around it (the twin's loop asks again after every suction change)."""
+        return self.step if self._overlapping else partial(_step_simulation, self.client)
 
     # -- reading ----------------------------------------------------------------------------
     def state(self) -> tuple:

@@ -71,7 +71,7 @@ class Timed(NamedTuple):
     mcap_bytes: int
     waits: int  # how often the twin waited for a recorder to catch up
     stepping_cpu_s: float = 0.0  # this process alone (the stepping one), the whole run
-    recorders: dict | None = None  # writer -> its process's RecorderStats (record.process)
+    recorders: object = None  # the recorder process's RecorderStats (record.recorder)
 
 
 def timed_run(folder: Path, *, mcap: bool, rrd: bool, cycles: int = CYCLES) -> Timed:
@@ -88,9 +88,7 @@ def timed_run(folder: Path, *, mcap: bool, rrd: bool, cycles: int = CYCLES) -> T
         twin.close()
         waits = sum(getattr(sink, "waits", 0) for sink in sinks)
     t1, cpu_s, own_s = time.perf_counter(), _cpu_s() - cpu0, time.process_time() - own0
-    recorders = {}
-    for sink in sinks:
-        recorders.update(getattr(sink, "stats", {}))
+    recorders = next((s.stats for s in sinks if getattr(s, "stats", None) is not None), None)
     return Timed(
         twin.step_index,
         clock.last_s - clock.first_s,
@@ -399,15 +397,16 @@ def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
     f["record_cpu_us_per_step_both"] = (
         statistics.median(t.stepping_cpu_s for t in both) / steps * 1e6
     )
-    per_frame = {
-        writer: (
-            statistics.median(t.recorders[writer].cpu_s for t in both) / steps * 1e6,
-            statistics.median(t.recorders[writer].writer_cpu_s for t in both) / steps * 1e6,
-        )
-        for writer in both[0].recorders
+    f["record_recorders_cpu_us_per_frame"] = (
+        statistics.median(t.recorders.cpu_s for t in both) / steps * 1e6
+    )
+    f["record_recorders_writer_cpu_us_per_frame"] = (
+        statistics.median(t.recorders.writer_cpu_s for t in both) / steps * 1e6
+    )
+    by_writer = {
+        writer: statistics.median(dict(t.recorders.by_writer)[writer] for t in both) / steps * 1e6
+        for writer, _ in both[0].recorders.by_writer
     }
-    f["record_recorders_cpu_us_per_frame"] = sum(cpu for cpu, _ in per_frame.values())
-    f["record_recorders_writer_cpu_us_per_frame"] = sum(w for _, w in per_frame.values())
     f["record_writers_cpu_us_per_frame"] = (
         f["record_mcap_writer_cpu_us_per_frame"] + f["record_rrd_writer_cpu_us_per_frame"]
     )
@@ -424,16 +423,21 @@ def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
             ),
         ),
     ]
-    for writer, (cpu, in_writer) in per_frame.items():
-        rows.append(
-            (
-                f"long run: {writer} recorder process CPU per frame (its writer; around it)",
-                f"{cpu:.2f} us ({in_writer:.2f}; {cpu - in_writer:.2f})",
-            )
-        )
+    cpu = f["record_recorders_cpu_us_per_frame"]
+    in_writers = f["record_recorders_writer_cpu_us_per_frame"]
     rows.append(
         (
-            "long run: recorders CPU per frame, summed; the isolated writers, summed",
+            "long run: recorder process CPU per frame (its writers: "
+            + ", ".join(by_writer)
+            + "; around them)",
+            f"{cpu:.2f} us ("
+            + ", ".join(f"{us:.2f}" for us in by_writer.values())
+            + f"; {cpu - in_writers:.2f})",
+        )
+    )
+    rows.append(
+        (
+            "long run: recorder CPU per frame; the isolated writers, summed",
             (
                 f"{f['record_recorders_cpu_us_per_frame']:.2f} us; "
                 f"{f['record_writers_cpu_us_per_frame']:.2f} us"

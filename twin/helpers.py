@@ -3,6 +3,7 @@ joined to it by a pipe, and deaf to the signals that are the twin's to handle.""
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import os
 import signal
@@ -37,9 +38,14 @@ def start_helper(
         daemon=True,
     )
     blocked = signal.pthread_sigmask(signal.SIG_BLOCK, TWINS_SIGNALS)
+    # The helper's garbage collector leaves the objects it inherits alone (a full collection would
+    # walk them all, copying every page it touches): they stay frozen in the helper; this side's
+    # collector takes them back at once.
+    gc.freeze()
     try:
         process.start()
     finally:
+        gc.unfreeze()
         signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
     child_conn.close()
     weakref.finalize(owner, conn.close)

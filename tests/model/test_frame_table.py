@@ -1,8 +1,9 @@
 """The Frame table is written once, in model/fields.py; five places spell it out again by hand
 (the Frame NamedTuple, FrameColumns, FrameRows.pack_into, the table column stems, and the twin's
-Frame built from World.state) because each is read by people and type checkers, or runs every
-physics step where a loop over the table costs time. This file is the one check that holds them
-in line: adding a field to FRAME_FIELDS and forgetting a copy fails here, not at import."""
+Frame built from World.state, in _read_frame and written out in its stepping loop) because each is
+read by people and type checkers, or runs every physics step where a loop over the table costs
+time. This file is the one check that holds them in line: adding a field to FRAME_FIELDS and
+forgetting a copy fails here, not at import."""
 
 from __future__ import annotations
 
@@ -71,6 +72,8 @@ def test_the_twins_frame_has_the_tables_shapes_and_types():
     twin = Twin(TwinConfig())
     try:
         frame = twin.step(3)
+        # the stepping loop writes the Frame out as _read_frame makes it: the two agree
+        assert twin._read_frame() == frame
     finally:
         twin.close()
     n_joints, n_objects = len(frame.joint_q), len(frame.object_poses)

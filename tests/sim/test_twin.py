@@ -191,3 +191,34 @@ def test_every_command_kind_has_a_handler_and_every_handler_a_kind():
     from twin.model.types import COMMAND_ARGS
 
     assert set(Twin._COMMANDS) == set(COMMAND_ARGS)
+
+
+def test_a_closed_worlds_client_serves_the_next_twin_as_a_fresh_one(monkeypatch):
+    """A process's next headless World takes the PyBullet client a closed one left (connecting is
+    most of building a Twin); after build()'s reset it steps bit for bit as a new client does, even
+    one left holding a box with its collisions off."""
+    from twin.sim import world
+    from twin.tasks import TASKS, run_task
+
+    monkeypatch.setattr(world, "_SPARE_CLIENTS", [])
+    fresh = _run_pick_place()
+    (client,) = world._SPARE_CLIENTS
+    monkeypatch.setattr(world, "_SPARE_CLIENTS", [])  # the next one connects anew
+    holding = Twin()
+    assert holding._world.client != client
+    box = holding.config.objects[0].pos_m
+    holding.move_to(box[0], box[1])
+    holding.lower()
+    holding.suction(True)
+    holding.step(10)
+    assert holding.frame.held_body == 0
+    left = holding._world.client
+    holding.close()
+    assert world._SPARE_CLIENTS == [left]
+    sink = FrameCollector()
+    again = Twin(sinks=[sink])
+    assert again._world.client == left and not world._SPARE_CLIENTS
+    run_task(again, TASKS["pick_place"], ONE_CYCLE)
+    again.close()
+    assert sink.columns().equals(fresh.columns())
+    assert sink.events == fresh.events and sink.commands == fresh.commands

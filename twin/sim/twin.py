@@ -18,6 +18,7 @@ from twin.model.keymaps import KeyPlayer
 from twin.model.sink import Sink
 from twin.model.types import COMMAND_ARGS, NO_BODY, Command, Event, Frame
 from twin.robot import kinematics
+from twin.sim.keyhands import KeyHands
 from twin.sim.motions import Motions, Z
 from twin.sim.suction import Suction
 from twin.sim.world import World
@@ -69,7 +70,7 @@ class Twin(Motions):
         self._limits = self.profile.joint_limits()
         self._suction_wanted = False  # any of the profile's suction signals is non-zero
         self._keys = KeyPlayer(self.config.keymap, self.profile)
-        self._key_hands = _KeyHands(self)
+        self._key_hands = KeyHands(self)
         self._said: Event | None = None  # the Event the last `event` Command emitted
         self._pad_pose = kinematics.pad_pose_function(self.profile)
         self._camera_renderer = self._add_cameras(camera_background)
@@ -132,22 +133,38 @@ class Twin(Motions):
 
     def _stepping(self, n: int) -> Iterator[Frame]:
         """Advance n physics steps, yielding each Frame once every sink has it: for a caller that
-        looks at every Frame (settle), a generator's resume costs a fraction of a step() call."""
-        sinks, pad_model, world_step, read_frame = (
-            self.sinks,
-            self.suction_pad,
-            self._world.step,
-            self._read_frame,
-        )
-        renderer = self._camera_renderer
+        looks at every Frame (settle), a generator's resume costs a fraction of a step() call. The
+        Frame is made here as _read_frame makes it (written out: a call less a step)."""
+        sinks, pad_model, world = self.sinks, self.suction_pad, self._world
+        renderer, state, pad_pose = self._camera_renderer, world.state, self._pad_pose
+        world_step, dt_ns = world.stepper(), self.config.dt_ns
         for _ in range(n):
             # an idle pad, or one holding on, has nothing to do
             if self._suction_wanted is not pad_model.idle_on:
                 for ev in pad_model.update(self._suction_wanted, self.frame, self._heading):
                     self._emit(ev.kind, self._body_name(ev.body), ev.message)
+                world_step = world.stepper()  # a hold taken or let go changes how the world steps
             world_step()
-            self.step_index += 1
-            f = self.frame = read_frame()
+            step = self.step_index = self.step_index + 1
+            q, qd, effort, poses, force, torque = state()
+            f = self.frame = _new_frame(
+                Frame,
+                (
+                    step,
+                    step * dt_ns,
+                    q,
+                    qd,
+                    effort,
+                    self._targets,
+                    pad_model.on,
+                    pad_model.sensed,
+                    pad_model.held,
+                    force,
+                    torque,
+                    pad_pose(q),
+                    poses,
+                ),
+            )
             for s in sinks:
                 s.on_frame(f)
             # after every sink: a picture reaches them after the frame it shows
@@ -567,29 +584,3 @@ def _number(value: Any, what: str) -> float:
 
 def _replaced(values: tuple, i: int, value) -> tuple:
     return values[:i] + (value,) + values[i + 1 :]
-
-
-class _KeyHands:
-    """What a key map's actions may do to the twin (model.keymaps.KeyPlayer plays them on it): the
-    same handlers its Commands run, inside the `key` Command that holds them."""
-
-    def __init__(self, twin: Twin) -> None:
-        self._twin = twin
-
-    def joint(self, name: str | int) -> int:
-        return self._twin._joint(name)
-
-    def target(self, joint: int) -> float:
-        return self._twin._targets[joint]
-
-    def limits(self, joint: int) -> tuple[float, float]:
-        return self._twin._limits[joint]
-
-    def drive(self, joint: int, q: float) -> None:
-        self._twin._do_joint_target({"joint": joint, "q": q})
-
-    def place(self, joint: int, q: float) -> None:
-        self._twin._do_joint_position({"joint": joint, "q": q})
-
-    def signal(self, name: str, value) -> None:
-        self._twin._do_signal({"name": name, "value": value})

@@ -11,6 +11,8 @@ import ctypes
 import os
 import sys
 import tempfile
+from collections.abc import Callable
+from functools import partial
 
 from twin.model.config import TwinConfig
 from twin.model.errors import ConfigError
@@ -18,6 +20,9 @@ from twin.model.types import NO_BODY
 from twin.robot.urdf import urdf_text
 
 NO_CONSTRAINT = -1
+# DIRECT clients of closed Worlds, kept for this process's next ones (World._direct_client)
+_SPARE_CLIENTS: list[int] = []
+_MAX_SPARE = 1
 # The solver's residual threshold is EngineParams.solver_residual_threshold (recorded with the run):
 # at PyBullet's default 1e-7 a resting box creeps (tests/test_long_run.py measures it).
 # The floor is a static box, not a GEOM_PLANE: PyBullet builds a box-on-plane contact one corner per
@@ -64,7 +69,8 @@ class World:
         self.gui = gui
         if gui:
             _require_display()
-        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        self.client = pb.connect(pb.GUI) if gui else self._direct_client()
+        self._closed = False
         if self.client < 0:
             raise ConfigError("cannot open a PyBullet window; run without --gui or under a display")
         if gui:
@@ -221,6 +227,12 @@ class World:
         _step_simulation(self.client)
         if self._overlapping:
             self._collide_once_apart()
+
+    def stepper(self) -> Callable[[], object]:
+        """What step() does, as a call to make every step until the next attach or detach: with no
+        released object still overlapping the robot, PyBullet's step itself, without a Python call
+        around it (the twin's loop asks again after every suction change)."""
+        return self.step if self._overlapping else partial(_step_simulation, self.client)
 
     # -- reading ----------------------------------------------------------------------------
     def state(self) -> tuple:
@@ -386,8 +398,29 @@ class World:
         return bool(pb.isConnected(self.client))
 
     def close(self) -> None:
-        if pb.isConnected(self.client):
+        """Let go of the PyBullet client: a plain headless world's is kept for the next World of
+        this process (_direct_client), any other disconnected. Idempotent."""
+        if self._closed or not pb.isConnected(self.client):
+            return
+        self._closed = True
+        if self._reuses_clients() and len(_SPARE_CLIENTS) < _MAX_SPARE:
+            _SPARE_CLIENTS.append(self.client)  # build() resets it before anything else
+        else:
             pb.disconnect(self.client)
+
+    def _reuses_clients(self) -> bool:
+        """A headless World itself (not a render world, whose renderer keeps state of its own)."""
+        return not self.gui and type(self) is World
+
+    def _direct_client(self) -> int:
+        """A DIRECT client: one a closed World left, else a new one. Connecting is most of building
+        a Twin (14 of 18 ms here); build() starts with resetSimulation, after which a client steps
+        bit for bit as a fresh one does (docs: determinism; the goldens hold it)."""
+        while self._reuses_clients() and _SPARE_CLIENTS:
+            client = _SPARE_CLIENTS.pop()
+            if pb.isConnected(client):
+                return client
+        return pb.connect(pb.DIRECT)
 
 
 def _require_display() -> None:

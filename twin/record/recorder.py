@@ -1,0 +1,279 @@
+"""The recorder process's side (record.process forks it): one process runs every writer of a run,
+the MCAP writer first, then the Rerun one, each fed from the ring at its own pace.
+
+It sleeps in poll() until the twin wakes it (a message down the pipe: rows [0, N) are published, and
+the commands, events and pictures that come before them), hands each writer its rows as column
+views of the ring (record.ring: the writers copy what they keep) and says, per writer, how far it
+has read. The MCAP writer takes every row it is woken for; the Rerun writer only once TAKE rows have
+gathered, since its cost is per batch as much as per frame. A writer that fails stops its own file
+there (kept, unfinalized, as after a crash) and the process goes on reading, so the twin never
+waits for it; the close request is answered with the failure, in one line.
+"""
+
+from __future__ import annotations
+
+import collections
+import marshal
+import os
+import pickle
+import select
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+from twin.model.config import TwinConfig
+from twin.model.sink import close_all
+from twin.record.ring import FrameRing
+
+WAKE, CLOSE = b"W", b"C"
+DONE = b"OK\0"  # the recorder's last reply: finished, and its RecorderStats
+STARTED = b"OK"  # a writer's start reply (else: its error, as text)
+COMMAND, EVENT = 0, 1
+IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
+# item kind -> the sinks' method
+_HANDLERS = {COMMAND: "on_command", EVENT: "on_event", IMAGE: "on_image"}
+
+
+class RecorderStats(NamedTuple):
+    """What the recorder process spent, from its first row to its files finalized (CPU seconds of
+    all its threads), how much of it its writers spent (their calls, and the threads they run), and
+    that share by writer ((name, seconds), ...)."""
+
+    cpu_s: float
+    writer_cpu_s: float
+    frames: int
+    by_writer: tuple = ()
+
+
+class Writer(NamedTuple):
+    """One writer the recorder runs: its kind ("mcap" or "rrd"), its file, the ring reader it reads
+    as, and how many rows it lets gather before it takes them in (1: every wake-up)."""
+
+    kind: str
+    path: str | Path
+    reader: int
+    take: int
+
+
+def poller(conn) -> select.poll:
+    """One poll object for a pipe end: Connection.poll builds a selector on every call."""
+    poll = select.poll()
+    poll.register(conn.fileno(), select.POLLIN)
+    return poll
+
+
+def serve(
+    conn,
+    writers: list[Writer],
+    ring: FrameRing,
+    config: TwinConfig,
+    run: dict,
+    urdf: str,
+    meshes: list[Path],
+    rate: int,
+    engine: dict[str, str] | None,
+) -> None:
+    """The recorder process: start each writer (one start reply each, in order), feed them what the
+    twin publishes, finish on request."""
+    if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
+        # whether arrays are pandas objects: they never are here
+        sys.meta_path.insert(0, _NoPandas())
+    feeds: list[_Feed] = []
+    failed = False
+    for writer in writers:
+        try:
+            sink = _make(
+                writer, config=config, run=run, urdf=urdf, meshes=meshes, rate=rate, engine=engine
+            )
+        except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
+            if not failed:
+                conn.send_bytes(str(err).encode())
+            failed = True
+            continue
+        feeds.append(_Feed(ring, sink, writer))
+        if not failed:
+            conn.send_bytes(STARTED)
+    if failed:  # the twin stops the run at the first failure: the writers that started end as error
+        _close_all([feed.sink for feed in feeds], "error", "recording could not start")
+        os._exit(0)
+    _loop(conn, ring, feeds, _Clock())  # from here: the writers' starts are not per frame
+
+
+def _make(writer: Writer, *, config, run, urdf, meshes, rate, engine):
+    if writer.kind == "mcap":
+        from twin.record.mcap.writer import McapRecorder  # loaded by the parent
+
+        return McapRecorder(
+            writer.path, config, run, urdf=urdf, meshes=meshes, rate=rate, engine=engine
+        )
+    from twin.record.rerun.writer import RerunRecorder
+
+    return RerunRecorder(writer.path, config, urdf)
+
+
+def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock) -> None:
+    poll = poller(conn)
+    synced = 0  # the rows whose others have come: what the writers may take in
+    while True:
+        # asleep until the twin wakes it (rows to take in, with the others before them; the close)
+        # or the pipe ends
+        poll.poll()
+        end, woken_to = _take_messages(conn, poll, feeds)
+        synced = max(synced, woken_to)
+        final = end is not None
+        for feed in feeds:
+            # the rows the twin woke it for: those whose others it has (all, at the close; at the
+            # twin's death the rows published after its last wake-up are left out)
+            if final or feed.due(synced):
+                feed.take(synced, final=final)
+                ring.release(feed.writer.reader, feed.read)
+        if end == "died":  # the twin's process died: keep what arrived, unfinalized
+            for feed in feeds:
+                if not feed.failure:
+                    _abandon([feed.sink])
+            os._exit(0)
+        if final:
+            failure = _finish(feeds, *end)
+            stats = clock.stats(feeds)
+            conn.send_bytes(failure.encode() if failure else DONE + marshal.dumps(stats))
+            os._exit(0)
+
+
+def _finish(feeds: list[_Feed], outcome: str, error: str) -> str:
+    """Finalize every writer that has not failed, side by side: the Rerun one in a thread of its
+    own (its CPU counts as its writer's, as its SDK's threads do), so that its file's fsync and the
+    MCAP file's overlap. The first failure as text, or ''."""
+    failures = {feed.writer.kind: feed.failure for feed in feeds}
+    closing = [feed for feed in feeds if not feed.failure]
+
+    def close(feed: _Feed) -> None:
+        failures[feed.writer.kind] = _close_all([feed.sink], outcome, error)
+
+    apart = [threading.Thread(target=close, args=(f,)) for f in closing if f.writer.kind == "rrd"]
+    for thread in apart:
+        thread.start()
+    for feed in closing:
+        if feed.writer.kind != "rrd":
+            failures[feed.writer.kind] = feed.timed(_close_all, [feed.sink], outcome, error)
+    for thread in apart:
+        thread.join()
+    return next((text for text in failures.values() if text), "")
+
+
+def _take_messages(conn, poll: select.poll, feeds: list[_Feed]):
+    """Read every message waiting in the pipe: the others go to each feed's queue. Returns (None,
+    the close request's (outcome, error), or "died" when the pipe has closed: the twin's process
+    died; the rows the twin has woken it for)."""
+    synced = 0
+    while poll.poll(0):
+        try:
+            message = conn.recv_bytes()
+        except (EOFError, OSError):
+            return "died", synced
+        tag, body = message[:1], message[1:]
+        if tag == WAKE:  # rows to take in, and the others that come before them
+            woken_to, others = marshal.loads(body)
+            for feed in feeds:
+                feed.queue.extend(others)
+            synced = max(synced, woken_to)
+        elif tag == CLOSE:
+            return marshal.loads(body), synced
+    return None, synced
+
+
+class _Clock:
+    """CPU seconds of the process and of its main thread since the start, for RecorderStats."""
+
+    def __init__(self) -> None:
+        self.cpu0, self.thread0 = time.process_time(), time.thread_time()
+
+    def stats(self, feeds: list[_Feed]) -> tuple:
+        """RecorderStats' fields: everything this thread did outside the writers' calls is the
+        recorder's own work; the other threads (Rerun's) are the Rerun writer's."""
+        cpu_s = time.process_time() - self.cpu0
+        thread_s = time.thread_time() - self.thread0
+        by_writer = {feed.writer.kind: feed.in_writer_s for feed in feeds}
+        if "rrd" in by_writer:
+            by_writer["rrd"] += cpu_s - thread_s
+        writer_s = sum(by_writer.values())
+        frames = max((feed.read for feed in feeds), default=0)
+        return (cpu_s, writer_s, frames, tuple(by_writer.items()))
+
+
+class _Feed:
+    """Rows from the ring and the others from the pipe, to one writer in the order the twin made
+    them."""
+
+    def __init__(self, ring: FrameRing, sink, writer: Writer) -> None:
+        self.ring, self.sink, self.writer = ring, sink, writer
+        self.read = 0  # rows taken in (or, after a failure, passed over)
+        # (frames before it, kind, pickle)
+        self.queue: collections.deque[tuple[int, int, bytes]] = collections.deque()
+        self.failure = ""
+        self.in_writer_s = 0.0  # CPU seconds of the main thread in this writer's calls
+
+    def timed(self, call, *args):
+        """call(*args), a writer's work: its CPU counts as the writer's (RecorderStats)."""
+        t0 = time.thread_time()
+        try:
+            return call(*args)
+        finally:
+            self.in_writer_s += time.thread_time() - t0
+
+    def due(self, synced: int) -> bool:
+        """Whether to take rows in now: a take's worth has gathered (for a writer that takes every
+        wake-up: any row, or any other)."""
+        if self.writer.take <= 1:
+            return synced > self.read or bool(self.queue)
+        return synced - self.read >= self.writer.take
+
+    def take(self, written: int, *, final: bool) -> None:
+        """Rows [read, written) and the others that come before row `written` (all of them when
+        final)."""
+        try:
+            while self.queue and (final or self.queue[0][0] <= written):
+                before, kind, data = self.queue.popleft()
+                self._rows(min(before, written))
+                if not self.failure:
+                    self.timed(getattr(self.sink, _HANDLERS[kind]), pickle.loads(data))
+            self._rows(written)
+        except Exception as err:  # noqa: BLE001 - e.g. a full disk
+            self.failure = (
+                f"recording stopped by a writer error (what came before is kept): "
+                f"{type(err).__name__}: {err}"
+            )
+            _abandon([self.sink])
+        self.read = max(self.read, written)
+
+    def _rows(self, upto: int) -> None:
+        if upto <= self.read:
+            return
+        if not self.failure:
+            for frames in self.ring.runs(self.read, upto):  # views into the ring: writers copy
+                self.timed(self.sink.on_frames, frames)
+        self.read = upto
+
+
+class _NoPandas:
+    """An import hook that says pandas is not installed (the recorder process never needs it)."""
+
+    def find_spec(self, name: str, path=None, target=None):
+        if name == "pandas" or name.startswith("pandas."):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+
+
+def _close_all(sinks: list, outcome: str, error: str) -> str:
+    """Finish every writer with the run's outcome; the first failure as text, or ''."""
+    failure = close_all(sinks, outcome, error)
+    return str(failure) if failure is not None else ""
+
+
+def _abandon(sinks: list) -> None:
+    """Leave every file as a crash would: NAME.partial, unfinalized (the MCAP one recoverable)."""
+    for sink in sinks:
+        try:
+            sink.abandon()
+        except Exception:  # noqa: BLE001, S110 - already failing: keep what can be kept
+            pass

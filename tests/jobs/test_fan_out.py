@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -24,7 +25,7 @@ SEARCH = [
     "--vary",
     "box.x_m=0.1..0.3",
     "--param",
-    "cycles=1",
+    "cycles=10",  # 41 runs of one cycle ended the search in 2.4 s, before a signal reached it
     "--param",
     "pause_s=0.1",
     "--budget",
@@ -111,9 +112,38 @@ def test_kill_9_of_search_leaves_no_process(tmp_path):
     _kill_9_leaves_nothing(_start([*SEARCH, "--out", str(tmp_path / "s"), "-q"]))
 
 
-def test_kill_9_of_check_leaves_no_process():
+@pytest.fixture(scope="module")
+def check_args(tmp_path_factory) -> list[str]:
+    """`twin check` of the short shipped goldens, then four copies of a 40-cycle run: the short
+    ones finish first, the long ones keep both workers busy for seconds (the shipped ones alone
+    took 0.2-0.3 s each and the check could end before a signal reached it)."""
+    folder = tmp_path_factory.mktemp("long_goldens")
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "twin",
+            "run",
+            "pick_place",
+            "--cycles",
+            "40",
+            "--record",
+            str(folder / "long_0.mcap"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    for k in range(1, 4):
+        shutil.copy(folder / "long_0.mcap", folder / f"long_{k}.mcap")
     assert len(GOLDENS) >= 4
-    _kill_9_leaves_nothing(_start(["check", *GOLDENS, "-j", "2"]))
+    return ["check", *GOLDENS, *sorted(str(p) for p in folder.glob("long_*.mcap")), "-j", "2"]
+
+
+def test_kill_9_of_check_leaves_no_process(check_args):
+    _kill_9_leaves_nothing(_start(check_args))
 
 
 def _stops(proc: subprocess.Popen, signum: int) -> str:
@@ -145,8 +175,8 @@ def test_a_search_started_with_sigint_ignored_ends_on_a_stop_signal(tmp_path, si
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-def test_a_check_started_with_sigint_ignored_ends_on_a_stop_signal(signum):
-    printed = _stops(_start(["check", *GOLDENS, "-j", "2"], sigint=signal.SIG_IGN), signum)
+def test_a_check_started_with_sigint_ignored_ends_on_a_stop_signal(check_args, signum):
+    printed = _stops(_start(check_args, sigint=signal.SIG_IGN), signum)
     assert "interrupted: " in printed  # what finished, as a table, before the exit
 
 

@@ -215,6 +215,7 @@ def test_a_closed_worlds_client_serves_the_next_twin_as_a_fresh_one(monkeypatch)
     left = holding._world.client
     holding.close()
     assert world._SPARE_CLIENTS == [left]
+    assert not holding._world.connected()  # the closed world no longer reaches the client it left
     sink = FrameCollector()
     again = Twin(sinks=[sink])
     assert again._world.client == left and not world._SPARE_CLIENTS

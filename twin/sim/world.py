@@ -20,6 +20,7 @@ from twin.model.types import NO_BODY
 from twin.robot.urdf import urdf_text
 
 NO_CONSTRAINT = -1
+NO_CLIENT = -1  # a closed World's client id: PyBullet refuses it as "not connected"
 # DIRECT clients of closed Worlds, kept for this process's next ones (World._direct_client)
 _SPARE_CLIENTS: list[int] = []
 _MAX_SPARE = 1
@@ -407,6 +408,9 @@ class World:
             _SPARE_CLIENTS.append(self.client)  # build() resets it before anything else
         else:
             pb.disconnect(self.client)
+        # a call on this closed World fails as on a disconnected one, never reaching the client's
+        # next World
+        self.client = NO_CLIENT
 
     def _reuses_clients(self) -> bool:
         """A headless World itself (not a render world, whose renderer keeps state of its own)."""

@@ -26,9 +26,9 @@ FIXTURES = TESTS / "fixtures"
 def pytest_configure(config: pytest.Config) -> None:
     """Once, in the run's first process: twin/ compiled to bytecode. The suite starts hundreds of
     twin processes and workers (593 ended normally in one run, besides those killed or forked);
-    where PYTHONDONTWRITEBYTECODE is set (as on our machines)
-    none writes its bytecode, so each compiled the twin modules it imports anew: 0.13 s of CPU per
-    `twin info` (0.60 -> 0.48 s, five runs each), more for run, check and diff."""
+    where PYTHONDONTWRITEBYTECODE is set (as on our machines) none writes its bytecode, so each
+    compiled the twin modules it imports anew: 0.13 s of CPU per `twin info` (0.60 -> 0.48 s,
+    five runs each), more for run, check and diff."""
     if hasattr(config, "workerinput"):  # an xdist worker: its controller did it
         return
     import compileall

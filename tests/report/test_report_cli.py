@@ -13,26 +13,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.carry import CARRY as TUTORIAL_CARRY
 from support.cli import twin
 
-CARRY = """\
-def run(twin, place_x_m: float = -0.3, place_y_m: float = -0.55, hold_s: float = 0.2):
-    twin.phase("pick")
-    twin.raise_()
-    twin.move_to(0.2, 0.7)
-    twin.suction(True)
-    twin.lower()
-    twin.wait(hold_s)
-    if twin.frame.held_body < 0:
-        raise RuntimeError("nothing picked at (0.2, 0.7)")
-    twin.raise_()
-    twin.phase("place")
-    twin.move_to(place_x_m, place_y_m)
-    twin.lower()
-    twin.suction(False)
-    twin.wait(hold_s)
-    twin.raise_()
-"""
+# the tutorial's task, holding 0.2 s and without its placement event
+CARRY = TUTORIAL_CARRY.replace("hold_s: float = 0.5", "hold_s: float = 0.2").split("    x, y = ")[0]
 MOVED = CARRY.replace("twin.move_to(0.2, 0.7)", "twin.move_to(0.202, 0.7)")  # the pick, 2 mm on
 # a resource the page would fetch: src=, href=, CSS url() or @import naming a host
 REMOTE = re.compile(r"""(src|href)\s*=\s*["']?\s*(https?:)?//|url\(\s*["']?(https?:)?//|@import""",

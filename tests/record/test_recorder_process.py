@@ -64,8 +64,10 @@ def test_a_writer_that_cannot_start_fails_at_once_in_one_line(tmp_path):
     assert "a_file" in str(err.value) and "\n" not in str(err.value)
 
 
-def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
-    path = tmp_path / "killed.mcap"
+def _killed_run(path, late_event: bool) -> subprocess.CompletedProcess:
+    """A run recorded to path whose process kills itself after a move and a 5 s wait (and 40 steps:
+    past the wake-up for the flush at step 1379), 20 frames after an event the recorder was never
+    sent (late_event) or with none since the twin last woke it."""
     script = textwrap.dedent(f"""
         import os, signal
         from twin.model.config import TwinConfig
@@ -76,12 +78,19 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
             twin = Twin(config, sinks=sinks)
             twin.move_to(0.3, 0.3)
             twin.wait(5.0)
+            twin.step(40)
+            if {late_event!r}:
+                twin.event("late", message="never sent")
+                twin.step(20)
             os.kill(os.getpid(), signal.SIGKILL)
     """)
-    done = subprocess.run(
+    return subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
     )
-    assert done.returncode == -signal.SIGKILL, done.stderr
+
+
+def _recovered(path, tmp_path):
+    """The killed run's file, recovered: its Recording."""
     partial = partial_path(path)  # the file is renamed to path only when finalized
     # the orphaned recorder writes what it got once it sees the pipe close
     _wait_until_settled(partial)
@@ -90,17 +99,39 @@ def test_a_run_whose_process_dies_leaves_what_reached_the_recorder(tmp_path):
     assert not kept.complete and S.META_FINALIZED not in kept.metadata
     fixed = tmp_path / "fixed.mcap"
     recover(path, fixed)
-    frames = load(fixed).frames
-    assert frames.t_ns[-1] * 1e-9 >= twin_seconds(path) - 1.0  # all but at most the last second
+    return load(fixed)
 
 
-def twin_seconds(_path) -> float:
-    """Simulated time the killed run had reached: the move plus the 5 s wait, as a fresh run
-    shows."""
+def test_a_run_whose_process_dies_leaves_every_published_frame(tmp_path):
+    """With nothing the recorder was not sent, it keeps every row the twin published (one every
+    16 frames): at most the last 15 frames are lost."""
+    path = tmp_path / "killed.mcap"
+    done = _killed_run(path, late_event=False)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    last_step = int(_recovered(path, tmp_path).frames.step[-1])
+    assert twin_steps() - 16 <= last_step < twin_steps()
+
+
+def test_a_run_whose_process_dies_keeps_no_frame_after_an_event_it_lost(tmp_path):
+    """An event kept for the next wake-up dies with the twin: the recorder keeps the rows before
+    it, none after it, so the file never shows what came after an event it does not hold."""
+    path = tmp_path / "killed.mcap"
+    done = _killed_run(path, late_event=True)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    rec = _recovered(path, tmp_path)
+    assert "late" not in [e.kind for e in rec.events]
+    # the event came at step twin_steps(): its frame is the last that may be kept
+    assert twin_steps() - 16 <= int(rec.frames.step[-1]) <= twin_steps()
+
+
+def twin_steps() -> int:
+    """Steps the killed run had made before the kill (or before the late event): the move, the 5 s
+    wait and 40 steps, as a fresh run shows."""
     twin = Twin()
     twin.move_to(0.3, 0.3)
     twin.wait(5.0)
-    return twin.t_s
+    twin.step(40)
+    return twin.step_index
 
 
 def _wait_until_settled(path, timeout_s: float = 10.0) -> None:

@@ -3,17 +3,19 @@ which runs the same MCAP and Rerun writers (both in one process: twin.record.rec
 
 The stepping thread packs each Frame into a ring of rows in shared memory (twin.record.ring: about a
 microsecond, no system call) and every 1/15 s of simulated time publishes how far it got. The
-recorder sleeps in poll() until the twin wakes it (a message down the pipe) once TAKE_S of simulated
-time is published since the last wake-up; the wake-up carries the commands, events and pictures
-(rare) that come before those rows. The MCAP writer takes in every row it is woken for, the Rerun
-one every RRD_TAKE_S (the writers take columns: the bigger the batch, the less each frame costs);
-each says how far it read. The twin waits for the recorder only when it has used all its slack (the
-MCAP writer's: MAX_AHEAD_S of simulated time, which bounds what a kill -9 of the whole run loses;
-the Rerun writer's: the ring). Files are byte-for-byte what the in-process writers make, since the
-same writer code sees the same stream. If the twin's process dies, the recorder sees the pipe close,
-takes in every row it was woken for and leaves the MCAP file unfinalized (and recoverable, as
-NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to handle (it then finalizes the files):
-the recorder ignores them.
+recorder sleeps in poll() until the twin wakes it (a message down the pipe): just after each frame
+at which the MCAP writer flushes its file (every 0.5 s of simulated time), or, without an MCAP
+file, once the Rerun writer's take (RRD_TAKE_S) has gathered (twin.record.wakes says why so
+seldom). The wake-up carries the commands, events and pictures (rare) that come before those rows.
+The MCAP writer takes in every row it is woken for, the Rerun one every RRD_TAKE_S (the writers
+take columns: the bigger the batch, the less each frame costs); each says how far it read. The twin
+waits for the recorder only when it would go MAX_AHEAD_S of simulated time past a flush frame the
+MCAP writer has not taken in (which bounds what a kill -9 of the whole run loses), or past what the
+ring holds. Files are byte-for-byte what the in-process writers make, since the same writer code
+sees the same stream. If the twin's process dies, the recorder sees the pipe close, takes in every
+published row whose commands, events and pictures it was sent, and leaves the MCAP file
+unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are the twin's to
+handle (it then finalizes the files): the recorder ignores them.
 
 One process for both writers rather than one each (measured on 2 cores): it forks once, the MCAP
 writer starts with the other core to itself (the twin waits for it at its first Frame) and the Rerun
@@ -35,6 +37,7 @@ from twin.model.errors import RecordingError
 from twin.model.images import CameraImage
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
+from twin.record.mcap.writer import flush_steps
 from twin.record.outputs import check_target
 from twin.record.recorder import (
     CLOSE,
@@ -49,19 +52,20 @@ from twin.record.recorder import (
     poller,
     serve,
 )
-from twin.record.ring import FrameRing
+from twin.record.ring import NO_ROW, FrameRing
 from twin.record.rows import FrameRows
+from twin.record.wakes import WakeSchedule
 
 PUBLISH_S = 16 / 240  # simulated time between the twin's publishes: 16 frames at 240 Hz
-# simulated time the MCAP writer may lag behind the twin: bounds what a kill -9 loses
+# simulated time the twin may step past a flush frame the MCAP writer has not taken in: with the
+# flush interval, bounds what a kill -9 loses
 MAX_AHEAD_S = 0.4
 # simulated time the ring holds: slack for the Rerun writer's bursts (every 8192 frames)
 RING_S = 4096 / 240
-# The twin wakes the recorder (a message down its pipe) once this much simulated time is published
-# since it last did: a recorder asleep in poll() costs nothing. Half the MCAP writer's slack.
-TAKE_S = 48 / 240
 # the Rerun writer takes rows in once this much has gathered: a quarter of the ring
 RRD_TAKE_S = 1024 / 240
+# pictures waiting for a wake-up this large wake the recorder at once (a camera's run)
+OTHERS_WAKE_BYTES = 1 << 20
 WAIT_S = 0.0002  # the twin's sleep while it waits for the recorder to take rows in
 
 
@@ -100,19 +104,17 @@ class RecorderProcess(Sink):
         self._rows = FrameRows(len(config.profile.joint_names), len(config.objects))
         self._publish_every = _frames(config, PUBLISH_S)
         mcap_ahead = max(_frames(config, MAX_AHEAD_S), 2 * self._publish_every)
-        capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
-        take = max(1, min(_frames(config, TAKE_S), mcap_ahead - 2 * self._publish_every))
+        self._capacity = capacity = max(_frames(config, RING_S), 4 * mcap_ahead)
         rrd_take = max(1, min(_frames(config, RRD_TAKE_S), capacity // 4))
-        # (kind, path, how far ahead the twin may go, how many rows it lets gather), MCAP first
+        # (kind, path, how many rows it lets gather), MCAP first: ring reader 0
         wanted = [
-            (kind, path, ahead, gather)
-            for kind, path, ahead, gather in [
-                ("mcap", mcap_path, mcap_ahead, 1),
-                ("rrd", rrd_path, capacity, rrd_take),
-            ]
+            (kind, path, gather)
+            for kind, path, gather in [("mcap", mcap_path, 1), ("rrd", rrd_path, rrd_take)]
             if path is not None
         ]
-        writers = [Writer(k, path, i, gather) for i, (k, path, _, gather) in enumerate(wanted)]
+        writers = [Writer(k, path, i, gather) for i, (k, path, gather) in enumerate(wanted)]
+        flushes = flush_steps(config.dt_ns, rate) if mcap_path is not None else None
+        self._wakes = WakeSchedule(flushes, gather=rrd_take, ahead=mcap_ahead)
         self._ring = FrameRing(self._rows, capacity, len(writers))
         # what on_frame needs, bound once: it runs every step
         self._row_size, self._memory = self._rows.size, self._ring.memory
@@ -125,13 +127,12 @@ class RecorderProcess(Sink):
         self._next_publish = 1
         # (frames before it, kind, pickle): the ones the recorder has not been sent yet
         self._others: list[tuple[int, int, bytes]] = []
+        self._others_bytes = 0
         self._closed = False
         # how often the twin waited for the recorder (tools/bench_record.py reports it)
         self.waits = 0
         # Load the writers here, once: the forked recorder inherits them instead of importing anew
-        # (rerun alone takes ~0.3 s to import).
-        import twin.record.mcap.writer
-
+        # (rerun alone takes ~0.3 s to import; the MCAP writer comes with this module).
         if rrd_path is not None:
             import twin.record.rerun.writer  # noqa: F401
         # what a writer would refuse at its start, refused here, before the run: a bad path or run
@@ -142,12 +143,7 @@ class RecorderProcess(Sink):
         self._twins_cpus: set[int] | None = None  # the CPUs the twin's thread had before
         try:
             with forking_on(cpus and cpus[1]):
-                self._child = _Child(
-                    writers,
-                    take,
-                    [ahead for _, _, ahead, _ in wanted],
-                    (self._ring, config, run, urdf, meshes, rate, engine),
-                )
+                self._child = _Child(writers, (self._ring, config, run, urdf, meshes, rate, engine))
         except BaseException:
             self._fail_start()
             raise
@@ -186,28 +182,32 @@ class RecorderProcess(Sink):
         self._at = at + self._row_size if at < self._last else self._first
         self._written += 1
         if self._written == self._next_publish:
-            self._publish()
+            self._publish(frame.step)
 
     # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
     # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
     def on_command(self, command: Command) -> None:
-        self._others.append(
-            (self._written, COMMAND, pickle.dumps(command, protocol=pickle.HIGHEST_PROTOCOL))
-        )
+        self._keep_other(COMMAND, command)
 
     def on_event(self, event: Event) -> None:
-        self._others.append(
-            (self._written, EVENT, pickle.dumps(event, protocol=pickle.HIGHEST_PROTOCOL))
-        )
+        self._keep_other(EVENT, event)
 
     def on_image(self, image: CameraImage) -> None:
-        self._others.append(
-            (self._written, IMAGE, pickle.dumps(image, protocol=pickle.HIGHEST_PROTOCOL))
-        )
+        self._keep_other(IMAGE, image)
 
-    def _publish(self) -> None:
-        """The rows up to here published, and the recorder woken when a take's worth is waiting
-        for it (or waited for, when the twin would pass a writer's slack)."""
+    def _keep_other(self, kind: int, other: Command | Event | CameraImage) -> None:
+        """Keep a command, event or picture for the next wake-up (the ring first says that rows
+        from here on have one the recorder has not been sent)."""
+        if not self._others:
+            self._ring.mark_others(self._written)
+        data = pickle.dumps(other, protocol=pickle.HIGHEST_PROTOCOL)
+        self._others.append((self._written, kind, data))
+        self._others_bytes += len(data)
+
+    def _publish(self, step: int) -> None:
+        """The rows up to here (the last one step `step`'s) published, and the recorder woken when
+        the schedule says so (twin.record.wakes), or waited for when the twin would pass its
+        slack."""
         child = self._child
         if child.starting:
             self._check_started(("mcap",))
@@ -217,17 +217,23 @@ class RecorderProcess(Sink):
         # publish moved to frame 0: a task whose commands come at steps in step with the publishes
         # would see a killed run keep a frame without the commands of its step
         self._next_publish = (written // self._publish_every + 1) * self._publish_every
+        wake = self._wakes.passed(written, step) or self._others_bytes >= OTHERS_WAKE_BYTES
+        # a writer the ring would pass, and the MCAP writer behind a flush frame by its slack
         behind = [
-            (reader, self._next_publish - ahead)
-            for reader, (read, ahead) in enumerate(zip(reads, child.aheads, strict=True))
-            if self._next_publish - read > ahead
+            (reader, self._next_publish - self._capacity)
+            for reader, read in enumerate(reads)
+            if self._next_publish - read > self._capacity
         ]
+        if child.writers[0] == "mcap":
+            due = self._wakes.mcap_due(reads[0], self._next_publish)
+            if due is not None:
+                behind.append((0, due))
         if behind:
             self.waits += 1
             self._wake(written)
             for reader, read in behind:
                 self._wait_until_read(reader, read)
-        elif written - child.woken_at >= child.take:
+        elif wake:
             self._wake(written)
 
     def _wait_until_read(self, reader: int, read: int) -> None:
@@ -245,7 +251,10 @@ class RecorderProcess(Sink):
         """Have the recorder take in rows [0, written): the wake-up carries the others it has not
         had yet (all of them come before row `written`), so it wakes once for both."""
         self._child.wake(written, self._others)
-        self._others = []
+        self._wakes.woken(written)
+        if self._others:
+            self._ring.mark_others(NO_ROW)
+            self._others, self._others_bytes = [], 0
 
     def close(self, outcome: str = "ok", error: str = "") -> None:
         """Publish what is left, have the writers finalize, wait for them (the first failure is
@@ -284,16 +293,12 @@ class RecorderProcess(Sink):
 
 
 class _Child:
-    """The recorder process, the twin's end of its pipe, and how far ahead of each of its writers
-    the twin may go (`aheads`, rows by ring reader: for the MCAP file that bounds what a kill -9
-    loses; the view gets the whole ring)."""
+    """The recorder process and the twin's end of its pipe."""
 
-    def __init__(self, writers: list[Writer], take: int, aheads: list[int], args: tuple) -> None:
-        self.take = take  # rows published between wake-ups
-        self.aheads = aheads
-        self.starting = [w.kind for w in writers]  # the writers whose start reply is yet to come
+    def __init__(self, writers: list[Writer], args: tuple) -> None:
+        self.writers = [w.kind for w in writers]  # by ring reader
+        self.starting = list(self.writers)  # the writers whose start reply is yet to come
         self.wakes = 0  # wake-ups the twin sent it
-        self.woken_at = 0  # the rows published when the twin last woke it
         # what the recorder said of its CPU at the end (RecorderStats), None before
         self.stats: RecorderStats | None = None
         self.conn, self.process = start_helper(self, serve, (writers, *args), name="twin-recorder")
@@ -312,7 +317,6 @@ class _Child:
     def wake(self, written: int, others: list) -> None:
         """Rows [0, written) are published: have the recorder take them in, with `others` (the
         commands, events and pictures that come before them it has not had)."""
-        self.woken_at = written
         self.wakes += 1
         self.send(WAKE + marshal.dumps((written, others)))
 

@@ -122,10 +122,12 @@ def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock) -> None:
         poll.poll()
         end, woken_to = _take_messages(conn, poll, feeds)
         synced = max(synced, woken_to)
+        if end == "died":  # every published row before the first other it was not sent
+            synced = max(synced, min(ring.written(), ring.others_from()))
         final = end is not None
         for feed in feeds:
-            # the rows the twin woke it for: those whose others it has (all, at the close; at the
-            # twin's death the rows published after its last wake-up are left out)
+            # the rows the twin woke it for: those whose others it has (all, at the close and at
+            # the twin's death)
             if final or feed.due(synced):
                 feed.take(synced, final=final)
                 ring.release(feed.writer.reader, feed.read)

@@ -19,11 +19,13 @@ from twin.model.columns import FrameColumns
 from twin.record.rows import FrameRows
 
 _COUNTER = struct.Struct("<Q")
+NO_ROW = 2**64 - 1  # others_from when every command, event and picture has gone to the recorder
 
 
 class FrameRing:
-    """`capacity` rows of `rows.size` bytes, a written counter and one read counter per reader.
-    Made before the recorders are forked: they inherit the mapping and the lock."""
+    """`capacity` rows of `rows.size` bytes, a written counter, one read counter per reader and the
+    row count before the first command, event or picture the recorder has not been sent yet
+    (others_from). Made before the recorders are forked: they inherit the mapping and the lock."""
 
     def __init__(self, rows: FrameRows, capacity: int, readers: int) -> None:
         if capacity < 1 or readers < 1:
@@ -33,11 +35,14 @@ class FrameRing:
         self.rows = rows
         self.capacity = capacity
         self.readers = readers
-        self._header = _COUNTER.size * (1 + readers)  # written, then each reader's read
+        # written, each reader's read, others_from
+        self._header = _COUNTER.size * (2 + readers)
+        self._others_at = _COUNTER.size * (1 + readers)
         # anonymous, shared with forks
         self.memory = mmap.mmap(-1, self._header + capacity * rows.size)
         self._lock = multiprocessing.get_context("fork").Lock()
         self._columns: FrameColumns | None = None  # the whole ring as columns, made on first use
+        self.mark_others(NO_ROW)
 
     def offset(self, frame: int) -> int:
         """Where the row of frame number `frame` (counted from the run's first) lives in
@@ -54,6 +59,12 @@ class FrameRing:
                 for i in range(self.readers)
             ]
 
+    def mark_others(self, row: int) -> None:
+        """Say that the commands, events and pictures from row `row` on have not been sent to the
+        recorder (NO_ROW: all have). Set before the first of them is kept, cleared once they are
+        sent: if the twin's process dies, the recorder keeps no published row after one it lost."""
+        _COUNTER.pack_into(self.memory, self._others_at, row)
+
     def read(self, reader: int) -> int:
         """How many rows reader `reader` has taken in."""
         with self._lock:
@@ -64,6 +75,11 @@ class FrameRing:
         """How many rows the twin has published."""
         with self._lock:
             return _COUNTER.unpack_from(self.memory, 0)[0]
+
+    def others_from(self) -> int:
+        """The rows whose commands, events and pictures have all been sent: [0, others_from)."""
+        with self._lock:
+            return _COUNTER.unpack_from(self.memory, self._others_at)[0]
 
     def release(self, reader: int, read: int) -> None:
         """Reader `reader` is done with rows [0, read): the twin may write over them."""

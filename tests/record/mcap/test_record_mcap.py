@@ -440,3 +440,24 @@ def test_a_user_urdf_travels_with_its_meshes_and_drives_the_transforms(tmp_path,
     } == edges
     rec = twin.load(out)
     assert rec.config.profile.name == "stl_scara" and len(rec.frames) > 1000
+
+
+@pytest.mark.parametrize(("rate", "steps"), [(1, 2400), (7, 2400), (300, 14400)])
+def test_flush_steps_are_the_frames_at_which_the_file_grows(tmp_path, rate, steps):
+    """The recorder process is woken just after these frames (twin.record.wakes): they are the
+    writer's own flushes, block ends and (at a rate of more than a second) long gaps alike."""
+    from twin.record.mcap.writer import McapRecorder, flush_steps
+    from twin.sim.twin import Twin
+
+    config = TwinConfig()
+    recorder = McapRecorder(
+        tmp_path / "f.mcap", config, RUN, urdf=urdf_text(config.profile), rate=rate
+    )
+    flushed, flush = [], recorder._flush
+    recorder._flush = lambda t_ns: (flushed.append(t_ns // config.dt_ns), flush(t_ns))
+    twin = Twin(config, sinks=[recorder])
+    twin.step(steps)
+    recorder._flush = flush  # the close's own flush is not a run's
+    twin.close()
+    assert len(flushed) > 10
+    assert flushed == list(itertools.islice(flush_steps(config.dt_ns, rate), len(flushed)))

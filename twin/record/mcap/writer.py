@@ -10,8 +10,10 @@ fsynced, when it is finalized: a run killed part-way never leaves a broken file 
 from __future__ import annotations
 
 import bisect
+import itertools
 import json
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +41,8 @@ from twin.record.rows import FrameBatch
 
 BLOCK_S = 0.25
 FLUSH_S = 0.5
+FLUSH_NS = round(FLUSH_S * 1e9)
+GAP_NS = 2 * FLUSH_NS  # a run this long without a block (a high --rate) is flushed anyway
 VIEW_HZ = 30.0
 CHUNK_BYTES = 8 * 1024 * 1024  # chunks end at our flushes, not at a size
 BATCH_FRAMES = 256  # on_frame hands its Frames to on_frames this many at a time at most
@@ -105,10 +109,10 @@ class McapRecorder(Sink):
         self.engine = dict(engine or {})  # the simulation's own versions, for twin.versions
         self.n_objects = len(config.objects)
         dt_ns = config.dt_ns
-        self.block_frames = max(1, round(BLOCK_S * 1e9 / (dt_ns * rate)))
+        self.block_frames = block_frames(dt_ns, rate)
         self.view_every = max(1, round(1e9 / (VIEW_HZ * dt_ns)))
-        self.flush_ns = round(FLUSH_S * 1e9)
-        self._gap_ns = 2 * self.flush_ns  # blocks this far apart (a high --rate): flush between
+        self.flush_ns = FLUSH_NS
+        self._gap_ns = GAP_NS  # blocks this far apart (a high --rate): flush between
         self._tf = SceneTransforms(
             urdf, config.profile.joint_names, tuple(o.name for o in config.objects)
         )
@@ -466,6 +470,27 @@ class McapRecorder(Sink):
             ) from err
         finally:
             self._file.close()
+
+
+def block_frames(dt_ns: int, rate: int) -> int:
+    """Frames kept per block: BLOCK_S of simulated time at the recording rate, at least one."""
+    return max(1, round(BLOCK_S * 1e9 / (dt_ns * rate)))
+
+
+def flush_steps(dt_ns: int, rate: int) -> Iterator[int]:
+    """The steps of the frames at which a run's file grows (McapRecorder flushes its chunk), in
+    order, for the twin's frames (every step from step 0): a block's last frame once FLUSH_S has
+    passed since the last flush, or a frame GAP_NS past it while no block fills. The recorder
+    process wakes its writer just after them (twin.record.process)."""
+    per_block, last_flush_ns = block_frames(dt_ns, rate), 0
+    for block in itertools.count(1):
+        end_step = (block * per_block - 1) * rate  # the block's last kept frame
+        while (gap_step := -(-(last_flush_ns + GAP_NS) // dt_ns)) < end_step:
+            yield gap_step
+            last_flush_ns = gap_step * dt_ns
+        if end_step * dt_ns - last_flush_ns >= FLUSH_NS:
+            yield end_step
+            last_flush_ns = end_step * dt_ns
 
 
 def _every(steps: np.ndarray, every: int) -> range | list[int]:

@@ -18,8 +18,9 @@ unfinalized (and recoverable, as NAME.partial). Ctrl-C, SIGTERM and SIGHUP are t
 handle (it then finalizes the files): the recorder ignores them.
 
 One process for both writers rather than one each (measured on 2 cores): it forks once, the MCAP
-writer starts with the other core to itself (the twin waits for it at its first Frame) and the Rerun
-writer after it, and one wake-up feeds both.
+writer starts with the other core to itself and the Rerun writer in a thread beside it while the
+first is fed, and one wake-up feeds both. The twin does not wait for either to start: it reads their
+start replies as they come, and stops the run at the first failure.
 """
 
 from __future__ import annotations
@@ -122,8 +123,8 @@ class RecorderProcess(Sink):
         self._first, self._last = self._ring.offset(0), self._ring.offset(capacity - 1)
         self._at = self._first  # where the next row goes
         self._written = 0
-        # the first publish is the first frame's (the twin's scene is built by then): it waits for
-        # the MCAP writer to be ready, so the run's stepping never does
+        # the first publish is the first frame's: the writers' start replies are read from there on
+        # as they come (the twin does not wait for them: rows gather in the ring meanwhile)
         self._next_publish = 1
         # (frames before it, kind, pickle): the ones the recorder has not been sent yet
         self._others: list[tuple[int, int, bytes]] = []
@@ -210,7 +211,7 @@ class RecorderProcess(Sink):
         slack."""
         child = self._child
         if child.starting:
-            self._check_started(("mcap",))
+            self._check_started(())
         written = self._written
         reads = self._ring.publish(written)
         # then every publish_every frames from the run's start (16, 32, ...), as before the first
@@ -261,24 +262,18 @@ class RecorderProcess(Sink):
         raised once all have finished). Idempotent."""
         if self._closed:
             return
-        if self._child.starting:  # a writer that could not start: the others end as error
-            self._check_started(("mcap", "rrd"))
+        if self._child.starting:  # a start failure already said: the others end as error
+            self._check_started(())
         self._closed = True
         self._free_twins_thread()
         child = self._child
         child.spread()  # the twin waits from here on: the recorder may use its core too
-        failure: RecordingError | None = None
+        self._ring.publish(self._written)
         try:
-            self._ring.publish(self._written)
             self._wake(self._written)
-        except RecordingError as err:
-            failure = err
-        try:
-            child.finish(outcome, error)
-        except RecordingError as err:
-            failure = failure or err
-        if failure is not None:
-            raise failure
+        except RecordingError:
+            pass  # the recorder has stopped: finish says why (a start failure it said first)
+        child.finish(outcome, error)
 
     def _free_twins_thread(self) -> None:
         """The twin's thread may run on every CPU it could before the recording again."""
@@ -345,16 +340,22 @@ class _Child:
 
     def finish(self, outcome: str, error: str) -> None:
         """Have the writers finalize with the run's outcome and wait for them (or their failure:
-        RecordingError), and for the process."""
+        RecordingError), and for the process. The start replies still due come first (a writer that
+        could not start: the recorder ends the others as error)."""
         try:
             self.conn.send_bytes(CLOSE + marshal.dumps((outcome, error)))
+            sent: OSError | None = None
         except OSError as err:
-            text = self.exit_text()
-            self.stop()
-            raise RecordingError(
-                f"recording could not be finished: the recorder process stopped ({text})"
-            ) from err
+            sent = err
         try:
+            while self.starting:
+                self.starting.pop(0)
+                self.expect_ok("recording could not start")
+            if sent is not None:
+                raise RecordingError(
+                    f"recording could not be finished: the recorder process stopped "
+                    f"({self.exit_text()})"
+                ) from sent
             self.expect_ok("recording could not be finished")
         except RecordingError:
             self.stop()

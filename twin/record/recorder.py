@@ -13,6 +13,7 @@ waits for it; the close request is answered with the failure, in one line.
 from __future__ import annotations
 
 import collections
+import functools
 import marshal
 import os
 import pickle
@@ -76,29 +77,72 @@ def serve(
     engine: dict[str, str] | None,
 ) -> None:
     """The recorder process: start each writer (one start reply each, in order), feed them what the
-    twin publishes, finish on request."""
+    twin publishes, finish on request. The first writer starts before anything else; the others
+    start in a thread of their own while the first one is fed (the twin does not wait for them:
+    their rows gather in the ring), and their start replies follow once they have started."""
     if "pandas" not in sys.modules:  # pyarrow (under rerun) would import it, 0.3 s, only to ask
         # whether arrays are pandas objects: they never are here
         sys.meta_path.insert(0, _NoPandas())
-    feeds: list[_Feed] = []
-    failed = False
-    for writer in writers:
-        try:
-            sink = _make(
-                writer, config=config, run=run, urdf=urdf, meshes=meshes, rate=rate, engine=engine
-            )
-        except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
-            if not failed:
-                conn.send_bytes(str(err).encode())
-            failed = True
-            continue
-        feeds.append(_Feed(ring, sink, writer))
-        if not failed:
-            conn.send_bytes(STARTED)
-    if failed:  # the twin stops the run at the first failure: the writers that started end as error
-        _close_all([feed.sink for feed in feeds], "error", "recording could not start")
+    make = functools.partial(
+        _make, config=config, run=run, urdf=urdf, meshes=meshes, rate=rate, engine=engine
+    )
+    feeds = [_Feed(ring, None, writer) for writer in writers]
+    error = _start(feeds[0], make)
+    if error:
+        conn.send_bytes(error.encode())
+        for feed in feeds[1:]:  # the others end as error, as after a failure in the run
+            _start(feed, make)
+        _close_all([feed.sink for feed in feeds if feed.sink], "error", "recording could not start")
         os._exit(0)
-    _loop(conn, ring, feeds, _Clock())  # from here: the writers' starts are not per frame
+    conn.send_bytes(STARTED)
+    clock = _Clock()  # from here: the first writer's start is not per frame, nor the others'
+    _loop(conn, ring, feeds, clock, _Starter(feeds[1:], make))
+
+
+def _start(feed: _Feed, make) -> str:
+    """Start a feed's writer: '' once it has, else why not, in one line."""
+    try:
+        feed.sink = make(feed.writer)
+    except Exception as err:  # noqa: BLE001 - reported to the twin's process as one line
+        return str(err)
+    return ""
+
+
+class _Starter(threading.Thread):
+    """The writers after the first, started one after another in this thread while the recorder
+    feeds the first: the first failure ends it. Its CPU time is not per frame (RecorderStats)."""
+
+    def __init__(self, feeds: list[_Feed], make) -> None:
+        super().__init__(name="twin-recorder-start", daemon=True)
+        self.feeds, self.make = feeds, make
+        self.error = ""
+        self.cpu_s = 0.0
+        self.replied = not feeds  # whether the recorder has sent their start replies
+        if feeds:
+            self.start()
+
+    def run(self) -> None:
+        t0 = time.thread_time()
+        for feed in self.feeds:
+            self.error = _start(feed, self.make)
+            if self.error:
+                break
+        self.cpu_s = time.thread_time() - t0
+
+    def reply(self, conn, feeds: list[_Feed], *, wait: bool) -> None:
+        """Once every writer has started (waited for when `wait`): their start replies; after a
+        failure, its text, the started writers ended as error and the process with them."""
+        if self.replied or not (wait or not self.is_alive()):
+            return
+        self.join()
+        self.replied = True
+        if not self.error:
+            for _ in self.feeds:
+                conn.send_bytes(STARTED)
+            return
+        conn.send_bytes(self.error.encode())
+        _close_all([feed.sink for feed in feeds if feed.sink], "error", "recording could not start")
+        os._exit(0)
 
 
 def _make(writer: Writer, *, config, run, urdf, meshes, rate, engine):
@@ -113,7 +157,7 @@ def _make(writer: Writer, *, config, run, urdf, meshes, rate, engine):
     return RerunRecorder(writer.path, config, urdf)
 
 
-def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock) -> None:
+def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock, starter: _Starter) -> None:
     poll = poller(conn)
     synced = 0  # the rows whose others have come: what the writers may take in
     while True:
@@ -125,20 +169,24 @@ def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock) -> None:
         if end == "died":  # every published row before the first other it was not sent
             synced = max(synced, min(ring.written(), ring.others_from()))
         final = end is not None
+        if end != "died":  # the close waits for the writers still starting
+            starter.reply(conn, feeds, wait=final)
         for feed in feeds:
             # the rows the twin woke it for: those whose others it has (all, at the close and at
-            # the twin's death)
+            # the twin's death); a writer still starting takes them in later
+            if feed.sink is None:
+                continue
             if final or feed.due(synced):
                 feed.take(synced, final=final)
                 ring.release(feed.writer.reader, feed.read)
         if end == "died":  # the twin's process died: keep what arrived, unfinalized
             for feed in feeds:
-                if not feed.failure:
+                if feed.sink is not None and not feed.failure:
                     _abandon([feed.sink])
             os._exit(0)
         if final:
             failure = _finish(feeds, *end)
-            stats = clock.stats(feeds)
+            stats = clock.stats(feeds, starter.cpu_s)
             conn.send_bytes(failure.encode() if failure else DONE + marshal.dumps(stats))
             os._exit(0)
 
@@ -191,10 +239,11 @@ class _Clock:
     def __init__(self) -> None:
         self.cpu0, self.thread0 = time.process_time(), time.thread_time()
 
-    def stats(self, feeds: list[_Feed]) -> tuple:
+    def stats(self, feeds: list[_Feed], start_s: float) -> tuple:
         """RecorderStats' fields: everything this thread did outside the writers' calls is the
-        recorder's own work; the other threads (Rerun's) are the Rerun writer's."""
-        cpu_s = time.process_time() - self.cpu0
+        recorder's own work; the other threads (Rerun's) are the Rerun writer's, but for the
+        `start_s` seconds of the thread that started the writers after the first."""
+        cpu_s = time.process_time() - self.cpu0 - start_s
         thread_s = time.thread_time() - self.thread0
         by_writer = {feed.writer.kind: feed.in_writer_s for feed in feeds}
         if "rrd" in by_writer:

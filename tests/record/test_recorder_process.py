@@ -206,6 +206,24 @@ def test_a_writer_that_fails_after_the_checks_stops_the_run_in_one_line(tmp_path
     assert (tmp_path / "x.rrd").exists()  # the view ended as error, finished
 
 
+def test_a_view_that_fails_to_start_beside_the_run_stops_it_in_one_line(tmp_path):
+    """The Rerun writer starts in a thread of the recorder while the MCAP one is fed: when it
+    cannot (its NAME.partial is a folder), the run stops in one line and the MCAP file ends as
+    error, finalized."""
+    (tmp_path / "x.rrd.partial").mkdir()
+    config = TwinConfig()
+    with (
+        pytest.raises(RecordingError) as err,
+        open_recorders(
+            config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+        ) as sinks,
+    ):
+        Twin(config, sinks=sinks).step(2000)
+    assert "x.rrd.partial" in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "x.rrd").exists()
+    assert load(tmp_path / "x.mcap").meta[S.META_FINALIZED]["outcome"] == "error"
+
+
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the recorders share it")
 def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
     """While it records, the twin's thread keeps to the CPU it was on and the recorder (one process

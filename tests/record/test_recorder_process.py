@@ -224,17 +224,35 @@ def test_a_view_that_fails_to_start_beside_the_run_stops_it_in_one_line(tmp_path
     assert load(tmp_path / "x.mcap").meta[S.META_FINALIZED]["outcome"] == "error"
 
 
+def test_a_run_that_fails_before_its_first_frame_still_says_how_it_ended(tmp_path):
+    """The recorder is forked at the twin's first Frame: a run that never makes one (its scene
+    fails to build) still gets both files, the MCAP one finalized as error."""
+    with (
+        pytest.raises(ValueError),
+        open_recorders(
+            TwinConfig(), RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+        ),
+    ):
+        raise ValueError("no scene")
+    finalized = load(tmp_path / "x.mcap").meta[S.META_FINALIZED]
+    assert finalized["outcome"] == "error" and "no scene" in finalized["error"]
+    assert finalized["frames"] == "0" and (tmp_path / "x.rrd").exists()
+
+
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the recorders share it")
 def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
-    """While it records, the twin's thread keeps to the CPU it was on and the recorder (one process
-    for both writers) to every other one; afterwards the thread may run where it could before."""
+    """While it records (from the twin's first Frame, when the recorder is forked), the twin's
+    thread keeps to the CPU it was on and the recorder (one process for both writers) to every
+    other one; afterwards the thread may run where it could before."""
     config = TwinConfig()
     before = os.sched_getaffinity(0)
     with open_recorders(
         config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
     ) as sinks:
+        assert sinks[0]._children == [] and os.sched_getaffinity(0) == before
+        twin = Twin(config, sinks=sinks)
         twins = os.sched_getaffinity(0)
         cpus = [os.sched_getaffinity(child.process.pid) for child in sinks[0]._children]
-        Twin(config, sinks=sinks).step(20)
+        twin.step(20)
     assert os.sched_getaffinity(0) == before
     assert len(twins) == 1 and cpus == [before - twins]

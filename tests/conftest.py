@@ -36,6 +36,25 @@ def pytest_configure(config: pytest.Config) -> None:
     compileall.compile_dir(ROOT / "twin", quiet=1)
 
 
+def pytest_itemcollected(item: pytest.Item) -> None:
+    """A test that uses a module-scoped fixture runs on the worker of its module's other such tests
+    (pyproject's `--dist loadgroup`): under xdist's plain `load`, tests of one module went to both
+    workers and each made the module's fixtures, e.g. test_remote_seeds' seed_runs twice (13 s
+    of setup on each worker in one run). xdist schedules such groups first, largest first."""
+    info = getattr(item, "_fixtureinfo", None)
+    defs = info.name2fixturedefs.values() if info is not None else ()
+    if any(d and d[-1].scope == "module" for d in defs):
+        item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The tests marked slow first (otherwise in their order): the workers take the single tests
+    in this order, so a long one (the web viewer's, 1-2 min) no longer starts last while the other
+    worker has nothing left to do."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture(scope="session")
 def pick_place_mcap(tmp_path_factory):
     """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector

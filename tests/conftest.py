@@ -13,8 +13,9 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))  # `import support...` from any folder, whatever pytest's import mode
 
-from support.camera_run import record_camera_run
+from support.camera_run import camera_run_paths, record_camera_run
 from support.runs import collect_pick_place
+from support.shared import made_once
 
 ROOT = TESTS.parent  # the checkout: README.md, recordings/, tools/
 # twin check appends its table to the file GitHub names here: the suite's many checks would fill
@@ -66,9 +67,13 @@ def pick_place_mcap(tmp_path_factory):
 @pytest.fixture(scope="session")
 def pick_place_cli(tmp_path_factory):
     """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own
-    process: {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing
-    them."""
-    tmp = tmp_path_factory.mktemp("pick_place_cli")
+    process, once for the run's workers: {"tmp": folder, "mcap": path, "rrd": path}. Read them;
+    copy them before changing them."""
+    tmp = made_once(tmp_path_factory, "pick_place_cli", _record_pick_place_cli)
+    return {"tmp": tmp, "mcap": tmp / "pick_place.mcap", "rrd": tmp / "pick_place.rrd"}
+
+
+def _record_pick_place_cli(tmp: Path) -> None:
     mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
     # the rerun SDK may write its analytics config under HOME
     env = {**os.environ, "HOME": str(tmp)}
@@ -93,12 +98,11 @@ def pick_place_cli(tmp_path_factory):
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    return {"tmp": tmp, "mcap": mcap, "rrd": rrd}
 
 
 @pytest.fixture(scope="session")
 def camera_run(tmp_path_factory):
     """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras
-    (320x240, 15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before
-    changing them."""
-    return record_camera_run(tmp_path_factory.mktemp("camera_run"))
+    (320x240, 15 Hz), MCAP and .rrd, once for the run's workers: {"mcap": path, "rrd": path}. Read
+    them; copy them before changing them."""
+    return camera_run_paths(made_once(tmp_path_factory, "camera_run", record_camera_run))

@@ -20,6 +20,7 @@ from support.docs_examples import (
     page_file,
     run_workflow,
 )
+from support.shared import made_once
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
@@ -39,8 +40,12 @@ def readme_first_run() -> list[str]:
 
 @pytest.fixture(scope="session")
 def first_run(tmp_path_factory) -> Path:
-    """A folder whose runs/ holds what the README's first command records (both files)."""
-    folder = tmp_path_factory.mktemp("first-run")
+    """A folder whose runs/ holds what the README's first command records (both files), made once
+    for the run's workers."""
+    return made_once(tmp_path_factory, "first-run", _record_first_run) / "runs"
+
+
+def _record_first_run(folder: Path) -> None:
     argv = readme_first_run()
     done = subprocess.run(
         [sys.executable, "-m", "twin.cli", *argv[1:]],
@@ -51,7 +56,6 @@ def first_run(tmp_path_factory) -> Path:
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    return folder / "runs"
 
 
 def _env(home: Path) -> dict[str, str]:

@@ -48,14 +48,6 @@ def pytest_itemcollected(item: pytest.Item) -> None:
         item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
-@pytest.hookimpl(trylast=True)
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tests marked slow first (otherwise in their order): the workers take the single tests
-    in this order, so a long one (the web viewer's, 1-2 min) no longer starts last while the other
-    worker has nothing left to do."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
-
-
 @pytest.fixture(scope="session")
 def pick_place_mcap(tmp_path_factory):
     """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector

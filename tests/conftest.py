@@ -13,8 +13,9 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))  # `import support...` from any folder, whatever pytest's import mode
 
-from support.camera_run import record_camera_run
+from support.camera_run import camera_run_paths, record_camera_run
 from support.runs import collect_pick_place
+from support.shared import made_once
 
 ROOT = TESTS.parent  # the checkout: README.md, recordings/, tools/
 # twin check appends its table to the file GitHub names here: the suite's many checks would fill
@@ -36,6 +37,17 @@ def pytest_configure(config: pytest.Config) -> None:
     compileall.compile_dir(ROOT / "twin", quiet=1)
 
 
+def pytest_itemcollected(item: pytest.Item) -> None:
+    """A test that uses a module-scoped fixture runs on the worker of its module's other such tests
+    (pyproject's `--dist loadgroup`): under xdist's plain `load`, tests of one module went to both
+    workers and each made the module's fixtures, e.g. test_remote_seeds' seed_runs twice (13 s
+    of setup on each worker in one run). xdist schedules such groups first, largest first."""
+    info = getattr(item, "_fixtureinfo", None)
+    defs = info.name2fixturedefs.values() if info is not None else ()
+    if any(d and d[-1].scope == "module" for d in defs):
+        item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
 @pytest.fixture(scope="session")
 def pick_place_mcap(tmp_path_factory):
     """One pick_place cycle recorded to MCAP in this process (open_recorders), with a FrameCollector
@@ -47,9 +59,13 @@ def pick_place_mcap(tmp_path_factory):
 @pytest.fixture(scope="session")
 def pick_place_cli(tmp_path_factory):
     """One pick_place cycle recorded as MCAP and .rrd by the real `twin run` command, in its own
-    process: {"tmp": folder, "mcap": path, "rrd": path}. Read them; copy them before changing
-    them."""
-    tmp = tmp_path_factory.mktemp("pick_place_cli")
+    process, once for the run's workers: {"tmp": folder, "mcap": path, "rrd": path}. Read them;
+    copy them before changing them."""
+    tmp = made_once(tmp_path_factory, "pick_place_cli", _record_pick_place_cli)
+    return {"tmp": tmp, "mcap": tmp / "pick_place.mcap", "rrd": tmp / "pick_place.rrd"}
+
+
+def _record_pick_place_cli(tmp: Path) -> None:
     mcap, rrd = tmp / "pick_place.mcap", tmp / "pick_place.rrd"
     # the rerun SDK may write its analytics config under HOME
     env = {**os.environ, "HOME": str(tmp)}
@@ -74,12 +90,11 @@ def pick_place_cli(tmp_path_factory):
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    return {"tmp": tmp, "mcap": mcap, "rrd": rrd}
 
 
 @pytest.fixture(scope="session")
 def camera_run(tmp_path_factory):
     """One pick_place cycle recorded by the real `twin run` with the overhead and wrist cameras
-    (320x240, 15 Hz), MCAP and .rrd: {"mcap": path, "rrd": path}. Read them; copy them before
-    changing them."""
-    return record_camera_run(tmp_path_factory.mktemp("camera_run"))
+    (320x240, 15 Hz), MCAP and .rrd, once for the run's workers: {"mcap": path, "rrd": path}. Read
+    them; copy them before changing them."""
+    return camera_run_paths(made_once(tmp_path_factory, "camera_run", record_camera_run))

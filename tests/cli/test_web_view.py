@@ -16,7 +16,6 @@ import time
 import numpy as np
 import pytest
 from PIL import Image
-from support.camera_run import record_camera_run
 
 pytestmark = [
     pytest.mark.slow,  # the web viewer's WASM takes 40-70 s to load here
@@ -50,13 +49,12 @@ def _shows_recording(colours: dict[str, int]) -> bool:
 
 
 @pytest.fixture
-def web_view(tmp_path):
+def web_view(camera_run, tmp_path):
     """`twin view CAMERA.rrd --web` as a real process: (its process, the printed URL's page and
-    query)."""
-    run = record_camera_run(tmp_path)
+    query). The session's camera run (the viewer only reads it), not one recorded for this test."""
     env = {**os.environ, "HOME": str(tmp_path), "TMPDIR": str(tmp_path)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "twin.cli", "view", str(run["rrd"]), "--web"],
+        [sys.executable, "-m", "twin.cli", "view", str(camera_run["rrd"]), "--web"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

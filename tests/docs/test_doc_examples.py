@@ -20,6 +20,7 @@ from support.docs_examples import (
     page_file,
     run_workflow,
 )
+from support.shared import made_once
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
@@ -39,8 +40,12 @@ def readme_first_run() -> list[str]:
 
 @pytest.fixture(scope="session")
 def first_run(tmp_path_factory) -> Path:
-    """A folder whose runs/ holds what the README's first command records (both files)."""
-    folder = tmp_path_factory.mktemp("first-run")
+    """A folder whose runs/ holds what the README's first command records (both files), made once
+    for the run's workers."""
+    return made_once(tmp_path_factory, "first-run", _record_first_run) / "runs"
+
+
+def _record_first_run(folder: Path) -> None:
     argv = readme_first_run()
     done = subprocess.run(
         [sys.executable, "-m", "twin.cli", *argv[1:]],
@@ -51,12 +56,10 @@ def first_run(tmp_path_factory) -> Path:
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    return folder / "runs"
 
 
-@pytest.fixture
-def docs_env(tmp_path) -> dict[str, str]:
-    home = tmp_path / "home"
+def _env(home: Path) -> dict[str, str]:
+    """A user's environment, with home as HOME (made here)."""
     home.mkdir()
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "TWIN_"))}
     bin_dir = Path(sys.executable).parent  # twin's own interpreter first, as after `pip install`
@@ -66,6 +69,11 @@ def docs_env(tmp_path) -> dict[str, str]:
         "MPLBACKEND": "Agg",
         "PATH": f"{bin_dir}:{env.get('PATH', '')}",
     }
+
+
+@pytest.fixture
+def docs_env(tmp_path) -> dict[str, str]:
+    return _env(tmp_path / "home")
 
 
 def _workdir(tmp_path: Path, first_run: Path) -> Path:
@@ -87,6 +95,22 @@ def _run_page(page: Path, work: Path, env: dict[str, str]) -> None:
             run.run(block)
     finally:
         run.close()
+
+
+@pytest.fixture(scope="module")
+def ci_page_done(tmp_path_factory, first_run) -> Path:
+    """A user's folder after every example of the CI page ran in it, once for the CI tests below:
+    each works on a copy."""
+    folder = tmp_path_factory.mktemp("ci-page")
+    work = _workdir(folder, first_run)
+    _run_page(CI_PAGE, work, _env(folder / "home"))
+    return work
+
+
+def _ci_page_work(ci_page_done: Path, tmp_path: Path) -> Path:
+    work = tmp_path / "work"
+    shutil.copytree(ci_page_done, work, symlinks=True)  # tools/ and tests/fixtures stay links
+    return work
 
 
 @pytest.mark.parametrize("page", WITH_EXAMPLES, ids=lambda p: str(p.relative_to(ROOT)))
@@ -137,10 +161,9 @@ def _careless_edit(work: Path) -> None:
 
 
 def test_the_ci_job_passes_then_fails_on_a_changed_task_and_keeps_its_artifacts(
-    tmp_path, first_run, docs_env
+    tmp_path, ci_page_done, docs_env
 ):
-    work = _workdir(tmp_path, first_run)
-    _run_page(CI_PAGE, work, docs_env)
+    work = _ci_page_work(ci_page_done, tmp_path)
     workflow = page_file(CI_PAGE, WORKFLOW)
     assert (work / WORKFLOW).read_text() == workflow
     job = run_workflow(workflow, work, docs_env)
@@ -174,11 +197,12 @@ def test_the_ci_job_passes_then_fails_on_a_changed_task_and_keeps_its_artifacts(
     assert rrd.read_bytes()[:3] == b"RRF" and rrd.stat().st_size > 10_000
 
 
-def test_without_shell_bash_the_ci_job_stays_green_on_a_changed_task(tmp_path, first_run, docs_env):
+def test_without_shell_bash_the_ci_job_stays_green_on_a_changed_task(
+    tmp_path, ci_page_done, docs_env
+):
     """The page's job with its `shell: bash` lines removed, as GitHub would run it: `twin check`
     finds the changed golden and exits 1, `tee` exits 0, the job passes. The line matters."""
-    work = _workdir(tmp_path, first_run)
-    _run_page(CI_PAGE, work, docs_env)
+    work = _ci_page_work(ci_page_done, tmp_path)
     workflow, removed = re.subn(r"(?m)^ *shell: bash\n", "", page_file(CI_PAGE, WORKFLOW))
     assert removed >= 1
     _careless_edit(work)

@@ -9,10 +9,15 @@ import sys
 from pathlib import Path
 
 
+def camera_run_paths(folder: Path) -> dict[str, Path]:
+    """Where record_camera_run(folder) writes: {"mcap": path, "rrd": path}."""
+    return {"mcap": folder / "camera.mcap", "rrd": folder / "camera.rrd"}
+
+
 def record_camera_run(folder: Path, *extra: str) -> dict[str, Path]:
     """`twin run pick_place --cycles 1 --camera overhead --camera wrist` into folder, in its own
     process: {"mcap": path, "rrd": path}."""
-    mcap, rrd = folder / "camera.mcap", folder / "camera.rrd"
+    mcap, rrd = camera_run_paths(folder).values()
     # the rerun SDK may write its analytics config under HOME
     env = {**os.environ, "HOME": str(folder)}
     done = subprocess.run(
@@ -41,4 +46,4 @@ def record_camera_run(folder: Path, *extra: str) -> dict[str, Path]:
         check=False,
     )
     assert done.returncode == 0, done.stderr
-    return {"mcap": mcap, "rrd": rrd}
+    return camera_run_paths(folder)

@@ -123,21 +123,29 @@ def test_an_unchanged_user_task_checks_green_everywhere(user_golden, machine):
     assert done.returncode == 0, done.stdout + done.stderr
 
 
+@pytest.fixture(scope="module")
+def onsets() -> dict[str, int]:
+    """change -> the first step where the changed task's run here differs from the golden: the
+    same run for every machine, so recorded once a change (the first test of it fills it in)."""
+    return {}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("machine", list(MACHINES))
 @pytest.mark.parametrize("change", list(CHANGES))
 def test_a_changed_user_task_fails_the_default_check_at_its_onset(
-    user_golden, tmp_path, machine, change
+    user_golden, onsets, tmp_path, machine, change
 ):
     d = tmp_path / "work"
     shutil.copytree(user_golden, d)
     name, value = CHANGES[change].split("=")
     source = (d / "my_task.py").read_text()
     (d / "my_task.py").write_text(re.sub(rf"{name}=[0-9.]+", f"{name}={value}", source, count=1))
-    # here, for the onset
-    changed = twin_cli("run", d / "my_task.py", "--record", d / "changed.mcap")
-    assert changed.returncode == 0, changed.stderr
-    onset = _first_change(load(d / "golden.mcap"), load(d / "changed.mcap"))
+    if change not in onsets:  # here, for the onset
+        changed = twin_cli("run", d / "my_task.py", "--record", d / "changed.mcap")
+        assert changed.returncode == 0, changed.stderr
+        onsets[change] = _first_change(load(d / "golden.mcap"), load(d / "changed.mcap"))
+    onset = onsets[change]
     done = twin_cli("check", "-v", d / "golden.mcap", env=MACHINES[machine])
     assert done.returncode == 1, done.stdout + done.stderr
     step = int(re.search(r"^first divergence: step (\d+)", done.stdout, re.MULTILINE).group(1))

@@ -7,6 +7,7 @@ import math
 import os
 import sys
 import time
+from typing import TYPE_CHECKING
 
 from twin.cli.args import (
     add_param_option,
@@ -30,9 +31,9 @@ from twin.cli.view import add_view_command
 from twin.model.errors import ConfigError, TwinError
 from twin.model.sink import Sink
 from twin.signals import Terminated, stop_signals_raise
-from twin.sim.twin import Twin
-from twin.sim.world import engine_versions
-from twin.tasks import TimeLimit, check_params, resolve, run_task, task_params
+
+if TYPE_CHECKING:
+    from twin.sim.twin import Twin
 
 DEFAULT_CYCLES = 2
 BROKEN_PIPE_EXIT = 141  # 128 + SIGPIPE: standard output was closed by its reader
@@ -41,7 +42,12 @@ BROKEN_PIPE_EXIT = 141  # 128 + SIGPIPE: standard output was closed by its reade
 def cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    # here, not at the top: every `twin` command parses with this module, and only `run` steps a
+    # twin (the suite starts hundreds of twin processes; each import left out is CPU saved)
     from twin.record import open_recorders  # only record/ touches mcap and rerun
+    from twin.sim.twin import Twin
+    from twin.sim.world import engine_versions
+    from twin.tasks import TimeLimit, resolve, run_task
     from twin.verify.check import task_run
 
     fn = resolve(args.task)
@@ -82,6 +88,8 @@ def run_params(fn, args: argparse.Namespace) -> dict:
     """The task parameters of `twin run`: --param pairs and --cycles, checked against the task's
     signature (an unknown name is an error, exit 2). A task that takes `cycles` gets 2 when neither
     names it, as before --param existed."""
+    from twin.tasks import check_params, task_params
+
     params = params_dict(args.param)
     if args.cycles is not None:
         if "cycles" in params:

@@ -55,8 +55,8 @@ def test_rrd_holds_every_picture_on_the_cameras_entity(camera_run, tmp_path, cap
 @pytest.mark.skipif(
     not glob.glob("/usr/share/vulkan/icd.d/*.json"), reason="the headless viewer needs Vulkan"
 )
-def test_viewer_shows_the_pictures_beside_the_3d_view(camera_run, capsys):
-    png = camera_run["mcap"].parent / "camera.png"
+def test_viewer_shows_the_pictures_beside_the_3d_view(camera_run, tmp_path, capsys):
+    png = tmp_path / "camera.png"
     # at the attach
     assert main(["view", str(camera_run["rrd"]), "--screenshot", str(png), "--at", "2.27"]) == 0
     image = np.asarray(Image.open(png).convert("RGB")).astype(int)

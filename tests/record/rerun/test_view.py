@@ -84,8 +84,8 @@ def _one_line_error(capsys, argv: list[str], *expected: str) -> None:
         assert text in lines[0]
 
 
-def test_mcap_converts_to_an_rrd_with_every_frame(recorded, capsys):
-    out = recorded["tmp"] / "converted.rrd"
+def test_mcap_converts_to_an_rrd_with_every_frame(recorded, tmp_path, capsys):
+    out = tmp_path / "converted.rrd"
     assert main(["view", str(recorded["mcap"]), "--rrd", str(out)]) == 0
     recording = load(recorded["mcap"])
     assert capsys.readouterr().out.strip() == f"wrote {out}: {len(recording.frames)} frames"
@@ -144,10 +144,10 @@ def test_holding_time_is_the_end_of_the_first_hold(recorded):
 @pytest.mark.skipif(
     not HAVE_VULKAN, reason="no Vulkan driver (Debian: mesa-vulkan-drivers) for the headless viewer"
 )
-def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, capsys):
+def test_screenshot_shows_the_arm_the_box_and_the_plots(recorded, tmp_path, capsys):
     from PIL import Image
 
-    png = recorded["tmp"] / "pick_place.png"
+    png = tmp_path / "pick_place.png"
     png.write_bytes(b"the user's own picture")  # --force replaces it, once the new one is whole
     assert main(["view", str(recorded["mcap"]), "--screenshot", str(png), "--force"]) == 0
     out = capsys.readouterr().out

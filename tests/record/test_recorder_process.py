@@ -256,3 +256,37 @@ def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
         twin.step(20)
     assert os.sched_getaffinity(0) == before
     assert len(twins) == 1 and cpus == [before - twins]
+
+
+def test_a_view_slow_to_start_holds_the_twin_back_without_locking_it(tmp_path):
+    """The Rerun writer starts in a thread of the recorder: one slower to start than the twin is
+    to fill the ring (4,096 rows) makes the twin wait for it, and the recorder wakes to feed it
+    once it has started, with nothing lost (in a process of its own: a lock would hang it)."""
+    script = textwrap.dedent(f"""
+        import time
+        from twin.model.config import TwinConfig
+        from twin.record import open_recorders
+        from twin.record.rerun.writer import RerunRecorder
+        from twin.sim.twin import Twin
+        start = RerunRecorder.__init__
+        def slow(self, *args, **kwargs):
+            time.sleep(1.0)
+            start(self, *args, **kwargs)
+        RerunRecorder.__init__ = slow  # forked into the recorder with it
+        config = TwinConfig()
+        with open_recorders(
+            config, {RUN!r}, mcap_path={str(tmp_path / "x.mcap")!r},
+            rrd_path={str(tmp_path / "x.rrd")!r},
+        ) as sinks:
+            twin = Twin(config, sinks=sinks)
+            twin.step(6000)
+            twin.close()
+        print(sinks[0].waits)
+    """)
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert int(done.stdout) >= 1  # the twin waited for the view
+    assert len(load(tmp_path / "x.mcap").frames) == 6001
+    assert (tmp_path / "x.rrd").stat().st_size > 0

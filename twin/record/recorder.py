@@ -118,6 +118,10 @@ class _Starter(threading.Thread):
         self.error = ""
         self.cpu_s = 0.0
         self.replied = not feeds  # whether the recorder has sent their start replies
+        self.finished = False  # whether every writer has started, or one could not
+        # a byte down this pipe wakes the recorder when the writers have started: a twin waiting
+        # for one of them (it would pass the ring) sends no other wake-up
+        self.done_fd, self._done_w = os.pipe()
         if feeds:
             self.start()
 
@@ -128,14 +132,17 @@ class _Starter(threading.Thread):
             if self.error:
                 break
         self.cpu_s = time.thread_time() - t0
+        self.finished = True
+        os.write(self._done_w, b"S")
 
     def reply(self, conn, feeds: list[_Feed], *, wait: bool) -> None:
         """Once every writer has started (waited for when `wait`): their start replies; after a
         failure, its text, the started writers ended as error and the process with them."""
-        if self.replied or not (wait or not self.is_alive()):
+        if self.replied or not (wait or self.finished):
             return
         self.join()
         self.replied = True
+        os.read(self.done_fd, 1)
         if not self.error:
             for _ in self.feeds:
                 conn.send_bytes(STARTED)
@@ -158,12 +165,14 @@ def _make(writer: Writer, *, config, run, urdf, meshes, rate, engine):
 
 
 def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock, starter: _Starter) -> None:
-    poll = poller(conn)
+    poll = poller(conn)  # the twin's pipe
+    asleep = poller(conn)  # and the writers' start
+    asleep.register(starter.done_fd, select.POLLIN)
     synced = 0  # the rows whose others have come: what the writers may take in
     while True:
-        # asleep until the twin wakes it (rows to take in, with the others before them; the close)
-        # or the pipe ends
-        poll.poll()
+        # asleep until the twin wakes it (rows to take in, with the others before them; the close),
+        # the pipe ends or the writers after the first have started
+        asleep.poll()
         end, woken_to = _take_messages(conn, poll, feeds)
         synced = max(synced, woken_to)
         if end == "died":  # every published row before the first other it was not sent

@@ -187,11 +187,11 @@ def test_an_unreadable_mesh_leaves_an_existing_recording_alone(tmp_path):
     assert path.read_bytes() == b"an earlier recording"
 
 
-def test_a_writer_that_fails_after_the_checks_stops_the_run_in_one_line(tmp_path):
-    """The recorders start beside the twin's scene: a writer that fails in its process (here its
-    NAME.partial is a folder, which the path checks before the fork do not see) stops the run at
-    the twin's first publish, in one line, and the other writer ends as error."""
-    (tmp_path / "x.mcap.partial").mkdir()
+def _run_with_a_folder_in_the_way(tmp_path, name: str, *, steps: int):
+    """A run recorded to x.mcap and x.rrd in tmp_path, a folder made at `name` first (a writer's
+    NAME.partial: the path checks before the fork do not see it); the RecordingError it stops
+    with."""
+    (tmp_path / name).mkdir()
     config = TwinConfig()
     with (
         pytest.raises(RecordingError) as err,
@@ -199,7 +199,15 @@ def test_a_writer_that_fails_after_the_checks_stops_the_run_in_one_line(tmp_path
             config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
         ) as sinks,
     ):
-        Twin(config, sinks=sinks).step(100)
+        Twin(config, sinks=sinks).step(steps)
+    return err
+
+
+def test_a_writer_that_fails_after_the_checks_stops_the_run_in_one_line(tmp_path):
+    """The recorders start beside the twin's scene: a writer that fails in its process (here its
+    NAME.partial is a folder, which the path checks before the fork do not see) stops the run at
+    the twin's first publish, in one line, and the other writer ends as error."""
+    err = _run_with_a_folder_in_the_way(tmp_path, "x.mcap.partial", steps=100)
     assert "x.mcap" in str(err.value) and "\n" not in str(err.value)
     assert "could not start" in str(err.value) or "cannot write" in str(err.value)
     assert not (tmp_path / "x.mcap").exists()
@@ -210,15 +218,7 @@ def test_a_view_that_fails_to_start_beside_the_run_stops_it_in_one_line(tmp_path
     """The Rerun writer starts in a thread of the recorder while the MCAP one is fed: when it
     cannot (its NAME.partial is a folder), the run stops in one line and the MCAP file ends as
     error, finalized."""
-    (tmp_path / "x.rrd.partial").mkdir()
-    config = TwinConfig()
-    with (
-        pytest.raises(RecordingError) as err,
-        open_recorders(
-            config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
-        ) as sinks,
-    ):
-        Twin(config, sinks=sinks).step(2000)
+    err = _run_with_a_folder_in_the_way(tmp_path, "x.rrd.partial", steps=2000)
     assert "x.rrd.partial" in str(err.value) and "\n" not in str(err.value)
     assert not (tmp_path / "x.rrd").exists()
     assert load(tmp_path / "x.mcap").meta[S.META_FINALIZED]["outcome"] == "error"

@@ -26,6 +26,7 @@ the first failure.
 
 from __future__ import annotations
 
+import contextlib
 import marshal
 import os
 import pickle
@@ -280,10 +281,10 @@ class RecorderProcess(Sink):
         child = self._child
         child.spread()  # the twin waits from here on: the recorder may use its core too
         self._ring.publish(self._written)
-        try:
+        # a recorder that has stopped cannot be woken: finish says why (a start failure it said
+        # first, else that it stopped)
+        with contextlib.suppress(RecordingError):
             self._wake(self._written)
-        except RecordingError:
-            pass  # the recorder has stopped: finish says why (a start failure it said first)
         child.finish(outcome, error)
 
     def _free_twins_thread(self) -> None:

@@ -170,6 +170,7 @@ def make_session(session: Session, out_dir: Path = RECORDINGS) -> Path:
             session.robot,
             "--record",
             str(path),
+            "--force",  # remaking a golden replaces it
             *session.server_args,
         ],
         stdout=subprocess.PIPE,
@@ -202,10 +203,12 @@ def make_session(session: Session, out_dir: Path = RECORDINGS) -> Path:
 
 
 def _line(server: subprocess.Popen, text: str) -> str:
+    last = ""
     for line in server.stdout:
         if text in line:
             return line
-    raise TwinError(f"twin serve ended before printing {text!r}")
+        last = line.strip() or last
+    raise TwinError(f"twin serve ended before printing {text!r}; its last line: {last!r}")
 
 
 def make(golden: Golden, out_dir: Path = RECORDINGS) -> Path:

@@ -67,6 +67,16 @@ def test_the_goldens_are_the_documented_set():
     assert sum(p.stat().st_size for p in GOLDENS) < 5e6
 
 
+def test_remaking_a_session_golden_replaces_the_file(tmp_path):
+    """tools/regen_goldens.py remakes a session golden over the one in place (the server is asked
+    to replace it: a plain `twin serve --record` refuses an existing file)."""
+    regen = _regen_module()
+    session = next(s for s in regen.sessions() if s.name == "session_seed002")  # the shortest
+    (tmp_path / "session_seed002.mcap").write_bytes(b"an older golden")
+    path = regen.make_session(session, tmp_path)
+    assert load(path).run["source"] == "remote"
+
+
 def test_a_golden_holds_a_suction_break():
     rec = load(RECORDINGS / "pick_place_break_mtb.mcap")
     assert not rec.config.suction.infinite_strength

@@ -211,3 +211,28 @@ def test_a_pad_beside_a_box_at_the_same_height_senses_nothing():
     twin.set_joint_position("z", z_joint_for_height(twin.profile, 0.035))
     twin.step(3)
     assert twin.suction_pad.held == NO_BODY and "attach" not in _kinds(sink)
+
+
+def test_the_sensor_skips_its_ray_only_where_no_object_can_be_sensed():
+    """Suction._may_sense skips the engine's ray and the inside test when the sensor's segment is
+    outside every object's bounding sphere: on a grid of sensor starts around two boxes (one long,
+    turned), wherever it says no, the ray and the inside test find nothing; where they find a box,
+    it says yes; and it says no for most of the grid."""
+    boxes = (
+        SceneObject("box", pos_m=(0.5, 0.0, 0.025)),
+        SceneObject("bar", size_m=(0.2, 0.03, 0.04), pos_m=(0.3, 0.3, 0.02), yaw_rad=0.7),
+    )
+    twin = Twin(TwinConfig(objects=boxes))
+    pad, frame, rng_m = twin.suction_pad, twin.frame, SuctionParams().sensor_range_m
+    skipped = sensed = 0
+    for x in np.arange(0.15, 0.65, 0.02):
+        for y in np.arange(-0.1, 0.45, 0.02):
+            for z_from in (0.004, 0.03, 0.045, 0.05, 0.056, 0.07, 0.09, 0.2):
+                found = twin._world.ray_down(x, y, z_from, rng_m)
+                if found == NO_BODY:
+                    found = pad._inside(frame, (x, y, z_from))
+                may = pad._may_sense(frame, x, y, z_from)
+                assert may or found == NO_BODY, (x, y, z_from, found)
+                skipped += not may
+                sensed += found != NO_BODY
+    assert sensed > 50 and skipped > 0.8 * 25 * 28 * 8

@@ -104,6 +104,7 @@ class World:
         pb.resetSimulation(physicsClientId=c)
         self._constraint = NO_CONSTRAINT
         self._overlapping: list[tuple[int, int]] = []  # (link, body) pairs released while touching
+        self._bare_step = partial(_step_simulation, c)  # stepper(): made once, not at every call
         e = self.config.engine
         pb.setPhysicsEngineParameter(
             fixedTimeStep=self.config.dt_s,
@@ -233,7 +234,7 @@ class World:
         """What step() does, as a call to make every step until the next attach or detach: with no
         released object still overlapping the robot, PyBullet's step itself, without a Python call
         around it (the twin's loop asks again after every suction change)."""
-        return self.step if self._overlapping else partial(_step_simulation, self.client)
+        return self.step if self._overlapping else self._bare_step
 
     # -- reading ----------------------------------------------------------------------------
     def state(self) -> tuple:

@@ -258,28 +258,24 @@ def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
     assert len(twins) == 1 and cpus == [before - twins]
 
 
-def test_a_view_slow_to_start_holds_the_twin_back_without_locking_it(tmp_path):
-    """The Rerun writer starts in a thread of the recorder: one slower to start than the twin is
-    to fill the ring (4,096 rows) makes the twin wait for it, and the recorder wakes to feed it
-    once it has started, with nothing lost (in a process of its own: a lock would hang it)."""
+def _record_with_a_slow_view(tmp_path, slowing: str, stepping: str) -> str:
+    """Record to x.mcap and x.rrd in a process of its own (a lock would hang this one), with
+    `slowing` run first (it patches RerunRecorder, which the recorder forks with) and `stepping`
+    driving `twin`; what the script printed."""
     script = textwrap.dedent(f"""
         import time
         from twin.model.config import TwinConfig
         from twin.record import open_recorders
         from twin.record.rerun.writer import RerunRecorder
         from twin.sim.twin import Twin
-        start = RerunRecorder.__init__
-        def slow(self, *args, **kwargs):
-            time.sleep(1.0)
-            start(self, *args, **kwargs)
-        RerunRecorder.__init__ = slow  # forked into the recorder with it
+        {textwrap.indent(textwrap.dedent(slowing), " " * 8).strip()}
         config = TwinConfig()
         with open_recorders(
             config, {RUN!r}, mcap_path={str(tmp_path / "x.mcap")!r},
             rrd_path={str(tmp_path / "x.rrd")!r},
         ) as sinks:
             twin = Twin(config, sinks=sinks)
-            twin.step(6000)
+            {textwrap.indent(textwrap.dedent(stepping), " " * 12).strip()}
             twin.close()
         print(sinks[0].waits)
     """)
@@ -287,6 +283,46 @@ def test_a_view_slow_to_start_holds_the_twin_back_without_locking_it(tmp_path):
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False
     )
     assert done.returncode == 0, done.stderr
-    assert int(done.stdout) >= 1  # the twin waited for the view
-    assert len(load(tmp_path / "x.mcap").frames) == 6001
     assert (tmp_path / "x.rrd").stat().st_size > 0
+    return done.stdout
+
+
+def test_a_view_slow_to_start_holds_the_twin_back_without_locking_it(tmp_path):
+    """The Rerun writer starts in a thread of the recorder: one slower to start than the twin is
+    to fill the ring (4,096 rows) makes the twin wait for it, and the recorder wakes to feed it
+    once it has started, with nothing lost."""
+    slowing = """
+        start = RerunRecorder.__init__
+        def slow(self, *args, **kwargs):
+            time.sleep(1.0)
+            start(self, *args, **kwargs)
+        RerunRecorder.__init__ = slow
+    """
+    printed = _record_with_a_slow_view(tmp_path, slowing, "twin.step(6000)")
+    assert int(printed) >= 1  # the twin waited for the view
+    assert len(load(tmp_path / "x.mcap").frames) == 6001
+
+
+def test_a_slow_view_batch_does_not_hold_back_the_mcap_file(tmp_path):
+    """The Rerun writer is fed in a thread of its own: while one of its batches takes 2 s, the MCAP
+    writer goes on taking rows in, so the twin (kept within 0.4 s of simulated time of the MCAP
+    file's flushes) steps on; before, the twin waited out the batch. Both files are whole."""
+    slowing = """
+        take = RerunRecorder.on_frames
+        def slow(self, frames):
+            if not getattr(self, "slowed", False):
+                self.slowed = True
+                time.sleep(2.0)
+            take(self, frames)
+        RerunRecorder.on_frames = slow
+    """
+    stepping = """
+        twin.step(200)
+        time.sleep(0.5)  # the view has started: its first take comes at 1,024 rows
+        t0 = time.perf_counter()
+        twin.step(3000)  # fewer than the ring holds: the view's rows cannot hold it back
+        print(time.perf_counter() - t0)
+    """
+    stepped_s, _waits = _record_with_a_slow_view(tmp_path, slowing, stepping).split()
+    assert float(stepped_s) < 1.0  # the 2 s batch did not hold the twin
+    assert len(load(tmp_path / "x.mcap").frames) == 3201

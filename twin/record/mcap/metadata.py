@@ -10,6 +10,7 @@ import math
 import os
 import platform
 import sys
+from functools import cache
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
@@ -27,6 +28,7 @@ def _dumps(value: object) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"))
 
 
+@cache  # a package's version, read once per process (importlib.metadata parses its METADATA)
 def _version(dist: str) -> str:
     try:
         return importlib_metadata.version(dist)

@@ -30,28 +30,31 @@ def pick_place_steps(profile: str = "mtb") -> int:
         twin.close()
 
 
-def _timed_pick_place() -> float:
-    """steps/s of the task alone (building the twin is timed separately)."""
+def _timed_pick_place(clock=time.perf_counter) -> float:
+    """steps/s of the task alone (building the twin is timed separately), timed by `clock`."""
     twin = Twin(TwinConfig())
     try:
-        t0 = time.perf_counter()
+        t0 = clock()
         run_task(twin, TASKS["pick_place"], {"cycles": CYCLES})
-        return twin.step_index / (time.perf_counter() - t0)
+        return twin.step_index / (clock() - t0)
     finally:
         twin.close()
 
 
-def twin_cost_us_per_step(repeats: int, samples: int = 3) -> float:
+def twin_cost_us_per_step(repeats: int, pairs: int = 3) -> float:
     """The twin's own cost per step over the reads floor (bench_record.reads_floor_steps_per_s: the
     same motion on the bare World with a Frame's engine reads): its commands, suction rule, Frame
-    and settle checks. Each repeat takes the best of `samples` runs of each, side by side (a short
-    run is easily slowed by a busy moment); the median over repeats of 1/twin - 1/reads."""
+    and settle checks. Each pair runs the reads floor and then the twin, each timed in the thread's
+    CPU time (neither waits for anything: what a busy moment of another process takes from a short
+    run is left out); the median over repeats x pairs of 1/twin - 1/reads. Runs a few seconds apart
+    on a shared machine differ by more than the cost itself, so the two runs of a pair follow each
+    other."""
     from bench_record import reads_floor_steps_per_s
 
     costs = []
-    for _ in range(repeats):
-        reads = max(reads_floor_steps_per_s(CYCLES) for _ in range(samples))
-        twin = max(_timed_pick_place() for _ in range(samples))
+    for _ in range(repeats * pairs):
+        reads = reads_floor_steps_per_s(CYCLES, clock=time.thread_time)
+        twin = _timed_pick_place(clock=time.thread_time)
         costs.append((1 / twin - 1 / reads) * 1e6)
     return statistics.median(costs)
 
@@ -100,7 +103,7 @@ def bench(ctx) -> list[tuple[str, str]]:
         ),
         (
             "twin cost per step over the reads floor (the same motion and a Frame's engine reads)",
-            f"{cost_us:.2f} us (best of 3 each, median of {repeats} pairs)",
+            f"{cost_us:.2f} us (thread CPU, median of {repeats * 3} pairs)",
         ),
         (
             "twin.step() idle: steps/s (ratio to physics-only)",

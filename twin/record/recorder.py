@@ -177,10 +177,13 @@ class _Later(threading.Thread):
                     feed.ring.release(feed.writer.reader, feed.read)
 
     def feed_to(self, synced: int) -> None:
-        """Let the writers take rows [0, synced) in (and the others before them), in this thread."""
+        """Let the writers take rows [0, synced) in (and the others before them), in this thread,
+        which is woken only once one of them has a take's worth: the main thread is woken every
+        flush (120 frames), the Rerun writer takes 1024 at a time."""
         with self._due:
             self._synced = max(self._synced, synced)
-            self._due.notify()
+            if any(feed.sink is not None and feed.due(self._synced) for feed in self.feeds):
+                self._due.notify()
 
     def end(self, synced: int, ending) -> None:
         """Have the writers take rows [0, synced) and every other in, then end them (_Feed.end),

@@ -60,7 +60,9 @@ class FrameColumns:
         return Frame(*(_PLAIN[f.shape](getattr(self, f.name)[i]) for f in FRAME_FIELDS))
 
     def slice(self, start: int, stop: int) -> FrameColumns:
-        return FrameColumns(**{f.name: getattr(self, f.name)[start:stop] for f in fields(self)})
+        # by position, from the names' tuple: a recorder slices the ring at every wake-up (7.5 ->
+        # 5.1 us a call, timeit; dataclasses.fields builds its tuple anew each call)
+        return FrameColumns(*[getattr(self, name)[start:stop] for name in FIELD_NAMES])
 
     def copy(self) -> FrameColumns:
         """Contiguous copies of every column (of views into memory that will be written over)."""

@@ -326,3 +326,43 @@ def test_a_slow_view_batch_does_not_hold_back_the_mcap_file(tmp_path):
     stepped_s, _waits = _record_with_a_slow_view(tmp_path, slowing, stepping).split()
     assert float(stepped_s) < 1.0  # the 2 s batch did not hold the twin
     assert len(load(tmp_path / "x.mcap").frames) == 3201
+
+
+def test_a_view_writer_error_in_its_thread_is_one_line_and_the_mcap_file_is_whole(tmp_path):
+    """The Rerun writer fails in its own thread (a full disk, say): the close says so in one line,
+    the MCAP file is finalized with every frame, and the view is left as NAME.partial."""
+    script = textwrap.dedent(f"""
+        from twin.model.config import TwinConfig
+        from twin.model.errors import RecordingError
+        from twin.record import open_recorders
+        from twin.record.rerun.writer import RerunRecorder
+        from twin.sim.twin import Twin
+        take = RerunRecorder.on_frames
+        def failing(self, frames):
+            self.takes = getattr(self, "takes", 0) + 1
+            if self.takes == 2:
+                raise OSError(28, "No space left on device")
+            take(self, frames)
+        RerunRecorder.on_frames = failing  # forked into the recorder with it
+        config = TwinConfig()
+        try:
+            with open_recorders(
+                config, {RUN!r}, mcap_path={str(tmp_path / "x.mcap")!r},
+                rrd_path={str(tmp_path / "x.rrd")!r},
+            ) as sinks:
+                twin = Twin(config, sinks=sinks)
+                twin.step(3000)
+                twin.close()
+        except RecordingError as err:
+            print(err)
+    """)
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    said = done.stdout.strip()
+    assert "\n" not in said and "No space left on device" in said, said
+    rec = load(tmp_path / "x.mcap")
+    assert rec.finalized and len(rec.frames) == 3001
+    assert not (tmp_path / "x.rrd").exists()
+    assert partial_path(tmp_path / "x.rrd").exists()

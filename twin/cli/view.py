@@ -42,7 +42,8 @@ def add_view_command(sub: argparse._SubParsersAction) -> None:
         "--grpc-port",
         type=port(allow_any=True),
         default=0,
-        help="port of the viewer's gRPC server, which streams the recording (default: a free one)",
+        help="port the recording is served from: the viewer's gRPC server, or with --web an HTTP "
+        "server of the .rrd in twin view itself (default: a free one)",
     )
     p.add_argument(
         "--at",

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.error
 import urllib.parse
 import urllib.request
 
@@ -20,6 +21,7 @@ import numpy as np
 import psutil
 import pytest
 from support.cli import free_port
+from support.cpu import tree_cpu_over_s
 
 from twin.cli import main
 from twin.record.mcap.reader import load
@@ -209,16 +211,17 @@ def _end_group(proc: subprocess.Popen) -> None:
 
 
 def _served(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[str, int, int]:
-    """(URL, web port, gRPC port) from the line `twin view --web` prints once both listen."""
+    """(URL, web port, recording's port) from the line `twin view --web` prints once both listen:
+    the page's ?url= names the .rrd, served over HTTP by twin view itself."""
     line = _first_line(proc, timeout_s)
     match = URL.match(line)
     assert match, (
         f"no URL line: {line!r}; stderr: {proc.stderr.read() if proc.poll() is not None else ''}"
     )
     source = urllib.parse.unquote(match[3])
-    grpc = re.fullmatch(r"rerun\+http://127\.0\.0\.1:(\d+)/proxy", source)
-    assert grpc, source
-    return match[1], int(match[2]), int(grpc[1])
+    rrd = re.fullmatch(r"http://127\.0\.0\.1:(\d+)/[^/?#]+\.rrd", source)
+    assert rrd, source
+    return match[1], int(match[2]), int(rrd[1])
 
 
 def _first_line(proc: subprocess.Popen, timeout_s: float) -> str:
@@ -261,7 +264,8 @@ def test_two_web_viewers_run_side_by_side_on_loopback(recorded):
         url2, web2, grpc2 = _served(second)
         assert len({web1, grpc1, web2, grpc2}) == 4
         for proc, web, grpc in ((first, web1, grpc1), (second, web2, grpc2)):
-            assert _listening(_viewer_child(proc)) == {("127.0.0.1", web), ("127.0.0.1", grpc)}
+            assert _listening(_viewer_child(proc)) == {("127.0.0.1", web)}
+            assert _listening(psutil.Process(proc.pid)) == {("127.0.0.1", grpc)}  # the .rrd
         for url in (url1, url2):
             with urllib.request.urlopen(url, timeout=10) as response:
                 page = response.read().decode(errors="replace").lower()
@@ -294,6 +298,57 @@ def test_given_ports_are_used_and_busy_ones_are_one_line_errors(recorded, capsys
         ["view", str(recorded["rrd"]), "--web", "--port", str(web), "--grpc-port", str(web)],
         f"--port and --grpc-port are the same port {web}",
     )
+
+
+IDLE_WALL_S = 5.0
+# Measured over 10 s of serving: rerun's gRPC server streaming the file used 9.6 s of CPU (one core
+# spinning); the viewer's files and the .rrd over plain HTTP, 0.00 s.
+IDLE_MAX_CPU_S = 0.5
+
+
+def test_the_web_viewer_idles_while_it_serves(recorded):
+    """Every process `twin view --web` runs (itself, rerun and what rerun starts) together use less
+    than IDLE_MAX_CPU_S of CPU over IDLE_WALL_S of serving: no core kept busy for the user."""
+    proc = _start_view(str(recorded["rrd"]), "--web")
+    try:
+        _served(proc)
+        time.sleep(1.0)  # past the start-up
+        used_s = tree_cpu_over_s(proc.pid, IDLE_WALL_S)
+        assert proc.poll() is None
+        assert used_s < IDLE_MAX_CPU_S, f"{used_s:.2f} s of CPU over {IDLE_WALL_S} s of serving"
+    finally:
+        _end_group(proc)
+
+
+def _fetch(url: str, origin: str, method: str = "GET") -> tuple[int, dict[str, str], bytes]:
+    request = urllib.request.Request(url, method=method, headers={"Origin": origin})
+    try:
+        with urllib.request.urlopen(request, timeout=10) as response:
+            return response.status, dict(response.headers), response.read()
+    except urllib.error.HTTPError as err:
+        return err.code, dict(err.headers), b""
+
+
+def test_the_recording_is_served_whole_and_to_the_viewer_page_only(recorded):
+    proc = _start_view(str(recorded["rrd"]), "--web")
+    try:
+        url, web, port = _served(proc)
+        source = urllib.parse.unquote(urllib.parse.urlparse(url).query.removeprefix("url="))
+        page = f"http://127.0.0.1:{web}"
+        status, headers, body = _fetch(source, page)
+        assert status == 200 and body == recorded["rrd"].read_bytes()
+        assert headers["Access-Control-Allow-Origin"] == page
+        status, headers, body = _fetch(source, page, "HEAD")
+        assert status == 200 and body == b""
+        assert int(headers["Content-Length"]) == recorded["rrd"].stat().st_size
+        # another page in the same browser may not read it; no other path is served
+        status, headers, _ = _fetch(source, f"http://127.0.0.1:{_free_port()}")
+        assert status == 200 and "Access-Control-Allow-Origin" not in headers
+        assert _fetch(f"http://127.0.0.1:{port}/", page)[0] == 404
+        assert _fetch(f"http://127.0.0.1:{port}/../{recorded['rrd'].name}", page)[0] == 404
+        assert proc.poll() is None
+    finally:
+        _end_group(proc)
 
 
 @pytest.mark.skipif(

@@ -16,6 +16,7 @@ import time
 import urllib.parse
 from collections.abc import Callable
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
@@ -33,6 +34,7 @@ from twin.record.rerun.process import (
     wait_listening,
 )
 from twin.record.rerun.rrd_file import file_kind, read_scalars, rerun_executable, verify_rrd
+from twin.record.rerun.rrd_http import serve_rrd, stop_rrd
 from twin.record.rerun.vulkan import INSTALL_HINT, missing_driver
 from twin.record.rerun.writer import write_rrd
 
@@ -107,26 +109,37 @@ def open_native(rrd: str | os.PathLike, work_dir: str | os.PathLike, *, grpc_por
     require_display()
     (port,) = loopback_ports(("--grpc-port", grpc_port))
     cmd = [rerun_executable(), str(rrd), "--bind", LOOPBACK, "--port", str(port)]
-    with open(Path(work_dir) / LOG_NAME, "w+b") as log:
-        proc = spawn(cmd, log, tmp_dir=work_dir)
-        try:
-            code = proc.wait()
-        finally:
-            stop(proc)
-        if code != 0:
-            raise ViewerError(
-                f"the native Rerun viewer exited with code {code} "
-                f"({last_log_line(log) or 'no output'}); "
-                f"without a working display {NO_DISPLAY_HINT}"
-            )
+    code, why = _run_viewer(cmd, work_dir)
+    if code != 0:
+        raise ViewerError(
+            f"the native Rerun viewer exited with code {code} ({why or 'no output'}); "
+            f"without a working display {NO_DISPLAY_HINT}"
+        )
     return 0
 
 
-def web_url(web_port: int, grpc_port: int) -> str:
-    """The address that opens the recording in the web viewer (without ?url= it shows a welcome
-    page)."""
-    source = urllib.parse.quote(f"rerun+http://{LOOPBACK}:{grpc_port}/proxy", safe="")
-    return f"http://{LOOPBACK}:{web_port}/?url={source}"
+def _run_viewer(
+    cmd: list[str],
+    work_dir: str | os.PathLike,
+    on_started: Callable[[subprocess.Popen, IO[bytes]], None] | None = None,
+) -> tuple[int, str]:
+    """Run the viewer `cmd` until it ends (on_started called once it runs), its log in work_dir;
+    stopped whatever happens. Returns its exit code and, if that is not 0, its last log line."""
+    with open(Path(work_dir) / LOG_NAME, "w+b") as log:
+        proc = spawn(cmd, log, tmp_dir=work_dir)
+        try:
+            if on_started is not None:
+                on_started(proc, log)
+            code = proc.wait()
+        finally:
+            stop(proc)
+        return code, (last_log_line(log) if code != 0 else "")
+
+
+def web_url(web_port: int, rrd_url: str) -> str:
+    """The address that opens the recording at rrd_url in the web viewer (without ?url= it shows a
+    welcome page)."""
+    return f"http://{LOOPBACK}:{web_port}/?url={urllib.parse.quote(rrd_url, safe='')}"
 
 
 def serve_web(
@@ -141,35 +154,34 @@ def serve_web(
     browser is opened (`--serve-web`: `--web-viewer` would start the default one, the user opens the
     URL).
 
+    The page loads the file over plain HTTP from a thread of this process (twin.record.rerun.
+    rrd_http) on grpc_port, not from rerun's gRPC server: that one keeps a core busy for as long as
+    it serves a file. Given an http:// source, `rerun --serve-web` serves the viewer's files only.
     Both ports are the given ones or free ones, so several viewers run side by side. Once both
     listen, on_ready gets the URL that opens the recording. Its log and its temporary files go to
     work_dir (a folder the caller removes). Returns 0 when the server ends by itself."""
     web_port, grpc_port = loopback_ports(("--port", web_port), ("--grpc-port", grpc_port))
-    cmd = [
-        rerun_executable(),
-        str(rrd),
-        "--serve-web",
-        "--web-viewer-port",
-        str(web_port),
-        "--port",
-        str(grpc_port),
-        "--bind",
-        LOOPBACK,
-    ]
-    with open(Path(work_dir) / LOG_NAME, "w+b") as log:
-        proc = spawn(cmd, log, tmp_dir=work_dir)
-        try:
-            wait_listening(
-                proc, (web_port, grpc_port), log, "the Rerun web viewer", VIEWER_START_TIMEOUT_S
-            )
-            on_ready(web_url(web_port, grpc_port))
-            code = proc.wait()
-        finally:
-            stop(proc)
+    server = serve_rrd(rrd, grpc_port, web_port)
+    try:
+        cmd = [
+            rerun_executable(),
+            server.url,
+            "--serve-web",
+            "--web-viewer-port",
+            str(web_port),
+            "--bind",
+            LOOPBACK,
+        ]
+
+        def started(proc: subprocess.Popen, log: IO[bytes]) -> None:
+            wait_listening(proc, (web_port,), log, "the Rerun web viewer", VIEWER_START_TIMEOUT_S)
+            on_ready(web_url(web_port, server.url))
+
+        code, why = _run_viewer(cmd, work_dir, started)
         if code != 0:
-            raise ViewerError(
-                f"the Rerun web viewer exited with code {code}: {last_log_line(log) or 'no output'}"
-            )
+            raise ViewerError(f"the Rerun web viewer exited with code {code}: {why or 'no output'}")
+    finally:
+        stop_rrd(server)
     return 0
 
 

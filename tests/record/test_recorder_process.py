@@ -258,6 +258,34 @@ def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
     assert len(twins) == 1 and cpus == [before - twins]
 
 
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the recorders share it")
+def test_at_the_close_every_thread_of_the_recorder_may_use_every_cpu(tmp_path, monkeypatch):
+    """An affinity is a thread's own: at the close the recorder's threads (its main one, the Rerun
+    writer's and the Rerun SDK's) are each let onto the twin's CPU too, not its main thread
+    alone."""
+    from twin.record.process import _Child
+
+    seen = []
+    finish = _Child.finish
+
+    def looked_at(self, *args, **kwargs):
+        tasks = f"/proc/{self.process.pid}/task"
+        seen.append([os.sched_getaffinity(int(tid)) for tid in os.listdir(tasks)])
+        return finish(self, *args, **kwargs)
+
+    monkeypatch.setattr(_Child, "finish", looked_at)
+    config = TwinConfig()
+    before = os.sched_getaffinity(0)
+    with open_recorders(
+        config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+    ) as sinks:
+        twin = Twin(config, sinks=sinks)
+        twin.step(2000)
+        time.sleep(0.5)  # the Rerun writer has started, with its SDK's threads
+    (threads,) = seen
+    assert len(threads) >= 3 and all(cpus == before for cpus in threads)
+
+
 def _record_with_a_slow_view(tmp_path, slowing: str, stepping: str) -> str:
     """Record to x.mcap and x.rrd in a process of its own (a lock would hang this one), with
     `slowing` run first (it patches RerunRecorder, which the recorder forks with) and `stepping`

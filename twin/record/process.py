@@ -337,11 +337,17 @@ class _Child:
 
     def spread(self) -> None:
         """Let the recorder run on every CPU the twin's process may use (it was kept off the
-        twin's)."""
+        twin's): each of its threads, since an affinity is a thread's own (before, only its main
+        thread was moved; the Rerun writer's thread and the Rerun SDK's stayed on its one core)."""
+        pid = self.process.pid
         try:
-            os.sched_setaffinity(self.process.pid, os.sched_getaffinity(0))
+            cpus = os.sched_getaffinity(0)
+            threads = [int(tid) for tid in os.listdir(f"/proc/{pid}/task")]
         except (AttributeError, OSError):  # gone, or the system does not say
-            pass
+            threads, cpus = [pid], None
+        for tid in threads:
+            with contextlib.suppress(AttributeError, OSError, TypeError):  # a thread that ended
+                os.sched_setaffinity(tid, cpus)
 
     def expect_ok(self, what: str) -> None:
         try:

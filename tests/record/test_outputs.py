@@ -138,11 +138,15 @@ def test_a_killed_re_record_leaves_the_old_file_and_a_partial_file_recover_finds
     target = tmp_path / "g.mcap"
     shutil.copy(golden, target)
     before = target.read_bytes()
-    _kill_group(
-        _start_endless(
-            tmp_path, "--record", str(target), "--rrd", str(tmp_path / "g.rrd"), "--force"
-        )
+    run = _start_endless(
+        tmp_path, "--record", str(target), "--rrd", str(tmp_path / "g.rrd"), "--force"
     )
+    # the Rerun writer starts beside the run (3 s of simulated time can pass first on a busy
+    # machine): the kill comes once both writers have their files
+    deadline = time.monotonic() + 30
+    while not (tmp_path / "g.rrd.partial").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    _kill_group(run)
     assert target.read_bytes() == before  # the golden is untouched
     partial = tmp_path / "g.mcap.partial"
     assert (

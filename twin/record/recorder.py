@@ -15,7 +15,6 @@ failure, in one line.
 from __future__ import annotations
 
 import collections
-import contextlib
 import functools
 import marshal
 import os
@@ -37,7 +36,6 @@ STARTED = b"OK"  # a writer's start reply (else: its error, as text)
 COMMAND, EVENT = 0, 1
 IMAGE = 2  # a camera's picture (model.images.CameraImage), pickled like events
 SWITCH_S = 0.0005  # the recorder process's GIL switch interval (serve)
-LATER_NICE = 10  # the later writers' threads' nice value (_Later.run)
 # item kind -> the sinks' method
 _HANDLERS = {COMMAND: "on_command", EVENT: "on_event", IMAGE: "on_image"}
 
@@ -143,11 +141,6 @@ class _Later(threading.Thread):
             self.start()
 
     def run(self) -> None:
-        # on Linux a thread's own nice value, which the Rerun SDK's threads (made from this one)
-        # inherit: they yield the recorder's core to the MCAP writer's feeding (17,855 frames fed
-        # one every 25 us: the twin waited for the recorder 14-17 times before, 4-6 after)
-        with contextlib.suppress(OSError):
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), LATER_NICE)
         t0 = time.thread_time()
         for feed in self.feeds:
             self.error = _start(feed, self.make)

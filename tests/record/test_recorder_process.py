@@ -394,3 +394,30 @@ def test_a_view_writer_error_in_its_thread_is_one_line_and_the_mcap_file_is_whol
     assert rec.finalized and len(rec.frames) == 3001
     assert not (tmp_path / "x.rrd").exists()
     assert partial_path(tmp_path / "x.rrd").exists()
+
+
+def test_a_twin_killed_holding_the_rings_lock_does_not_hang_its_recorder(tmp_path):
+    """A kill -9 can land inside a publish, while the twin holds the ring's lock: the recorder,
+    seeing the pipe close, goes on without the lock (nobody else writes now), keeps what came and
+    exits. It holds the run's stdout, so a recorder waiting on the lock for good would keep
+    `subprocess.run` waiting too."""
+    path = tmp_path / "x.mcap"
+    script = textwrap.dedent(f"""
+        import os, signal
+        from twin.model.config import TwinConfig
+        from twin.record import open_recorders
+        from twin.sim.twin import Twin
+        config = TwinConfig()
+        with open_recorders(config, {RUN!r}, mcap_path={str(path)!r}) as sinks:
+            twin = Twin(config, sinks=sinks)
+            twin.step(1000)
+            sinks[0]._ring._lock.acquire()  # as inside a publish
+            os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    fixed = tmp_path / "fixed.mcap"
+    recover(partial_path(path), fixed)
+    assert len(load(fixed).frames) > 500

@@ -234,6 +234,7 @@ def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock, later: _Late
         end, woken_to = _take_messages(conn, poll, feeds)
         synced = max(synced, woken_to)
         if end == "died":  # every published row before the first other it was not sent
+            ring.orphaned()
             synced = max(synced, min(ring.written(), ring.others_from()))
         if end != "died":  # the close waits for the writers still starting
             later.reply(conn, feeds, wait=end is not None)

@@ -11,6 +11,7 @@ the row bytes before the counter that publishes them on every processor, not onl
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import multiprocessing
 import struct
@@ -71,6 +72,12 @@ class FrameRing:
             return _COUNTER.unpack_from(self.memory, _COUNTER.size * (1 + reader))[0]
 
     # -- a recorder's side ----------------------------------------------------------------------
+    def orphaned(self) -> None:
+        """The twin's process died (the recorder saw its pipe close), maybe holding the lock (a
+        kill -9 inside a publish left a recorder waiting on it for good): nobody else writes the
+        counters now, so this process reads and writes them without it from here on."""
+        self._lock = contextlib.nullcontext()
+
     def written(self) -> int:
         """How many rows the twin has published."""
         with self._lock:

@@ -128,7 +128,6 @@ class _Later(threading.Thread):
         self.start_cpu_s = 0.0  # starting the writers
         self.feed_cpu_s = 0.0  # feeding them, every call around theirs included
         self.replied = not feeds  # whether the recorder has sent their start replies
-        self.finished = False  # whether every writer has started, or one could not
         # a byte down this pipe wakes the recorder when the writers have started: a twin waiting
         # for one of them (it would pass the ring) sends no other wake-up
         self.done_fd, self._done_w = os.pipe()
@@ -136,7 +135,7 @@ class _Later(threading.Thread):
         self._synced = 0  # the rows the main thread says they may take in
         self._ending = None  # how the run ended, once it has (_take_messages)
         self._failures: list[str] = []
-        self._started = threading.Event()
+        self._started = threading.Event()  # set once every writer has started, or one could not
         if feeds:
             self.start()
 
@@ -147,7 +146,6 @@ class _Later(threading.Thread):
             if self.error:
                 break
         self.start_cpu_s = time.thread_time() - t0
-        self.finished = True
         os.write(self._done_w, b"S")
         self._started.set()
         if not self.error:
@@ -195,7 +193,7 @@ class _Later(threading.Thread):
     def reply(self, conn, feeds: list[_Feed], *, wait: bool) -> None:
         """Once every writer has started (waited for when `wait`): their start replies; after a
         failure, its text, the started writers ended as error and the process with them."""
-        if self.replied or not (wait or self.finished):
+        if self.replied or not (wait or self._started.is_set()):
             return
         self._started.wait()  # started, or failed (the thread may be feeding them already)
         self.replied = True

@@ -33,6 +33,7 @@ from twin.model.sink import Sink
 from twin.record import open_recorders
 from twin.record.mcap.reader import load
 from twin.record.mcap.writer import FLUSH_S
+from twin.record.process import RRD_TAKE_S
 from twin.record.rows import FrameRows
 from twin.sim.twin import Twin
 from twin.tasks import TASKS, run_task
@@ -136,12 +137,19 @@ def _feeds(n: int, take: int, events: list):
 
 
 def recorder_cpu_us_per_frame(
-    folder: Path, repeats: int, run: tuple, writer: str = "mcap"
+    folder: Path,
+    repeats: int,
+    run: tuple,
+    writer: str = "mcap",
+    *,
+    take: int = 0,
+    nap_s: float = 0.0,
 ) -> float:
     """Process CPU time (all its threads) a writer ("mcap" or "rrd") spends per frame, fed `run`
-    (packed_run) as its recorder process feeds it: packed rows, a flush's worth at a time (the
-    recorder is woken just after each MCAP flush frame: 120 frames at 240 Hz) split where an event
-    comes, back to back; no physics."""
+    (packed_run) as its recorder process feeds it: packed rows, `take` at a time (by default a
+    flush's worth: the recorder is woken just after each MCAP flush frame, 120 frames at 240 Hz)
+    split where an event comes; no physics. Back to back, or asleep `nap_s` before each take, as
+    the recorder sleeps between the twin's wake-ups (the sleep is not CPU time)."""
     from twin.robot.urdf import urdf_text
 
     config, rows, packed, events = run
@@ -161,7 +169,10 @@ def recorder_cpu_us_per_frame(
     for _ in range(max(3, repeats)):
         recorder = make()  # the start (static scene, meshes) is not per frame
         t0 = time.process_time()
-        for start, end, before in _feeds(n, round(FLUSH_S * 1e9 / config.dt_ns), events):
+        every = take or _flush_frames(config)
+        for start, end, before in _feeds(n, every, events):
+            if nap_s and start % every == 0:  # a take's first rows (an event splits takes)
+                time.sleep(nap_s)
             recorder.on_frames(
                 rows.columns(memoryview(packed)[start * rows.size : end * rows.size], copy=False)
             )
@@ -379,7 +390,7 @@ def bench(ctx) -> list[tuple[str, str]]:
                 )
             )
         if "twin + MCAP + Rerun" in rates:
-            rows.extend(long_runs(ctx, folder, repeats))
+            rows.extend(long_runs(ctx, folder, repeats, run))
         sim_min = steps * TwinConfig().dt_ns * 1e-9 / 60.0
         rows.append(("MCAP bytes per simulated minute", f"{mcap_bytes / sim_min / 1e6:.2f} MB"))
         ctx.figures["mcap_mb_per_sim_min"] = mcap_bytes / sim_min / 1e6
@@ -395,7 +406,12 @@ def bench(ctx) -> list[tuple[str, str]]:
     return rows
 
 
-def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
+def _flush_frames(config: TwinConfig) -> int:
+    """Frames between two of the MCAP writer's flushes: the recorder's wake-ups."""
+    return round(FLUSH_S * 1e9 / config.dt_ns)
+
+
+def long_runs(ctx, folder: Path, repeats: int, run: tuple) -> list[tuple[str, str]]:
     """pick_place's long run (ctx.long_cycles cycles, 100 by default: 109,876 steps, where a
     recorder's cost per frame shows as a short run hides it) without recording and with both files,
     taking turns: the stepping speed with both over without (record_both_long_vs_none, paired by
@@ -432,6 +448,15 @@ def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
     f["record_writers_cpu_us_per_frame"] = (
         f["record_mcap_writer_cpu_us_per_frame"] + f["record_rrd_writer_cpu_us_per_frame"]
     )
+    # the same writers fed at the long run's pace: asleep, between takes, as long as the twin took
+    # to step that many frames (the MCAP writer every flush, the Rerun writer every RRD_TAKE_S)
+    frame_s = statistics.median(t.stepping_s for t in both) / steps
+    config = run[0]
+    paces = {"mcap": _flush_frames(config), "rrd": round(RRD_TAKE_S * 1e9 / config.dt_ns)}
+    f["record_writers_paced_cpu_us_per_frame"] = sum(
+        recorder_cpu_us_per_frame(folder, repeats, run, w, take=take, nap_s=take * frame_s)
+        for w, take in paces.items()
+    )
     rows = [
         (
             f"long run ({steps:,} steps): stepping with MCAP + Rerun over without (paired)",
@@ -459,10 +484,12 @@ def long_runs(ctx, folder: Path, repeats: int) -> list[tuple[str, str]]:
     )
     rows.append(
         (
-            "long run: recorder CPU per frame; the isolated writers, summed",
+            "long run: recorder CPU per frame; the isolated writers, summed (back to back; asleep "
+            "between takes as in the run)",
             (
                 f"{f['record_recorders_cpu_us_per_frame']:.2f} us; "
-                f"{f['record_writers_cpu_us_per_frame']:.2f} us"
+                f"{f['record_writers_cpu_us_per_frame']:.2f} us "
+                f"({f['record_writers_paced_cpu_us_per_frame']:.2f} us)"
             ),
         )
     )

@@ -77,6 +77,7 @@ def test_json_holds_the_named_ratios_measured_in_that_run(tmp_path):
         "record_cpu_us_per_step_both",
         "record_recorders_cpu_us_per_frame",
         "record_recorders_writer_cpu_us_per_frame",
+        "record_writers_paced_cpu_us_per_frame",
     ):
         assert isinstance(data[key], float) and data[key] > 0, key
     # a difference of two timings: on a busy machine it can come out below zero (seen: -13.7)

@@ -484,8 +484,10 @@ def long_runs(ctx, folder: Path, repeats: int, run: tuple) -> list[tuple[str, st
     )
     rows.append(
         (
-            "long run: recorder CPU per frame; the isolated writers, summed (back to back; asleep "
-            "between takes as in the run)",
+            (
+                "long run: recorder CPU per frame; the isolated writers, summed (back to back; "
+                "asleep between takes as in the run)"
+            ),
             (
                 f"{f['record_recorders_cpu_us_per_frame']:.2f} us; "
                 f"{f['record_writers_cpu_us_per_frame']:.2f} us "

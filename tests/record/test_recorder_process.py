@@ -315,20 +315,43 @@ def _record_with_a_slow_view(tmp_path, slowing: str, stepping: str) -> str:
     return done.stdout
 
 
+def _slow_start(seconds: float) -> str:
+    """Script lines that make RerunRecorder take `seconds` more to start (in the recorder)."""
+    return f"""
+        start = RerunRecorder.__init__
+        def slow(self, *args, **kwargs):
+            time.sleep({seconds})
+            start(self, *args, **kwargs)
+        RerunRecorder.__init__ = slow
+    """
+
+
+# 3000 steps, timed: fewer than the ring holds, so the view's rows cannot hold the twin back
+_TIMED_STEPS = """
+        t0 = time.perf_counter()
+        twin.step(3000)
+        print(time.perf_counter() - t0)
+    """
+
+
 def test_a_view_slow_to_start_holds_the_twin_back_without_locking_it(tmp_path):
     """The Rerun writer starts in a thread of the recorder: one slower to start than the twin is
     to fill the ring (4,096 rows) makes the twin wait for it, and the recorder wakes to feed it
     once it has started, with nothing lost."""
-    slowing = """
-        start = RerunRecorder.__init__
-        def slow(self, *args, **kwargs):
-            time.sleep(1.0)
-            start(self, *args, **kwargs)
-        RerunRecorder.__init__ = slow
-    """
-    printed = _record_with_a_slow_view(tmp_path, slowing, "twin.step(6000)")
+    printed = _record_with_a_slow_view(tmp_path, _slow_start(1.0), "twin.step(6000)")
     assert int(printed) >= 1  # the twin waited for the view
     assert len(load(tmp_path / "x.mcap").frames) == 6001
+
+
+def test_a_view_slow_to_start_does_not_hold_back_the_mcap_file(tmp_path):
+    """The Rerun writer starts in a thread of the recorder while the MCAP writer is fed: while the
+    view takes 2 s to start, the MCAP writer takes its rows in, so the twin steps on within the
+    ring. Before, the recorder's main thread waited out the view's start at its first wake-up:
+    the thread's class had given its own event a name threading.Thread uses for itself."""
+    printed = _record_with_a_slow_view(tmp_path, _slow_start(2.0), _TIMED_STEPS)
+    stepped_s, _waits = printed.split()
+    assert float(stepped_s) < 1.5  # the 2 s start did not hold the twin
+    assert len(load(tmp_path / "x.mcap").frames) == 3001
 
 
 def test_a_slow_view_batch_does_not_hold_back_the_mcap_file(tmp_path):
@@ -347,10 +370,7 @@ def test_a_slow_view_batch_does_not_hold_back_the_mcap_file(tmp_path):
     stepping = """
         twin.step(200)
         time.sleep(0.5)  # the view has started: its first take comes at 1,024 rows
-        t0 = time.perf_counter()
-        twin.step(3000)  # fewer than the ring holds: the view's rows cannot hold it back
-        print(time.perf_counter() - t0)
-    """
+    """ + _TIMED_STEPS
     stepped_s, _waits = _record_with_a_slow_view(tmp_path, slowing, stepping).split()
     assert float(stepped_s) < 1.0  # the 2 s batch did not hold the twin
     assert len(load(tmp_path / "x.mcap").frames) == 3201

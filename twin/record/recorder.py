@@ -114,7 +114,7 @@ def _start(feed: _Feed, make) -> str:
     return ""
 
 
-class _Later(threading.Thread):
+class _Later:
     """The writers after the first (the Rerun one), in a thread of their own: started one after
     another while the main thread feeds the first, then fed here, so that a Rerun batch (tens of
     ms) never keeps the MCAP writer from the rows the twin waits on (its slack is a few ms of the
@@ -122,7 +122,6 @@ class _Later(threading.Thread):
     per frame (RecorderStats)."""
 
     def __init__(self, feeds: list[_Feed], make) -> None:
-        super().__init__(name="twin-recorder-later", daemon=True)
         self.feeds, self.make = feeds, make
         self.error = ""
         self.start_cpu_s = 0.0  # starting the writers
@@ -136,10 +135,13 @@ class _Later(threading.Thread):
         self._ending = None  # how the run ended, once it has (_take_messages)
         self._failures: list[str] = []
         self._started = threading.Event()  # set once every writer has started, or one could not
+        # a thread of its own, not a Thread subclass: threading.Thread keeps private state under
+        # names (its own `_started`, set as the thread begins) that a subclass's would replace
+        self._thread = threading.Thread(target=self._run, name="twin-recorder-later", daemon=True)
         if feeds:
-            self.start()
+            self._thread.start()
 
-    def run(self) -> None:
+    def _run(self) -> None:
         t0 = time.thread_time()
         for feed in self.feeds:
             self.error = _start(feed, self.make)
@@ -187,7 +189,7 @@ class _Later(threading.Thread):
     def finish(self) -> str:
         """Wait for the writers' end; the first failure as text, or ''."""
         if self.feeds:  # the thread runs only for them
-            self.join()
+            self._thread.join()
         return next((text for text in self._failures if text), "")
 
     def reply(self, conn, feeds: list[_Feed], *, wait: bool) -> None:
@@ -202,7 +204,7 @@ class _Later(threading.Thread):
             for _ in self.feeds:
                 conn.send_bytes(STARTED)
             return
-        self.join()
+        self._thread.join()
         conn.send_bytes(self.error.encode())
         _close_all([feed.sink for feed in feeds if feed.sink], "error", "recording could not start")
         os._exit(0)

@@ -1,6 +1,6 @@
 """A call in twin/ that passes six or more arguments names them: a reordered parameter list cannot
 shift values silently. Only calls whose callee takes no keywords are left positional: struct.pack
-(a C function) and functions that take *args (bisect's git)."""
+and a struct.Struct's pack (C functions) and functions that take *args (bisect's git)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-POSITIONAL_ONLY = {"struct.pack", "git"}
+POSITIONAL_ONLY = {"struct.pack", "_HEAD.pack", "git"}  # _HEAD: mcap/batch_writer.py's Struct
 
 
 def _long_positional_calls(tree: ast.AST) -> list[tuple[int, str]]:

@@ -32,7 +32,7 @@ class BatchWriter(Writer):
         chunk = self._Writer__chunk_builder
         counts, indices = stats.channel_message_counts, chunk.message_indices
         buffer, limit = chunk.record_writer._buffer, self._Writer__chunk_size
-        pack, opcode = _HEAD.pack, Opcode.MESSAGE
+        opcode = Opcode.MESSAGE
         for channel_id, t, data, sequence in messages:
             first_t = stats.message_start_time if stats.message_count else t
             stats.message_start_time = min(t, first_t)
@@ -47,7 +47,7 @@ class BatchWriter(Writer):
                 index = indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
             index.records.append((t, buffer.tell()))
             chunk.num_messages += 1
-            buffer.write(pack(opcode, _FIELDS_BYTES + len(data), channel_id, sequence, t, t))
+            buffer.write(_HEAD.pack(opcode, _FIELDS_BYTES + len(data), channel_id, sequence, t, t))
             buffer.write(data)
             if buffer.tell() > limit:  # a chunk this large ends here, as add_message ends it
                 self._Writer__maybe_finalize_chunk()

@@ -41,7 +41,10 @@ def _timed_pick_place(clock=time.perf_counter) -> float:
         twin.close()
 
 
-def twin_cost_us_per_step(repeats: int, pairs: int = 3) -> float:
+PAIRS = 3  # twin_cost_us_per_step's pairs a repeat
+
+
+def twin_cost_us_per_step(repeats: int, pairs: int = PAIRS) -> float:
     """The twin's own cost per step over the reads floor (bench_record.reads_floor_steps_per_s: the
     same motion on the bare World with a Frame's engine reads): its commands, suction rule, Frame
     and settle checks. Each pair runs the reads floor and then the twin, each timed in the thread's
@@ -103,7 +106,7 @@ def bench(ctx) -> list[tuple[str, str]]:
         ),
         (
             "twin cost per step over the reads floor (the same motion and a Frame's engine reads)",
-            f"{cost_us:.2f} us (thread CPU, median of {repeats * 3} pairs)",
+            f"{cost_us:.2f} us (thread CPU, median of {repeats * PAIRS} pairs)",
         ),
         (
             "twin.step() idle: steps/s (ratio to physics-only)",

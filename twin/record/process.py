@@ -337,16 +337,19 @@ class _Child:
 
     def spread(self) -> None:
         """Let the recorder run on every CPU the twin's process may use (it was kept off the
-        twin's): each of its threads, since an affinity is a thread's own (before, only its main
-        thread was moved; the Rerun writer's thread and the Rerun SDK's stayed on its one core)."""
+        twin's): each of its threads, since an affinity is a thread's own (the Rerun writer's
+        thread and the Rerun SDK's as well as its main one)."""
         pid = self.process.pid
         try:
             cpus = os.sched_getaffinity(0)
+        except (AttributeError, OSError):  # the system does not say
+            return
+        try:
             threads = [int(tid) for tid in os.listdir(f"/proc/{pid}/task")]
-        except (AttributeError, OSError):  # gone, or the system does not say
-            threads, cpus = [pid], None
+        except OSError:  # gone, or no /proc: the process's own (main thread's) affinity
+            threads = [pid]
         for tid in threads:
-            with contextlib.suppress(AttributeError, OSError, TypeError):  # a thread that ended
+            with contextlib.suppress(OSError):  # a thread that has ended
                 os.sched_setaffinity(tid, cpus)
 
     def expect_ok(self, what: str) -> None:

@@ -197,9 +197,8 @@ class _Later:
         failure, its text, the started writers ended as error and the process with them."""
         if self.replied or not (wait or self._started.is_set()):
             return
-        self._started.wait()  # started, or failed (the thread may be feeding them already)
         self.replied = True
-        os.read(self.done_fd, 1)
+        os.read(self.done_fd, 1)  # written once they have started, or one could not
         if not self.error:
             for _ in self.feeds:
                 conn.send_bytes(STARTED)

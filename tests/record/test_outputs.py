@@ -202,3 +202,24 @@ def test_check_update_names_one_golden_twice_without_a_race(golden, tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.count("G.mcap") == 1 and "1 match" in done.stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == ["G.mcap"]
+
+
+def test_start_writeback_leaves_the_file_as_written_and_takes_any_descriptor(tmp_path):
+    """The writers call it as their files grow: it only asks the OS to start writing them out, on a
+    regular file and on whatever else a path may name (a pipe), without an error."""
+    from twin.record.outputs import start_writeback
+
+    path = tmp_path / "x.bin"
+    data = os.urandom(1 << 20)
+    with open(path, "wb") as f:
+        f.write(data)
+        f.flush()
+        start_writeback(f.fileno())
+        f.write(data[:10])
+    assert path.read_bytes() == data + data[:10]
+    read_end, write_end = os.pipe()
+    try:
+        start_writeback(write_end)
+    finally:
+        os.close(read_end)
+        os.close(write_end)

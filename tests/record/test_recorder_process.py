@@ -441,3 +441,33 @@ def test_a_twin_killed_holding_the_rings_lock_does_not_hang_its_recorder(tmp_pat
     fixed = tmp_path / "fixed.mcap"
     recover(partial_path(path), fixed)
     assert len(load(fixed).frames) > 500
+
+
+def _zombie_children() -> list[int]:
+    """This process's children that have exited and not been reaped (state Z in /proc)."""
+    zombies = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        if fields[0] == "Z" and int(fields[1]) == os.getpid():
+            zombies.append(int(entry))
+    return zombies
+
+
+def test_finished_recorder_processes_are_reaped_by_the_next_recording(tmp_path):
+    """The close does not wait for the recorder process's exit: the next recording's start reaps
+    it, so a program that records many runs keeps at most the last one unreaped."""
+    config = TwinConfig()
+    for i in range(3):
+        with open_recorders(config, RUN, mcap_path=tmp_path / f"{i}.mcap") as sinks:
+            twin = Twin(config, sinks=sinks)
+            twin.step(100)
+            twin.close()
+        assert load(tmp_path / f"{i}.mcap").finalized
+    time.sleep(0.5)  # the last one's exit
+    assert len(_zombie_children()) <= 1

@@ -7,6 +7,8 @@ fsync it and rename it over the target, so the target is either the old file or 
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
 import secrets
 from collections.abc import Iterable, Iterator
@@ -150,6 +152,28 @@ def fsync_file(path: str | os.PathLike) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+SYNC_FILE_RANGE_WRITE = 2  # Linux's flag: start writing the range's dirty pages, do not wait
+
+
+@functools.cache
+def _sync_file_range():
+    """libc's sync_file_range, or None where the C library has none (not Linux)."""
+    call = getattr(ctypes.CDLL(None, use_errno=True), "sync_file_range", None)
+    if call is not None:
+        call.argtypes = [ctypes.c_int, ctypes.c_int64, ctypes.c_int64, ctypes.c_uint]
+    return call
+
+
+def start_writeback(fd: int) -> None:
+    """Have the OS start putting what is written to the open file `fd` on disk, without waiting
+    for it: the fsync that finishes the file (publish) then writes only what came since. A
+    recording's writers call it as their file grows; where the OS has no such call, or it fails,
+    nothing happens (the fsync still does it all)."""
+    call = _sync_file_range()
+    if call is not None:
+        call(fd, 0, 0, SYNC_FILE_RANGE_WRITE)  # 0 bytes: to the end of the file
 
 
 def publish(written: str | os.PathLike, target: str | os.PathLike) -> None:

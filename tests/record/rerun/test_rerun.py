@@ -190,6 +190,30 @@ def test_events_and_commands_become_text_logs(run):
     assert len(commands) == len(collector.commands) > 5
 
 
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # a cut-short file has none
+def test_events_and_commands_go_out_with_each_batch_of_frames(tmp_path):
+    """A view cut short (its process killed: no close) still shows the events and commands of the
+    frames it sent: they go out with each batch, not only at the close."""
+    config = TwinConfig()
+    collector = FrameCollector()
+    recorder = RerunRecorder(
+        tmp_path / "cut.rrd", config, urdf_text(config.profile), batch_steps=100
+    )
+    twin = Twin(config, sinks=[collector, recorder])
+    run_task(twin, pick_place.run, {"cycles": 1})
+    twin.close()
+    recorder.stream.flush()  # what a kill leaves: no close
+    sent = recorder.frames_written
+    partial = tmp_path / "cut.rrd.partial"
+    _, texts = _component(partial, "/" + scene.EVENTS_PATH, "TextLog:text")
+    events = [" ".join(p for p in (e.kind, e.body, e.message) if p) for e in collector.events]
+    before = sum(e.step < sent - 1 for e in collector.events)
+    assert before > 5
+    assert [t[0] for t in texts] == events[: len(texts)] and len(texts) >= before
+    _, commands = _component(partial, "/" + scene.COMMANDS_PATH, "TextLog:text")
+    assert len(commands) >= sum(c.step < sent - 1 for c in collector.commands) > 5
+
+
 def test_static_scene_has_the_robot_the_box_and_a_blueprint(run):
     reader = RrdReader(str(run["path"]))
     static = {c.entity_path for c in reader.stream() if c.is_static}

@@ -27,7 +27,7 @@ from twin.model.recording import Recording
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.images import recorded_images
-from twin.record.outputs import check_target, partial_path, publish
+from twin.record.outputs import check_target, partial_path, publish, start_writeback
 from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
 from twin.record.rows import FrameBatch
@@ -95,6 +95,8 @@ class RerunRecorder(Sink):
         target = check_target(path, "recording", "a .rrd file path", error=RecordingError)
         self.path = str(path)
         self._start(file_stream(partial_path(target), config), tree)
+        # the file the SDK writes, opened again to have the OS start writing it out as it grows
+        self._written_fd = _open_to_sync(partial_path(target))
 
     @classmethod
     def to_stream(
@@ -111,6 +113,7 @@ class RerunRecorder(Sink):
         tree = self._prepare(config, urdf_text, batch_steps)
         self.path = ""
         self._start(stream, tree)
+        self._written_fd = -1
         return self
 
     def _prepare(self, config: TwinConfig, urdf_text: str, batch_steps: int) -> rr.urdf.UrdfTree:
@@ -167,7 +170,9 @@ class RerunRecorder(Sink):
             self._n += k
             start += k
             if self._n == self.batch_steps:
-                self._send_frames()
+                self._send_batch()
+        if self._written_fd >= 0:  # what the SDK has written of the batches sent
+            start_writeback(self._written_fd)
 
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture on its entity (world/cameras/NAME, under its static Pinhole), with the
@@ -202,11 +207,14 @@ class RerunRecorder(Sink):
         if self.closed:
             return
         self.closed = True
-        self._send_buffered()
-        if self.path:
-            finish_file(self.stream, partial_path(self.path), Path(self.path))
-        else:
-            self.stream.flush()
+        try:
+            self._send_buffered()
+            if self.path:
+                finish_file(self.stream, partial_path(self.path), Path(self.path))
+            else:
+                self.stream.flush()
+        finally:
+            self._close_written_fd()
 
     def abandon(self) -> None:
         """The run died without closing: write out what arrived but leave the file as
@@ -214,10 +222,18 @@ class RerunRecorder(Sink):
         if self.closed:
             return
         self.closed = True
-        self._send_buffered()
-        self.stream.flush()
-        if self.path:
-            self.stream.disconnect()
+        try:
+            self._send_buffered()
+            self.stream.flush()
+            if self.path:
+                self.stream.disconnect()
+        finally:
+            self._close_written_fd()
+
+    def _close_written_fd(self) -> None:
+        if self._written_fd >= 0:
+            os.close(self._written_fd)
+            self._written_fd = -1
 
     def __enter__(self) -> Self:
         return self
@@ -231,6 +247,11 @@ class RerunRecorder(Sink):
         frames = self._batch.take()
         if frames is not None:
             self.on_frames(frames)
+        self._send_batch()
+
+    def _send_batch(self) -> None:
+        """The frames gathered, and the events and commands come since the last batch: sent with
+        each batch, not all at the close, which the twin waits for."""
         self._send_frames()
         self._send_events()
         self._send_commands()
@@ -330,6 +351,15 @@ class RerunRecorder(Sink):
             indexes=_event_times(steps, [s * self.config.dt_ns for s in steps]),
             columns=rr.TextLog.columns(text=texts, level=["DEBUG"] * len(texts)),
         )
+
+
+def _open_to_sync(path: Path) -> int:
+    """A read-only descriptor of the file at `path` for start_writeback, or -1 if it cannot be
+    opened (the writeback is then left to the close's fsync)."""
+    try:
+        return os.open(path, os.O_RDONLY)
+    except OSError:
+        return -1
 
 
 def _event_times(steps: list[int], t_ns: list[int]) -> list[rr.TimeColumn]:

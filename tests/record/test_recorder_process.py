@@ -258,6 +258,39 @@ def test_the_recorders_and_the_twin_keep_to_cores_of_their_own(tmp_path):
     assert len(twins) == 1 and cpus == [before - twins]
 
 
+def _thread_nices(pid: int) -> dict[str, int]:
+    """Each thread of process `pid` (by name, tid) and its nice value, from /proc."""
+    nices = {}
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{tid}/stat") as f:
+            stat = f.read()
+        name = stat[stat.index("(") + 1 : stat.rindex(")")]
+        nices[f"{name}/{tid}"] = int(stat.rsplit(")", 1)[1].split()[16])
+    return nices
+
+
+def test_the_view_and_its_sdk_threads_yield_the_core_to_the_mcap_writer(tmp_path):
+    """The recorder's main thread (the MCAP writer, which the twin may wait on) keeps this
+    process's priority; the Rerun writer's thread, and every thread the Rerun SDK starts from it,
+    run at LATER_NICE more."""
+    from twin.record.recorder import LATER_NICE
+
+    config = TwinConfig()
+    mine = os.getpriority(os.PRIO_PROCESS, 0)
+    with open_recorders(
+        config, RUN, mcap_path=tmp_path / "x.mcap", rrd_path=tmp_path / "x.rrd"
+    ) as sinks:
+        twin = Twin(config, sinks=sinks)
+        twin.step(100)
+        sinks[0]._check_started(("mcap", "rrd"))  # the view has started: its SDK's threads run
+        pid = sinks[0]._children[0].process.pid
+        nices = _thread_nices(pid)
+        twin.close()
+    main = nices.pop(next(k for k in nices if k.endswith(f"/{pid}")))
+    assert main == mine
+    assert len(nices) >= 3 and set(nices.values()) == {mine + LATER_NICE}, nices
+
+
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: the recorders share it")
 def test_at_the_close_every_thread_of_the_recorder_may_use_every_cpu(tmp_path, monkeypatch):
     """An affinity is a thread's own: at the close the recorder's threads (its main one, the Rerun

@@ -504,3 +504,20 @@ def test_finished_recorder_processes_are_reaped_by_the_next_recording(tmp_path):
         assert load(tmp_path / f"{i}.mcap").finalized
     time.sleep(0.5)  # the last one's exit
     assert len(_zombie_children()) <= 1
+
+
+def test_commands_events_and_pictures_cross_to_the_recorder_unchanged():
+    """What the twin sends besides rows travels as its fields' values (recorder.pack_other) and is
+    rebuilt as the same item, of the same class, whatever its data holds."""
+    from twin.model.images import CameraImage
+    from twin.model.types import Command, Event
+    from twin.record.recorder import COMMAND, EVENT, IMAGE, pack_other, unpack_other
+
+    items = {
+        COMMAND: Command(12, "joint_target", {"joint": 1, "q": 0.5}),
+        EVENT: Event(7, 29_166_666, "note", "box", "odd", {"v": np.float32(1.5), "b": b"\x00"}),
+        IMAGE: CameraImage("pad", 3, 12_500_000, "png", b"\x89PNG", (1.0, 2.0, 3.0, 0, 0, 0, 1)),
+    }
+    for kind, item in items.items():
+        back = unpack_other(kind, pack_other(kind, item))
+        assert type(back) is type(item) and back == item

@@ -29,7 +29,6 @@ from __future__ import annotations
 import contextlib
 import marshal
 import os
-import pickle
 import time
 from pathlib import Path
 
@@ -53,6 +52,7 @@ from twin.record.recorder import (
     WAKE,
     RecorderStats,
     Writer,
+    pack_other,
     poller,
     serve,
 )
@@ -200,8 +200,9 @@ class RecorderProcess(Sink):
         if self._written == self._next_publish:
             self._publish(frame.step)
 
-    # Commands and events (rare) are pickled one by one: their data comes from tasks and may hold
-    # values marshal would silently turn into bytes (anything with a buffer, e.g. numpy scalars).
+    # Commands and events (rare) are pickled one by one (recorder.pack_other): their data comes from
+    # tasks and may hold values marshal would silently turn into bytes (anything with a buffer, e.g.
+    # numpy scalars).
     def on_command(self, command: Command) -> None:
         self._keep_other(COMMAND, command)
 
@@ -216,7 +217,7 @@ class RecorderProcess(Sink):
         from here on have one the recorder has not been sent)."""
         if not self._others:
             self._ring.mark_others(self._written)
-        data = pickle.dumps(other, protocol=pickle.HIGHEST_PROTOCOL)
+        data = pack_other(kind, other)
         self._others.append((self._written, kind, data))
         self._others_bytes += len(data)
 

@@ -223,3 +223,17 @@ def test_start_writeback_leaves_the_file_as_written_and_takes_any_descriptor(tmp
     finally:
         os.close(read_end)
         os.close(write_end)
+
+
+def test_a_writeback_is_started_once_another_share_of_the_file_is_written(tmp_path):
+    """Writeback asks the OS only every `every_bytes` of growth (each ask costs CPU), counting from
+    the size at the last one."""
+    from twin.record.outputs import Writeback
+
+    with open(tmp_path / "x.bin", "wb") as f:
+        writeback = Writeback(f.fileno(), every_bytes=1000)
+        sizes = []
+        for size in (500, 999, 1000, 1500, 1999, 2000, 5000):
+            writeback.grew_to(size)
+            sizes.append(writeback._started_at)
+    assert sizes == [0, 0, 1000, 1000, 1000, 2000, 5000]

@@ -155,6 +155,7 @@ def fsync_file(path: str | os.PathLike) -> None:
 
 
 SYNC_FILE_RANGE_WRITE = 2  # Linux's flag: start writing the range's dirty pages, do not wait
+WRITEBACK_BYTES = 256 * 1024  # a growing file's writeback is started at most this often (Writeback)
 
 
 @functools.cache
@@ -168,12 +169,26 @@ def _sync_file_range():
 
 def start_writeback(fd: int) -> None:
     """Have the OS start putting what is written to the open file `fd` on disk, without waiting
-    for it: the fsync that finishes the file (publish) then writes only what came since. A
-    recording's writers call it as their file grows; where the OS has no such call, or it fails,
-    nothing happens (the fsync still does it all)."""
+    for it; where the OS has no such call, or it fails, nothing happens."""
     call = _sync_file_range()
     if call is not None:
         call(fd, 0, 0, SYNC_FILE_RANGE_WRITE)  # 0 bytes: to the end of the file
+
+
+class Writeback:
+    """A growing file's writeback, started each time another `every_bytes` of it are written: the
+    fsync that finishes it (publish) then writes only what came since. A writer says how large its
+    file has grown (grew_to) whenever it likes: the call costs about 0.1 ms of CPU on our machines
+    (the MCAP writer's per frame rose 11% with one at every flush), so it is made only so often."""
+
+    def __init__(self, fd: int, every_bytes: int = WRITEBACK_BYTES) -> None:
+        self.fd, self.every_bytes = fd, every_bytes
+        self._started_at = 0  # the file's size at the last writeback started
+
+    def grew_to(self, size: int) -> None:
+        if size - self._started_at >= self.every_bytes:
+            start_writeback(self.fd)
+            self._started_at = size
 
 
 def publish(written: str | os.PathLike, target: str | os.PathLike) -> None:

@@ -37,7 +37,7 @@ from twin.record.mcap.batch_writer import BatchWriter
 from twin.record.mcap.blocks import BlockEncoder
 from twin.record.mcap.metadata import check_run, portable_config, run_metadata
 from twin.record.mcap.scene_tf import WORLD, SceneTransforms
-from twin.record.outputs import partial_path, publish, start_writeback
+from twin.record.outputs import Writeback, partial_path, publish
 from twin.record.rows import FrameBatch
 
 BLOCK_S = 0.25
@@ -142,6 +142,7 @@ class McapRecorder(Sink):
         self._writer = BatchWriter(
             self._file, chunk_size=CHUNK_BYTES, compression=COMPRESSIONS[compression]
         )
+        self._writeback = Writeback(self._file.fileno())
         try:
             self._start(config, run, urdf, mesh_files, compression)
         except BaseException:
@@ -206,7 +207,6 @@ class McapRecorder(Sink):
             self._writer.add_attachment(0, 0, name, media_type, data)
         self._add(S.ROBOT_DESCRIPTION.topic, 0, _json({"data": urdf}))
         self._writer.flush()
-        start_writeback(self._file.fileno())
 
     # -- sink -----------------------------------------------------------------------------------
     def on_frame(self, frame: Frame) -> None:
@@ -423,10 +423,10 @@ class McapRecorder(Sink):
             self._flush(t_last)
 
     def _flush(self, t_ns: int) -> None:
-        """End the chunk and hand the file what is buffered, which the OS starts putting on disk:
-        the close's fsync then has only the last chunks left to write."""
+        """End the chunk and hand the file what is buffered (which the OS is asked now and then to
+        start putting on disk: the close's fsync then has only the last chunks left to write)."""
         self._writer.flush()
-        start_writeback(self._file.fileno())
+        self._writeback.grew_to(self._file.tell())
         self._last_flush_ns = t_ns
 
     # -- ending ---------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ from twin.model.recording import Recording
 from twin.model.sink import Sink
 from twin.model.types import Command, Event, Frame
 from twin.record.images import recorded_images
-from twin.record.outputs import check_target, partial_path, publish, start_writeback
+from twin.record.outputs import Writeback, check_target, partial_path, publish
 from twin.record.rerun import scene
 from twin.record.rerun.joints import JointMotion
 from twin.record.rows import FrameBatch
@@ -96,7 +96,8 @@ class RerunRecorder(Sink):
         self.path = str(path)
         self._start(file_stream(partial_path(target), config), tree)
         # the file the SDK writes, opened again to have the OS start writing it out as it grows
-        self._written_fd = _open_to_sync(partial_path(target))
+        fd = _open_to_sync(partial_path(target))
+        self._writeback = Writeback(fd) if fd >= 0 else None
 
     @classmethod
     def to_stream(
@@ -113,7 +114,7 @@ class RerunRecorder(Sink):
         tree = self._prepare(config, urdf_text, batch_steps)
         self.path = ""
         self._start(stream, tree)
-        self._written_fd = -1
+        self._writeback = None
         return self
 
     def _prepare(self, config: TwinConfig, urdf_text: str, batch_steps: int) -> rr.urdf.UrdfTree:
@@ -171,8 +172,8 @@ class RerunRecorder(Sink):
             start += k
             if self._n == self.batch_steps:
                 self._send_batch()
-        if self._written_fd >= 0:  # what the SDK has written of the batches sent
-            start_writeback(self._written_fd)
+        if self._writeback is not None:  # what the SDK has written of the batches sent
+            self._writeback.grew_to(os.fstat(self._writeback.fd).st_size)
 
     def on_image(self, image: CameraImage) -> None:
         """A camera's picture on its entity (world/cameras/NAME, under its static Pinhole), with the
@@ -214,7 +215,7 @@ class RerunRecorder(Sink):
             else:
                 self.stream.flush()
         finally:
-            self._close_written_fd()
+            self._close_writeback()
 
     def abandon(self) -> None:
         """The run died without closing: write out what arrived but leave the file as
@@ -228,12 +229,12 @@ class RerunRecorder(Sink):
             if self.path:
                 self.stream.disconnect()
         finally:
-            self._close_written_fd()
+            self._close_writeback()
 
-    def _close_written_fd(self) -> None:
-        if self._written_fd >= 0:
-            os.close(self._written_fd)
-            self._written_fd = -1
+    def _close_writeback(self) -> None:
+        if self._writeback is not None:
+            os.close(self._writeback.fd)
+            self._writeback = None
 
     def __enter__(self) -> Self:
         return self
@@ -354,7 +355,7 @@ class RerunRecorder(Sink):
 
 
 def _open_to_sync(path: Path) -> int:
-    """A read-only descriptor of the file at `path` for start_writeback, or -1 if it cannot be
+    """A read-only descriptor of the file at `path` for its Writeback, or -1 if it cannot be
     opened (the writeback is then left to the close's fsync)."""
     try:
         return os.open(path, os.O_RDONLY)

@@ -251,8 +251,8 @@ class RerunRecorder(Sink):
         self._send_batch()
 
     def _send_batch(self) -> None:
-        """The frames gathered, and the events and commands come since the last batch: sent with
-        each batch, not all at the close, which the twin waits for."""
+        """The frames gathered, and the events and commands that came since the last batch: they
+        go with each batch, not all at the close, which the twin waits for."""
         self._send_frames()
         self._send_events()
         self._send_commands()

@@ -160,8 +160,12 @@ WRITEBACK_BYTES = 256 * 1024  # a growing file's writeback is started at most th
 
 @functools.cache
 def _sync_file_range():
-    """libc's sync_file_range, or None where the C library has none (not Linux)."""
-    call = getattr(ctypes.CDLL(None, use_errno=True), "sync_file_range", None)
+    """libc's sync_file_range, or None where the C library has none (not Linux) or cannot be
+    loaded so (CDLL(None) is refused on Windows)."""
+    try:
+        call = getattr(ctypes.CDLL(None, use_errno=True), "sync_file_range", None)
+    except (OSError, TypeError):
+        return None
     if call is not None:
         call.argtypes = [ctypes.c_int, ctypes.c_int64, ctypes.c_int64, ctypes.c_uint]
     return call

@@ -200,9 +200,7 @@ class RecorderProcess(Sink):
         if self._written == self._next_publish:
             self._publish(frame.step)
 
-    # Commands and events (rare) are pickled one by one (recorder.pack_other): their data comes from
-    # tasks and may hold values marshal would silently turn into bytes (anything with a buffer, e.g.
-    # numpy scalars).
+    # Commands, events and pictures (rare) are packed one by one (recorder.pack_other says how).
     def on_command(self, command: Command) -> None:
         self._keep_other(COMMAND, command)
 

@@ -15,6 +15,7 @@ failure, in one line.
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import functools
 import marshal
@@ -48,8 +49,9 @@ LATER_NICE = 5
 # item kind -> the sinks' method
 _HANDLERS = {COMMAND: "on_command", EVENT: "on_event", IMAGE: "on_image"}
 # item kind -> its class; an item travels as its fields' values, a plain tuple, pickled (their data
-# come from tasks and may hold what marshal would silently turn into bytes): a frozen dataclass
-# pickles itself 5x slower (a Command: 5.7 us against 1.1, timeit; in a run, 18-31 us a call)
+# come from tasks and may hold what marshal would silently turn into bytes, e.g. numpy scalars): a
+# frozen dataclass pickles itself 5x slower (a Command: 5.7 us against 1.1, timeit; in a run, 18-31
+# us a call)
 _KINDS = {COMMAND: Command, EVENT: Event, IMAGE: CameraImage}
 _VALUES = {
     kind: operator.attrgetter(
@@ -403,10 +405,8 @@ def _lower_priority(nice: int) -> None:
     elsewhere, or where the system refuses, leave it."""
     if sys.platform == "linux":
         tid = threading.get_native_id()
-        try:
+        with contextlib.suppress(OSError):
             os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
-        except OSError:
-            pass
 
 
 class _NoPandas:

@@ -96,8 +96,7 @@ class RerunRecorder(Sink):
         self.path = str(path)
         self._start(file_stream(partial_path(target), config), tree)
         # the file the SDK writes, opened again to have the OS start writing it out as it grows
-        fd = _open_to_sync(partial_path(target))
-        self._writeback = Writeback(fd) if fd >= 0 else None
+        self._writeback = _writeback_of(partial_path(target))
 
     @classmethod
     def to_stream(
@@ -354,13 +353,13 @@ class RerunRecorder(Sink):
         )
 
 
-def _open_to_sync(path: Path) -> int:
-    """A read-only descriptor of the file at `path` for its Writeback, or -1 if it cannot be
-    opened (the writeback is then left to the close's fsync)."""
+def _writeback_of(path: Path) -> Writeback | None:
+    """The Writeback of the file at `path`, through a read-only descriptor of its own, or None if
+    it cannot be opened (the writeback is then left to the close's fsync)."""
     try:
-        return os.open(path, os.O_RDONLY)
+        return Writeback(os.open(path, os.O_RDONLY))
     except OSError:
-        return -1
+        return None
 
 
 def _event_times(steps: list[int], t_ns: list[int]) -> list[rr.TimeColumn]:

@@ -413,6 +413,7 @@ def test_a_view_writer_error_in_its_thread_is_one_line_and_the_mcap_file_is_whol
     """The Rerun writer fails in its own thread (a full disk, say): the close says so in one line,
     the MCAP file is finalized with every frame, and the view is left as NAME.partial."""
     script = textwrap.dedent(f"""
+        import time
         from twin.model.config import TwinConfig
         from twin.model.errors import RecordingError
         from twin.record import open_recorders
@@ -432,7 +433,13 @@ def test_a_view_writer_error_in_its_thread_is_one_line_and_the_mcap_file_is_whol
                 rrd_path={str(tmp_path / "x.rrd")!r},
             ) as sinks:
                 twin = Twin(config, sinks=sinks)
-                twin.step(3000)
+                twin.step(1100)
+                # the view's first take (1,024 rows) is in before the rest: a view slow to start
+                # would otherwise take every row at the close, in one call
+                deadline = time.monotonic() + 30
+                while sinks[0]._ring.read(1) < 1024 and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                twin.step(1900)
                 twin.close()
         except RecordingError as err:
             print(err)

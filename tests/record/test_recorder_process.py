@@ -483,9 +483,9 @@ def test_a_twin_killed_holding_the_rings_lock_does_not_hang_its_recorder(tmp_pat
     assert len(load(fixed).frames) > 500
 
 
-def _zombie_children() -> list[int]:
-    """This process's children that have exited and not been reaped (state Z in /proc)."""
-    zombies = []
+def _children() -> dict[int, str]:
+    """This process's children and their state letters from /proc ("Z": exited, not reaped)."""
+    children = {}
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -494,23 +494,36 @@ def _zombie_children() -> list[int]:
                 fields = f.read().rsplit(")", 1)[1].split()
         except OSError:  # gone meanwhile
             continue
-        if fields[0] == "Z" and int(fields[1]) == os.getpid():
-            zombies.append(int(entry))
-    return zombies
+        if int(fields[1]) == os.getpid():
+            children[int(entry)] = fields[0]
+    return children
+
+
+def _record_briefly(path) -> None:
+    config = TwinConfig()
+    with open_recorders(config, RUN, mcap_path=path) as sinks:
+        twin = Twin(config, sinks=sinks)
+        twin.step(100)
+        twin.close()
+    assert load(path).finalized
 
 
 def test_finished_recorder_processes_are_reaped_by_the_next_recording(tmp_path):
     """The close does not wait for the recorder process's exit: the next recording's start reaps
-    it, so a program that records many runs keeps at most the last one unreaped."""
-    config = TwinConfig()
+    every recorder that has exited by then, so finished ones do not pile up as zombies."""
+    before = set(_children())
     for i in range(3):
-        with open_recorders(config, RUN, mcap_path=tmp_path / f"{i}.mcap") as sinks:
-            twin = Twin(config, sinks=sinks)
-            twin.step(100)
-            twin.close()
-        assert load(tmp_path / f"{i}.mcap").finalized
-    time.sleep(0.5)  # the last one's exit
-    assert len(_zombie_children()) <= 1
+        _record_briefly(tmp_path / f"{i}.mcap")
+    deadline = time.monotonic() + 30
+    while True:  # until every recorder of ours has exited (one still running cannot be reaped)
+        ours = {pid: state for pid, state in _children().items() if pid not in before}
+        if all(state == "Z" for state in ours.values()) or time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
+    exited = {pid for pid, state in ours.items() if state == "Z"}
+    assert exited, "the last recording's recorder should be left for the next start to reap"
+    _record_briefly(tmp_path / "next.mcap")
+    assert not exited & set(_children())
 
 
 def test_commands_events_and_pictures_cross_to_the_recorder_unchanged():

@@ -165,7 +165,6 @@ class _Later:
         self._synced = 0  # the rows the main thread says they may take in
         self._ending = None  # how the run ended, once it has (_take_messages)
         self._failures: list[str] = []
-        self._started = threading.Event()  # set once every writer has started, or one could not
         # a thread of its own, not a Thread subclass: threading.Thread keeps private state under
         # names (its own `_started`, set as the thread begins) that a subclass's would replace
         self._thread = threading.Thread(target=self._run, name="twin-recorder-later", daemon=True)
@@ -180,8 +179,7 @@ class _Later:
             if self.error:
                 break
         self.start_cpu_s = time.thread_time() - t0
-        os.write(self._done_w, b"S")
-        self._started.set()
+        os.write(self._done_w, b"S")  # the one sign that they have started, or one could not
         if not self.error:
             self._feed()
         self.feed_cpu_s = time.thread_time() - t0 - self.start_cpu_s
@@ -227,10 +225,13 @@ class _Later:
     def reply(self, conn, feeds: list[_Feed], *, wait: bool) -> None:
         """Once every writer has started (waited for when `wait`): their start replies; after a
         failure, its text, the started writers ended as error and the process with them."""
-        if self.replied or not (wait or self._started.is_set()):
+        # the byte itself says so, not a flag set beside it: woken by the byte before such a flag
+        # was set (this thread niced, on the same core), the main loop left the byte unread and
+        # woke again at once, 300-1,900 times a run in 4 of 6 long runs
+        if self.replied or not (wait or select.select([self.done_fd], [], [], 0)[0]):
             return
         self.replied = True
-        os.read(self.done_fd, 1)  # written once they have started, or one could not
+        os.read(self.done_fd, 1)  # written once they have started, or one could not (waited for)
         if not self.error:
             for _ in self.feeds:
                 conn.send_bytes(STARTED)

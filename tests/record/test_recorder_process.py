@@ -547,8 +547,8 @@ def test_the_byte_that_says_the_rerun_writer_started_is_taken_as_soon_as_it_come
     """Woken by the byte the Rerun writer's thread writes once the writer has started, the
     recorder's main loop takes it and replies at once, whatever else that thread has yet to do. It
     used to read the byte only once a flag, set just after it, said so: woken in between (the
-    thread niced, on the same core), the loop left the byte unread and woke again at once, 300-1,900
-    times a run in 4 of 6 long runs."""
+    thread niced, on the same core), the loop left the byte unread and woke again at once, over and
+    over (CHANGES.md has the figures)."""
     import multiprocessing
     import select
 

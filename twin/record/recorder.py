@@ -226,8 +226,8 @@ class _Later:
         """Once every writer has started (waited for when `wait`): their start replies; after a
         failure, its text, the started writers ended as error and the process with them."""
         # the byte itself says so, not a flag set beside it: woken by the byte before such a flag
-        # was set (this thread niced, on the same core), the main loop left the byte unread and
-        # woke again at once, 300-1,900 times a run in 4 of 6 long runs
+        # was set (that thread niced, on this one's core), the main loop left the byte unread and
+        # woke again at once, over and over
         if self.replied or not (wait or select.select([self.done_fd], [], [], 0)[0]):
             return
         self.replied = True

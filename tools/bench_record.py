@@ -54,6 +54,8 @@ def _cpu_s() -> float:
 class _Clock(Sink):
     """A sink after the recorders: the wall time of the first and the last Frame."""
 
+    reads_pad_pose = False  # only the time: a twin with no recorder leaves the pad pose out
+
     def __init__(self) -> None:
         self.first_s = self.last_s = 0.0
 

@@ -12,9 +12,11 @@ from support.runs import collect_pick_place, columns_digest
 from twin.model.config import TwinConfig
 from twin.model.errors import ConfigError, OutOfReach, UnknownName
 from twin.model.profiles import PROFILES
+from twin.model.sink import Sink
 from twin.model.types import Command
-from twin.robot.kinematics import wrap_rad
+from twin.robot.kinematics import pad_pose_function, wrap_rad
 from twin.sim.twin import Twin
+from twin.tasks import TASKS, TimeLimit, run_task
 from twin.verify.collectors import FrameCollector
 
 ONE_CYCLE = {"cycles": 1}
@@ -223,3 +225,68 @@ def test_a_closed_worlds_client_serves_the_next_twin_as_a_fresh_one(monkeypatch)
     again.close()
     assert sink.columns().equals(fresh.columns())
     assert sink.events == fresh.events and sink.commands == fresh.commands
+
+
+class _Kept(Sink):
+    """Keeps every Frame it is handed."""
+
+    def __init__(self, reads_pad_pose: bool = True) -> None:
+        self.frames = []
+        self.reads_pad_pose = reads_pad_pose
+
+    def on_frame(self, frame) -> None:
+        self.frames.append(frame)
+
+
+class _EventsOnly(Sink):
+    def on_event(self, event) -> None:
+        pass
+
+
+def _pick_place(sinks) -> tuple[Twin, list]:
+    """pick_place (1 cycle) with `sinks`; the twin and the joint values it worked out a pad pose
+    for."""
+    twin = Twin(TwinConfig(), sinks=sinks)
+    worked_out, pad_pose = [], twin._pad_pose
+
+    def counted(q):
+        worked_out.append(q)
+        return pad_pose(q)
+
+    twin._pad_pose = counted
+    run_task(twin, TASKS["pick_place"], {"cycles": 1})
+    return twin, worked_out
+
+
+def test_with_no_sink_reading_it_the_pad_pose_is_worked_out_only_when_asked():
+    """The pad pose is half the twin's own work a step: with no sink reading it (none at all, one
+    that takes only events, a time limit, one that says so) the stepping loop leaves it out, and
+    `twin.frame` works it out when asked (the suction rule, a task, the caller), with the same bits
+    as a Frame that carried it."""
+    pad_pose = pad_pose_function(TwinConfig().profile)
+    for sinks in ([], [_EventsOnly()], [TimeLimit(1e6)], [_Kept(reads_pad_pose=False)]):
+        twin, worked_out = _pick_place(sinks)
+        try:
+            assert 0 < len(worked_out) < twin.step_index / 4, sinks
+            frame = twin.frame
+            assert frame.pad_pose == pad_pose(frame.joint_q)
+            assert twin.frame is frame  # worked out once
+        finally:
+            twin.close()
+    quiet = _Kept(reads_pad_pose=False)
+    _pick_place([quiet])[0].close()
+    assert quiet.frames[0].pad_pose is not None  # the first Frame is read whole
+    assert sum(f.pad_pose is None for f in quiet.frames) > len(quiet.frames) * 3 / 4
+    twin, worked_out = _pick_place([_Kept()])
+    twin.close()
+    assert len(worked_out) >= twin.step_index  # a sink reads it: every step
+
+
+def test_frames_a_sink_reads_whole_are_the_same_beside_one_that_does_not():
+    """One sink that reads the pad pose has it worked out every step, for every sink; the run is
+    the same as with that sink alone."""
+    alone, reading, quiet = _Kept(), _Kept(), _Kept(reads_pad_pose=False)
+    for sinks in ([alone], [reading, quiet]):
+        _pick_place(sinks)[0].close()
+    assert reading.frames == alone.frames == quiet.frames
+    assert all(len(f.pad_pose) == 7 for f in alone.frames)

@@ -16,7 +16,14 @@ OUTCOMES = ("ok", "error", "interrupted")  # how a run ended, as close() is told
 
 
 class Sink:
-    """A receiver of a run. close(): outcome is one of OUTCOMES; error says what went wrong."""
+    """A receiver of a run. close(): outcome is one of OUTCOMES; error says what went wrong.
+
+    `reads_pad_pose`: whether on_frame reads a Frame's pad_pose. A sink that sets it False (and one
+    without an on_frame of its own, which sees no Frames) lets the twin leave it out while stepping:
+    such a sink's Frames may hold None there. The twin works it out every step while any sink reads
+    it, and `twin.frame` always has it."""
+
+    reads_pad_pose = True
 
     def on_frame(self, frame: Frame) -> None:
         pass
@@ -49,3 +56,9 @@ def close_all(sinks, outcome: str, error: str) -> Exception | None:
         except Exception as err:  # noqa: BLE001 - keep closing the others
             first = first or err
     return first
+
+
+def reads_pad_pose(sink) -> bool:
+    """Whether the twin must work out each Frame's pad pose for `sink` (any object with on_frame):
+    it takes Frames (its on_frame is its own) and does not say it leaves the pad pose alone."""
+    return type(sink).on_frame is not Sink.on_frame and getattr(sink, "reads_pad_pose", True)

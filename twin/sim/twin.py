@@ -15,7 +15,7 @@ from twin.model.errors import ConfigError, UnknownName
 from twin.model.images import CameraImage
 from twin.model.json_values import event_data, finite_number
 from twin.model.keymaps import KeyPlayer
-from twin.model.sink import Sink
+from twin.model.sink import Sink, reads_pad_pose
 from twin.model.types import COMMAND_ARGS, NO_BODY, Command, Event, Frame
 from twin.robot import kinematics
 from twin.sim.keyhands import KeyHands
@@ -74,11 +74,19 @@ class Twin(Motions):
         self._said: Event | None = None  # the Event the last `event` Command emitted
         self._pad_pose = kinematics.pad_pose_function(self.profile)
         self._camera_renderer = self._add_cameras(camera_background)
-        self.frame = self._read_frame()
-        self._emit_frame(self.frame)
+        self._frame = self._read_frame()
+        self._emit_frame(self._frame)
 
     # -- read-only views: the twin changes only through Commands (apply), so every input is recorded
     # --
+    @property
+    def frame(self) -> Frame:
+        """The latest Frame: the state after the last step (step 0 before any)."""
+        f = self._frame
+        if f.pad_pose is None:  # no sink read it as it went by: worked out now, once
+            f = self._frame = f._replace(pad_pose=self._pad_pose(f.joint_q))
+        return f
+
     @property
     def targets(self) -> tuple[float, ...]:
         """Each joint's motor target (rad | m), in profile joint order."""
@@ -137,6 +145,9 @@ class Twin(Motions):
         Frame is made here as _read_frame makes it (written out: a call less a step)."""
         sinks, pad_model, world = self.sinks, self.suction_pad, self._world
         renderer, state, pad_pose = self._camera_renderer, world.state, self._pad_pose
+        # the pad pose (half the twin's own work a step) only when a sink or camera reads it; the
+        # `frame` property works it out for a Frame that went without
+        pads = renderer is not None or any(reads_pad_pose(s) for s in sinks)
         world_step, dt_ns = world.stepper(), self.config.dt_ns
         for _ in range(n):
             # an idle pad, or one holding on, has nothing to do
@@ -147,7 +158,7 @@ class Twin(Motions):
             world_step()
             step = self.step_index = self.step_index + 1
             q, qd, effort, poses, force, torque = state()
-            f = self.frame = _new_frame(
+            f = self._frame = _new_frame(
                 Frame,
                 (
                     step,
@@ -161,7 +172,7 @@ class Twin(Motions):
                     pad_model.held,
                     force,
                     torque,
-                    pad_pose(q),
+                    pad_pose(q) if pads else None,
                     poses,
                 ),
             )
@@ -503,7 +514,7 @@ class Twin(Motions):
         self._targets = _replaced(self._targets, j, q)
         self._world.reset_joint(j, q)
         self._world.set_motor(j, q, self._max_velocities[j])
-        self.frame = self._read_frame()  # the pad moved: later suction sensing must see it
+        self._frame = self._read_frame()  # the pad moved: later suction sensing must see it
 
     def _do_joint_max_velocity(self, args: dict) -> None:
         j = self._joint(args["joint"])

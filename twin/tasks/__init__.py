@@ -132,6 +132,8 @@ class TimeLimit(Sink):
     recorders, so they hold that frame too; it raises again on every later frame, so a task that
     catches the error cannot run on."""
 
+    reads_pad_pose = False  # only t_ns
+
     def __init__(self, limit_s: float) -> None:
         self.limit_s = limit_s
         self._limit_ns = round(limit_s * 1e9)

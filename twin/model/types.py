@@ -32,7 +32,9 @@ class Frame(NamedTuple):
     hold_force_n: tuple[float, float, float]
     # the pad's torque on it about its centre of mass, world frame
     hold_torque_nm: tuple[float, float, float]
-    pad_pose: Pose  # the pad tip (centre of the cup's face), world frame
+    # the pad tip (centre of the cup's face), world frame; None in the Frames a sink that does not
+    # read it is handed while no other sink does (Sink.reads_pad_pose)
+    pad_pose: Pose | None
     object_poses: tuple[Pose, ...]  # per scene object, in scene order
 
 

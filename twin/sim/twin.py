@@ -142,7 +142,8 @@ class Twin(Motions):
     def _stepping(self, n: int) -> Iterator[Frame]:
         """Advance n physics steps, yielding each Frame once every sink has it: for a caller that
         looks at every Frame (settle), a generator's resume costs a fraction of a step() call. The
-        Frame is made here as _read_frame makes it (written out: a call less a step)."""
+        Frame is made here as _read_frame makes it (written out: a call less a step), but for its
+        pad pose while no sink reads that."""
         sinks, pad_model, world = self.sinks, self.suction_pad, self._world
         renderer, state, pad_pose = self._camera_renderer, world.state, self._pad_pose
         # the pad pose (half the twin's own work a step) only when a sink or camera reads it; the

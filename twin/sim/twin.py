@@ -61,7 +61,7 @@ class Twin(Motions):
             self._world,
             tuple(o.size_m for o in self.config.objects),
         )
-        self.sinks: list[Sink] = list(sinks)
+        self.sinks: tuple[Sink, ...] = tuple(sinks)  # fixed for the twin's life
         self.step_index = 0
         self._signals: dict[str, int] = {}
         # a tuple, replaced on a command: every Frame shares it
@@ -74,6 +74,10 @@ class Twin(Motions):
         self._said: Event | None = None  # the Event the last `event` Command emitted
         self._pad_pose = kinematics.pad_pose_function(self.profile)
         self._camera_renderer = self._add_cameras(camera_background)
+        # the pad pose only while a sink or camera reads it (else the `frame` property works it out)
+        self._pads_each_step = self._camera_renderer is not None or any(
+            reads_pad_pose(s) for s in self.sinks
+        )
         self._frame = self._read_frame()
         self._emit_frame(self._frame)
 
@@ -146,9 +150,7 @@ class Twin(Motions):
         pad pose while no sink reads that."""
         sinks, pad_model, world = self.sinks, self.suction_pad, self._world
         renderer, state, pad_pose = self._camera_renderer, world.state, self._pad_pose
-        # the pad pose (half the twin's own work a step) only when a sink or camera reads it; the
-        # `frame` property works it out for a Frame that went without
-        pads = renderer is not None or any(reads_pad_pose(s) for s in sinks)
+        pads = self._pads_each_step
         world_step, dt_ns = world.stepper(), self.config.dt_ns
         for _ in range(n):
             # an idle pad, or one holding on, has nothing to do

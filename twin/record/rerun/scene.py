@@ -72,13 +72,15 @@ def joint_path(name: str) -> str:
     return f"{JOINTS_PATH}/{rr.escape_entity_path_part(name)}"
 
 
-def pad_colors(suction_on: np.ndarray, held_body: np.ndarray) -> np.ndarray:
-    """Per-frame RGB of the pad marker: grey off, amber sucking, green holding."""
-    colors = np.empty((len(suction_on), 3), dtype=np.uint8)
-    colors[:] = PAD_OFF_RGB
-    colors[suction_on] = PAD_ON_RGB
-    colors[held_body >= 0] = PAD_HOLDING_RGB
-    return colors
+PAD_RGBS = (PAD_OFF_RGB, PAD_ON_RGB, PAD_HOLDING_RGB)  # what pad_color_index indexes
+
+
+def pad_color_index(suction_on: np.ndarray, held_body: np.ndarray) -> np.ndarray:
+    """Per-frame colour of the pad marker, as an index into PAD_RGBS: grey off, amber sucking,
+    green holding."""
+    index = suction_on.astype(np.intp)
+    index[held_body >= 0] = 2
+    return index
 
 
 def load_urdf_tree(config: TwinConfig, urdf_text: str) -> rr.urdf.UrdfTree:

@@ -4,7 +4,8 @@ events).
 Frames come in as columns (on_frames: the recorder process's ring, a loaded recording; on_frame
 gathers the twin's single Frames into columns first) and are copied into preallocated numpy
 buffers; every `batch_steps` frames (and at close) the buffers go out as columns with
-`send_columns` — one `rr.log` per step would slow a run ~20x.
+`send_columns` — one `rr.log` per step would slow a run ~20x — built straight as Arrow arrays
+(twin.record.rerun.columns).
 The output (a file, or any stream the caller opened) is chosen apart from the logging code. A file
 is written as `NAME.partial` and renamed into place, fsynced, at close (see twin.outputs).
 """
@@ -29,12 +30,16 @@ from twin.model.types import Command, Event, Frame
 from twin.record.images import recorded_images
 from twin.record.outputs import Writeback, check_target, partial_path, publish
 from twin.record.rerun import scene
+from twin.record.rerun.columns import ColumnMaker
 from twin.record.rerun.joints import JointMotion
 from twin.record.rows import FrameBatch
 from twin.robot.urdf import urdf_text as profile_urdf_text
 
-# Each send costs ~0.1 ms of the SDK's Python whatever its length, 16 sends a batch: the recorder
-# process's CPU per frame was 3.6 us at 2048 frames, 3.1 at 4096, 2.6 at 8192 (medians of 3).
+# A batch is 16 sends, and each has a cost whatever its length: the SDK's (~0.1 ms of its Python,
+# and its threads' encoding of a chunk) and the columns' (twin.record.rerun.columns). The writer's
+# process CPU per frame, fed a 16-cycle run at once, was 4.5-4.6 us at 2048 frames, 1.9-3.6 at
+# 4096 and 1.9-2.9 at 8192 (3 runs each, 2026-11-29; at 8192, 3.7-4.3 before the columns were
+# built straight as Arrow).
 DEFAULT_BATCH_STEPS = 8192
 GATHER_FRAMES = 256  # on_frame hands the twin's Frames to on_frames this many at a time
 
@@ -137,6 +142,7 @@ class RerunRecorder(Sink):
             for j in self._joints
         ]
         self._object_paths = [scene.object_path(o.name) for o in config.objects]
+        self._make = ColumnMaker(batch_steps, scene.PAD_RGBS)
         self._buf = _Buffers(batch_steps, len(config.objects))
         # on_frame's Frames, gathered into columns for on_frames
         self._batch = FrameBatch(
@@ -269,58 +275,29 @@ class RerunRecorder(Sink):
             rr.TimeColumn(scene.STEP_TIMELINE, sequence=b.step[:n]),
             rr.TimeColumn(scene.TIME_TIMELINE, duration=b.t_ns[:n].astype("timedelta64[ns]")),
         ]
-        send = self.stream.send_columns
+        send, make = self.stream.send_columns, self._make
         for j, joint in enumerate(self._joints):
-            translations, quaternions = joint.transforms(b.joint_q[:n, j])
-            parents, children = self._frame_names[j]
             # Frame names go in every row: the viewer does not join a static frame name to timed
             # poses.
-            send(
-                scene.joint_path(joint.name),
-                indexes=times,
-                columns=rr.Transform3D.columns(
-                    translation=translations,
-                    quaternion=quaternions,
-                    parent_frame=parents.slice(0, n),
-                    child_frame=children.slice(0, n),
-                ),
-            )
+            columns = make.transforms(*joint.transforms(b.joint_q[:n, j]), self._frame_names[j])
+            send(scene.joint_path(joint.name), indexes=times, columns=columns)
         for k, path in enumerate(self._object_paths):
             poses = b.object_poses[:n, k]
-            send(
-                path,
-                indexes=times,
-                columns=rr.Transform3D.columns(translation=poses[:, :3], quaternion=poses[:, 3:]),
-            )
+            send(path, indexes=times, columns=make.transforms(poses[:, :3], poses[:, 3:]))
         sleeve_centres = b.pad_pose[:n, :3] + [0.0, 0.0, 0.5 * self.config.profile.pad_length_m]
-        send(
-            scene.PAD_PATH,
-            indexes=times,
-            columns=rr.Cylinders3D.columns(
-                centers=sleeve_centres, colors=scene.pad_colors(b.suction_on[:n], b.held_body[:n])
-            ),
-        )
+        colors = scene.pad_color_index(b.suction_on[:n], b.held_body[:n])
+        send(scene.PAD_PATH, indexes=times, columns=make.cylinders(sleeve_centres, colors))
         for j, role in enumerate(scene.ROLES):
             base = scene.Z_PATH if role == "z" else scene.ANGLES_PATH
+            send(f"{base}/{role}", indexes=times, columns=make.scalars(b.joint_q[:n, j]))
             send(
-                f"{base}/{role}",
-                indexes=times,
-                columns=rr.Scalars.columns(scalars=b.joint_q[:n, j]),
+                f"{base}/{role}_target", indexes=times, columns=make.scalars(b.joint_target[:n, j])
             )
-            send(
-                f"{base}/{role}_target",
-                indexes=times,
-                columns=rr.Scalars.columns(scalars=b.joint_target[:n, j]),
-            )
-        send(
-            f"{scene.SUCTION_PATH}/on",
-            indexes=times,
-            columns=rr.Scalars.columns(scalars=b.suction_on[:n].astype(np.float64)),
-        )
+        send(f"{scene.SUCTION_PATH}/on", indexes=times, columns=make.scalars(b.suction_on[:n]))
         send(
             f"{scene.SUCTION_PATH}/holding",
             indexes=times,
-            columns=rr.Scalars.columns(scalars=(b.held_body[:n] >= 0).astype(np.float64)),
+            columns=make.scalars(b.held_body[:n] >= 0),
         )
 
     def _send_events(self) -> None:

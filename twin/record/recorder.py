@@ -165,31 +165,24 @@ class _Later:
         self._synced = 0  # the rows the main thread says they may take in
         self._ending = None  # how the run ended, once it has (_take_messages)
         self._failures: list[str] = []
-        # set once the writers here hold nothing unsent (their files not yet finished), or ended
-        self._sent = threading.Event()
         # a thread of its own, not a Thread subclass: threading.Thread keeps private state under
         # names (its own `_started`, set as the thread begins) that a subclass's would replace
         self._thread = threading.Thread(target=self._run, name="twin-recorder-later", daemon=True)
         if feeds:
             self._thread.start()
-        else:
-            self._sent.set()
 
     def _run(self) -> None:
-        try:
-            _lower_priority(LATER_NICE)
-            t0 = time.thread_time()
-            for feed in self.feeds:
-                self.error = _start(feed, self.make)
-                if self.error:
-                    break
-            self.start_cpu_s = time.thread_time() - t0
-            os.write(self._done_w, b"S")  # the one sign that they have started, or one could not
-            if not self.error:
-                self._feed()
-            self.feed_cpu_s = time.thread_time() - t0 - self.start_cpu_s
-        finally:
-            self._sent.set()
+        _lower_priority(LATER_NICE)
+        t0 = time.thread_time()
+        for feed in self.feeds:
+            self.error = _start(feed, self.make)
+            if self.error:
+                break
+        self.start_cpu_s = time.thread_time() - t0
+        os.write(self._done_w, b"S")  # the one sign that they have started, or one could not
+        if not self.error:
+            self._feed()
+        self.feed_cpu_s = time.thread_time() - t0 - self.start_cpu_s
 
     def _feed(self) -> None:
         fed = 0
@@ -199,10 +192,6 @@ class _Later:
                     self._due.wait()
                 fed, ending = self._synced, self._ending
             if ending is not None:
-                if ending != "died":
-                    for feed in self.feeds:
-                        feed.send_all(fed)
-                self._sent.set()
                 self._failures = [feed.end(fed, ending) for feed in self.feeds]
                 return
             for feed in self.feeds:
@@ -226,14 +215,6 @@ class _Later:
             self._synced = max(self._synced, synced)
             self._ending = ending
             self._due.notify()
-
-    def wait_sent(self) -> None:
-        """Wait (half a second at most: a Rerun writer that hangs keeps no other file from being
-        finished) until the writers here have sent all they hold. At the close, the main thread
-        waits so before it finishes the MCAP file: the Rerun writer's last batch is Python that
-        would wait for the GIL behind that close, and what the SDK does after it (writing the file
-        out, its end and its fsync, 6-16 ms) runs without the GIL, beside the MCAP file's close."""
-        self._sent.wait(0.5)
 
     def finish(self) -> str:
         """Wait for the writers' end; the first failure as text, or ''."""
@@ -300,7 +281,6 @@ def _loop(conn, ring: FrameRing, feeds: list[_Feed], clock: _Clock, later: _Late
         # the close, or the twin's process died: every writer ends, side by side (the files'
         # fsyncs overlap), with every row the twin woke it for and every other it sent
         later.end(synced, end)
-        later.wait_sent()
         failure = first.end(synced, end)
         later_failure = later.finish()
         failure = failure or later_failure
@@ -390,27 +370,12 @@ class _Feed:
                     self.timed(getattr(self.sink, _HANDLERS[kind]), unpack_other(kind, data))
             self._rows(written)
         except Exception as err:  # noqa: BLE001 - e.g. a full disk
-            self._failed(err)
+            self.failure = (
+                f"recording stopped by a writer error (what came before is kept): "
+                f"{type(err).__name__}: {err}"
+            )
+            _abandon([self.sink])
         self.read = max(self.read, written)
-
-    def send_all(self, written: int) -> None:
-        """At the close: take rows [read, written) and every other in, and have a writer that
-        holds some back (the Rerun one's open batch) send them, its file not yet finished."""
-        self.take(written, final=True)
-        send = getattr(self.sink, "send_buffered", None)
-        if send is None or self.failure:
-            return
-        try:
-            self.timed(send)
-        except Exception as err:  # noqa: BLE001 - e.g. a full disk
-            self._failed(err)
-
-    def _failed(self, err: Exception) -> None:
-        self.failure = (
-            f"recording stopped by a writer error (what came before is kept): "
-            f"{type(err).__name__}: {err}"
-        )
-        _abandon([self.sink])
 
     def end(self, written: int, ending) -> str:
         """Take rows [read, written) and every other in, then end the writer: finalized with the

@@ -40,6 +40,7 @@ PAD_MARGIN_M = 0.003  # the coloured sleeve is this much larger than the pad, so
 PAD_OFF_RGB = (150, 150, 150)
 PAD_ON_RGB = (240, 190, 40)  # sucking, nothing held
 PAD_HOLDING_RGB = (40, 210, 90)
+PAD_RGBS = (PAD_OFF_RGB, PAD_ON_RGB, PAD_HOLDING_RGB)  # what pad_color_index indexes
 JOINT_RGB = {
     "shoulder": (70, 160, 255),
     "elbow": (255, 140, 50),
@@ -70,9 +71,6 @@ def camera_path(name: str) -> str:
 
 def joint_path(name: str) -> str:
     return f"{JOINTS_PATH}/{rr.escape_entity_path_part(name)}"
-
-
-PAD_RGBS = (PAD_OFF_RGB, PAD_ON_RGB, PAD_HOLDING_RGB)  # what pad_color_index indexes
 
 
 def pad_color_index(suction_on: np.ndarray, held_body: np.ndarray) -> np.ndarray:

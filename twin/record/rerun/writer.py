@@ -214,7 +214,7 @@ class RerunRecorder(Sink):
             return
         self.closed = True
         try:
-            self.send_buffered()
+            self._send_buffered()
             if self.path:
                 finish_file(self.stream, partial_path(self.path), Path(self.path))
             else:
@@ -229,7 +229,7 @@ class RerunRecorder(Sink):
             return
         self.closed = True
         try:
-            self.send_buffered()
+            self._send_buffered()
             self.stream.flush()
             if self.path:
                 self.stream.disconnect()
@@ -248,16 +248,12 @@ class RerunRecorder(Sink):
         self.close()
 
     # -- batches ------------------------------------------------------------------------------
-    def send_buffered(self) -> None:
-        """Send everything not yet sent (the frames of the open batch, the events, the commands)
-        and have the SDK start writing it out, now rather than at the close, which does so anyway:
-        the recorder process has this writer's last batch go out before it closes the MCAP file,
-        so that the SDK's work runs beside that close."""
+    def _send_buffered(self) -> None:
+        """Everything not yet sent: the frames of the open batch, the events, the commands."""
         frames = self._batch.take()
         if frames is not None:
             self.on_frames(frames)
         self._send_batch()
-        self.stream.flush(timeout_sec=0)  # the SDK starts writing it out, in its own threads
 
     def _send_batch(self) -> None:
         """The frames gathered, and the events and commands that came since the last batch: they

@@ -58,7 +58,7 @@ class ColumnMaker:
         self._cylinder_kinds = _kinds(rr.Cylinders3D.columns(centers=one, colors=[(0, 0, 0)]))
         self._scalar_kind = _kinds(rr.Scalars.columns(scalars=[0.0]))["scalars"]
         # the SDK's own packing of each colour (one u32 a colour)
-        self.colors = np.array(
+        self._colors = np.array(
             [rr.components.ColorBatch([rgb]).as_arrow_array()[0].as_py() for rgb in colors_rgb],
             dtype=np.uint32,
         )
@@ -99,7 +99,7 @@ class ColumnMaker:
         n = len(centers)
         c_desc, c_kind = self._cylinder_kinds["centers"]
         k_desc, k_kind = self._cylinder_kinds["colors"]
-        colors = pa.array(self.colors[color_index])
+        colors = pa.array(self._colors[color_index])
         return [
             Column(c_desc, self._vectors(c_kind, centers)),
             Column(k_desc, self._list(k_kind, colors, n)),

@@ -76,8 +76,8 @@ def joint_path(name: str) -> str:
 def pad_color_index(suction_on: np.ndarray, held_body: np.ndarray) -> np.ndarray:
     """Per-frame colour of the pad marker, as an index into PAD_RGBS: grey off, amber sucking,
     green holding."""
-    index = suction_on.astype(np.intp)
-    index[held_body >= 0] = 2
+    index = suction_on.astype(np.intp)  # off 0, on 1: PAD_RGBS' first two
+    index[held_body >= 0] = PAD_RGBS.index(PAD_HOLDING_RGB)
     return index
 
 
